@@ -1,0 +1,74 @@
+//! Per-vertex signal CSV: one column, a header line (the column name), then
+//! one value per vertex in vertex order.
+//!
+//! `nan` marks a missing value; it is accepted only when the caller says
+//! missing values are allowed (they must then be filled before the values
+//! become an fshape's signal, which has to be finite).
+
+use std::path::Path;
+
+use super::cursor::{Cursor, lossy, parse_f64};
+use super::{ParseError, ParseErrorKind, ReadError, WriteError, read_bytes, write_atomic};
+
+/// A parsed signal column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SignalColumn {
+    /// The header (column name).
+    pub name: String,
+    /// One value per data line; NaN for a missing value.
+    pub values: Vec<f64>,
+}
+
+/// Parses a one-column signal CSV. With `allow_missing` false, a `nan` (or
+/// any non-finite value) is an error naming its line.
+pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, ParseError> {
+    let mut cur = Cursor::new(data);
+    let header = cur.text_line("a header line")?.ok_or_else(|| cur.error(ParseErrorKind::Missing { what: "the header line (column name)" }))?;
+    let name = header.trim().to_string();
+    if name.is_empty() || parse_f64(name.as_bytes()).is_some() {
+        return Err(ParseError {
+            at: super::Location::Line(1),
+            kind: ParseErrorKind::BadToken { expected: "a header line naming the column", found: lossy(name.as_bytes()) },
+        });
+    }
+    if name.contains(',') {
+        return Err(ParseError {
+            at: super::Location::Line(1),
+            kind: ParseErrorKind::BadToken { expected: "a single column (no comma)", found: lossy(name.as_bytes()) },
+        });
+    }
+    let mut values = Vec::new();
+    loop {
+        let at = cur.at();
+        let Some(line) = cur.text_line("a number")? else { break };
+        let t = line.trim();
+        if t.is_empty() {
+            continue;
+        }
+        let v = parse_f64(t.as_bytes()).filter(|v| v.is_finite() || (allow_missing && v.is_nan()));
+        let expected = if allow_missing { "a number or `nan`" } else { "a finite number (missing values are not accepted here)" };
+        values.push(v.ok_or_else(|| ParseError { at, kind: ParseErrorKind::BadToken { expected, found: lossy(t.as_bytes()) } })?);
+    }
+    Ok(SignalColumn { name, values })
+}
+
+/// Reads a signal CSV file (optionally gzipped).
+pub fn read_signal(path: &Path, allow_missing: bool) -> Result<SignalColumn, ReadError> {
+    let data = read_bytes(path)?;
+    parse_signal(&data, allow_missing).map_err(|source| ReadError::Parse { path: path.into(), source })
+}
+
+/// Writes a signal CSV atomically, values in Rust's shortest round-trip
+/// form (`nan` for NaN).
+pub fn write_signal(path: &Path, name: &str, values: &[f64]) -> Result<(), WriteError> {
+    let mut s = format!("{name}\n");
+    for v in values {
+        if v.is_nan() {
+            s.push_str("nan\n");
+        } else {
+            s.push_str(&format!("{v:e}\n"));
+        }
+    }
+    let gz = path.extension().is_some_and(|e| e == "gz");
+    write_atomic(path, s.as_bytes(), gz)
+}

@@ -1,0 +1,375 @@
+//! Reading and writing fshapes: PLY, OBJ, VTK legacy, signal CSV, images.
+//!
+//! Every reader reports bad input as an error naming the file, the line
+//! (text) or byte offset (binary) and what was expected; none panics and
+//! none allocates more than the file can hold, whatever its header claims.
+//! Every writer writes to a temporary file beside the target and renames it
+//! into place, so a failed write never leaves a half-finished file.
+
+use std::fmt;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use crate::shape::{CellKind, FShape, ShapeError};
+
+mod cursor;
+pub mod csv;
+pub mod image;
+pub mod obj;
+pub mod ply;
+pub mod vtk;
+
+/// Where in a file a parse error happened.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Location {
+    /// 1-based line of a text file (or text header).
+    Line(usize),
+    /// 0-based byte offset into binary data (after decompression).
+    Byte(usize),
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Location::Line(l) => write!(f, "line {l}"),
+            Location::Byte(b) => write!(f, "byte {b}"),
+        }
+    }
+}
+
+/// What went wrong while parsing.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ParseErrorKind {
+    /// The data ended early (a truncated file or a record cut short).
+    #[error("unexpected end of data: expected {expected}")]
+    Eof {
+        /// What was expected next.
+        expected: &'static str,
+    },
+    /// A token or line is not what the format allows here.
+    #[error("expected {expected}, found `{found}`")]
+    BadToken {
+        /// What was expected.
+        expected: &'static str,
+        /// The offending text (shortened).
+        found: String,
+    },
+    /// A feature of the format that fshape does not read.
+    #[error("unsupported {what}: `{found}`")]
+    Unsupported {
+        /// Which feature.
+        what: &'static str,
+        /// Its value in the file.
+        found: String,
+    },
+    /// A required element or property is absent.
+    #[error("missing {what}")]
+    Missing {
+        /// What is missing.
+        what: &'static str,
+    },
+    /// The header claims more records than the rest of the file can hold.
+    #[error("the header claims {claimed} {what}, but only {available} bytes follow")]
+    Truncated {
+        /// Which records.
+        what: &'static str,
+        /// The count in the header.
+        claimed: u64,
+        /// Bytes left in the file.
+        available: usize,
+    },
+    /// A cell refers to a negative vertex index.
+    #[error("cell {cell} has the negative vertex index {value}")]
+    NegativeIndex {
+        /// Cell index.
+        cell: usize,
+        /// The index in the file.
+        value: i64,
+    },
+    /// Cells of different sizes in one file.
+    #[error("cell {cell} has {found} vertices, but the first cell has {expected} (mixed cell sizes)")]
+    MixedCellSizes {
+        /// Cell index.
+        cell: usize,
+        /// Its vertex count.
+        found: usize,
+        /// The first cell's vertex count.
+        expected: usize,
+    },
+    /// Cells that are neither segments nor triangles.
+    #[error("cell {cell} has {found} vertices; fshape reads segments (2) and triangles (3): triangulate polygons first")]
+    CellSize {
+        /// Cell index.
+        cell: usize,
+        /// Its vertex count.
+        found: usize,
+    },
+    /// Two counts that must agree do not.
+    #[error("{what}: expected {expected}, found {found}")]
+    CountMismatch {
+        /// What is counted.
+        what: &'static str,
+        /// The required count.
+        expected: u64,
+        /// The count in the file.
+        found: u64,
+    },
+}
+
+/// A parse error with its place in the data.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{at}: {kind}")]
+pub struct ParseError {
+    /// Where it happened.
+    pub at: Location,
+    /// What happened.
+    pub kind: ParseErrorKind,
+}
+
+/// Why reading a file failed. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadError {
+    /// The file could not be opened or read (or gunzipped).
+    #[error("{path}: {source}", path = .path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// The file's extension names no format fshape reads.
+    #[error("{path}: unknown format (expected .ply, .obj, .vtk, optionally .gz)", path = .path.display())]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The contents do not follow the format.
+    #[error("{path}: {source}", path = .path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// What and where.
+        source: ParseError,
+    },
+    /// The EXR reader rejected the file.
+    #[error("{path}: EXR: {source}", path = .path.display())]
+    Exr {
+        /// The file.
+        path: PathBuf,
+        /// exr's error.
+        source: exr::error::Error,
+    },
+    /// The parsed data is not a usable fshape (NaN coordinates, an index out
+    /// of range, ...); every problem is listed with its index.
+    #[error("{path}: {source}", path = .path.display())]
+    Shape {
+        /// The file.
+        path: PathBuf,
+        /// The problems.
+        source: ShapeError,
+    },
+    /// The signal property the caller named is not in the file.
+    #[error("{path}: no per-vertex scalar named `{name}` (available: {avail})", path = .path.display(), avail = list(.available))]
+    SignalNotFound {
+        /// The file.
+        path: PathBuf,
+        /// The name asked for.
+        name: String,
+        /// The per-vertex scalars the file has.
+        available: Vec<String>,
+    },
+}
+
+fn list(names: &[String]) -> String {
+    if names.is_empty() { "none".to_string() } else { names.join(", ") }
+}
+
+/// Why writing a file failed. Nothing is left at the target path.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WriteError {
+    /// Creating, writing or renaming failed.
+    #[error("{path}: {source}", path = .path.display())]
+    Io {
+        /// The target file.
+        path: PathBuf,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// The extension names no format fshape writes.
+    #[error("{path}: unknown output format (expected .ply, .obj, .vtk, optionally .gz)", path = .path.display())]
+    UnknownFormat {
+        /// The target file.
+        path: PathBuf,
+    },
+    /// The EXR writer failed.
+    #[error("{path}: EXR: {source}", path = .path.display())]
+    Exr {
+        /// The target file.
+        path: PathBuf,
+        /// exr's error.
+        source: exr::error::Error,
+    },
+}
+
+/// The per-vertex property read as the signal unless the caller names another.
+pub const DEFAULT_SIGNAL_NAME: &str = "signal";
+
+/// Options for [`read_mesh`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// The per-vertex scalar to read as the signal. `None` reads the
+    /// property [`DEFAULT_SIGNAL_NAME`] if present and no signal otherwise;
+    /// a named property must exist. Scanner fields (`confidence`,
+    /// `intensity`, ...) are never taken as a signal unless named here.
+    pub signal_name: Option<String>,
+}
+
+/// Mesh file formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Stanford PLY (ASCII, binary little or big endian).
+    Ply,
+    /// Wavefront OBJ (geometry only).
+    Obj,
+    /// VTK legacy POLYDATA (ASCII or binary).
+    Vtk,
+}
+
+impl Format {
+    /// The format named by a path's extension, looking through a final
+    /// `.gz`; also whether the path is gzip-compressed.
+    pub fn from_path(path: &Path) -> Option<(Format, bool)> {
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        let (stem, gz) = match name.strip_suffix(".gz") {
+            Some(s) => (s.to_string(), true),
+            None => (name, false),
+        };
+        let ext = stem.rsplit_once('.')?.1;
+        let f = match ext {
+            "ply" => Format::Ply,
+            "obj" => Format::Obj,
+            "vtk" => Format::Vtk,
+            _ => return None,
+        };
+        Some((f, gz))
+    }
+}
+
+/// Text or binary encoding for writers that offer both.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Encoding {
+    /// Human-readable text; floats in Rust's shortest round-trip `{:e}` form.
+    Ascii,
+    /// Binary (little endian for PLY; VTK legacy binary is big endian by
+    /// definition). Round trips are bitwise.
+    #[default]
+    Binary,
+}
+
+/// Per-vertex data as parsed, before it becomes an [`FShape`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct RawMesh {
+    pub(crate) dim: usize,
+    pub(crate) cell_size: Option<usize>,
+    pub(crate) points: Vec<f64>,
+    pub(crate) cells: Vec<usize>,
+    pub(crate) signal: Option<Vec<f64>>,
+    /// Names of every per-vertex scalar in the file.
+    pub(crate) scalars: Vec<String>,
+}
+
+impl RawMesh {
+    pub(crate) fn into_shape(self, path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
+        if let (Some(name), None) = (&opts.signal_name, &self.signal) {
+            return Err(ReadError::SignalNotFound { path: path.into(), name: name.clone(), available: self.scalars });
+        }
+        let kind = if self.cell_size == Some(2) { CellKind::Segment } else { CellKind::Triangle };
+        FShape::try_new(self.dim, kind, self.points, self.cells, self.signal)
+            .map_err(|source| ReadError::Shape { path: path.into(), source })
+    }
+}
+
+/// Reads a whole file, gunzipping it when it starts with the gzip magic.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
+    let io = |source| ReadError::Io { path: path.into(), source };
+    let raw = std::fs::read(path).map_err(io)?;
+    if raw.starts_with(&[0x1f, 0x8b]) {
+        let mut out = Vec::new();
+        flate2::read::MultiGzDecoder::new(&raw[..]).read_to_end(&mut out).map_err(io)?;
+        Ok(out)
+    } else {
+        Ok(raw)
+    }
+}
+
+/// Reads a mesh (PLY, OBJ or VTK legacy, each optionally gzipped), with its
+/// signal per [`ReadOptions`].
+///
+/// ```no_run
+/// use fshape_mesh::io::{read_mesh, ReadOptions};
+/// let s = read_mesh("lh.pial.thick.ply".as_ref(), &ReadOptions::default())?;
+/// println!("{} vertices, signal: {}", s.n_vertices(), s.signal().is_some());
+/// # Ok::<(), fshape_mesh::io::ReadError>(())
+/// ```
+pub fn read_mesh(path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
+    let (format, _) = Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
+    let data = read_bytes(path)?;
+    parse_mesh(&data, format, opts, path)
+}
+
+/// Parses mesh data already in memory (decompressed); `path` only names the
+/// source in error messages.
+pub fn parse_mesh(data: &[u8], format: Format, opts: &ReadOptions, path: &Path) -> Result<FShape, ReadError> {
+    let name = opts.signal_name.as_deref().unwrap_or(DEFAULT_SIGNAL_NAME);
+    let parse = |source| ReadError::Parse { path: path.into(), source };
+    let raw = match format {
+        Format::Ply => ply::parse(data, name).map_err(parse)?,
+        Format::Vtk => vtk::parse(data, name).map_err(parse)?,
+        Format::Obj => obj::parse(data).map_err(parse)?,
+    };
+    raw.into_shape(path, opts)
+}
+
+/// Writes a mesh in the format its extension names (`.ply`, `.obj`,
+/// `.vtk`, each optionally followed by `.gz`). OBJ carries no signal.
+/// The write is atomic: a temporary file is renamed into place.
+pub fn write_mesh(path: &Path, shape: &FShape, encoding: Encoding) -> Result<(), WriteError> {
+    let (format, gz) = Format::from_path(path).ok_or_else(|| WriteError::UnknownFormat { path: path.into() })?;
+    let mut bytes = Vec::new();
+    match format {
+        Format::Ply => ply::write(&mut bytes, shape, encoding),
+        Format::Vtk => vtk::write(&mut bytes, shape, encoding),
+        Format::Obj => obj::write(&mut bytes, shape),
+    }
+    .map_err(|source| WriteError::Io { path: path.into(), source })?;
+    write_atomic(path, &bytes, gz)
+}
+
+/// Writes `bytes` (gzipped when `gz`) to a temporary file beside `path`,
+/// then renames it over `path`, so readers never see a partial file.
+pub fn write_atomic(path: &Path, bytes: &[u8], gz: bool) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io { path: path.into(), source };
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = std::io::BufWriter::new(file);
+        if gz {
+            let mut enc = flate2::write::GzEncoder::new(&mut w, flate2::Compression::default());
+            enc.write_all(bytes)?;
+            enc.finish()?;
+        } else {
+            w.write_all(bytes)?;
+        }
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io)
+}

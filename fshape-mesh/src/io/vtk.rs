@@ -1,0 +1,401 @@
+//! VTK legacy POLYDATA, ASCII and binary (big endian), versions 2.0–5.1.
+//!
+//! Read: `POINTS`; cells from `POLYGONS` (triangles), `TRIANGLE_STRIPS`
+//! (split into triangles) or `LINES` (polylines split into segments), in the
+//! classic count-prefixed layout or the 5.1 `OFFSETS`/`CONNECTIVITY` layout;
+//! `VERTICES` are ignored. The signal is the `POINT_DATA` array (`SCALARS`
+//! with one component, or a one-component `FIELD` array) with the caller's
+//! name (default `signal`). Other attributes and all `CELL_DATA` are skipped.
+//!
+//! Write: version 4.2 (what fshapesTk and ParaView exchange), `double`
+//! points, `int` cells, `SCALARS signal double 1`. A planar shape gets
+//! z = 0 and the title `fshape planar`, which this reader honours.
+
+use std::io::{self, Write};
+
+use super::cursor::{Cursor, lossy};
+use super::{Encoding, ParseError, ParseErrorKind, RawMesh};
+use crate::shape::{CellKind, FShape};
+
+/// The title line that marks a planar (2-D) shape written with z = 0.
+pub const PLANAR_TITLE: &str = "fshape planar";
+
+/// Byte size of a VTK data type name, or `None` if unknown. `bit` arrays
+/// are not supported.
+fn type_size(name: &str) -> Option<usize> {
+    Some(match name {
+        "unsigned_char" | "char" => 1,
+        "unsigned_short" | "short" => 2,
+        "unsigned_int" | "int" | "float" => 4,
+        "unsigned_long" | "long" | "double" | "vtktypeint64" | "vtktypeuint64" | "vtkIdType" => 8,
+        _ => return None,
+    })
+}
+
+struct Reader<'a> {
+    cur: Cursor<'a>,
+    binary: bool,
+}
+
+impl<'a> Reader<'a> {
+    fn bad(&self, expected: &'static str, found: &str) -> ParseError {
+        self.cur.error(ParseErrorKind::BadToken { expected, found: lossy(found.as_bytes()) })
+    }
+
+    /// The next non-empty line, split into words; `None` at the end.
+    fn keyword_line(&mut self) -> Result<Option<Vec<&'a str>>, ParseError> {
+        while let Some(line) = self.cur.text_line("a VTK keyword line")? {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            if !words.is_empty() {
+                return Ok(Some(words));
+            }
+        }
+        Ok(None)
+    }
+
+    fn count(&self, word: Option<&&str>, expected: &'static str) -> Result<u64, ParseError> {
+        let w = word.copied().unwrap_or("");
+        w.parse::<u64>().map_err(|_| self.bad(expected, w))
+    }
+
+    fn dtype<'w>(&self, word: Option<&&'w str>) -> Result<(&'w str, usize), ParseError> {
+        let w = word.copied().unwrap_or("");
+        match type_size(w) {
+            Some(s) => Ok((w, s)),
+            None => Err(self.cur.error(ParseErrorKind::Unsupported { what: "VTK data type", found: lossy(w.as_bytes()) })),
+        }
+    }
+
+    /// Refuses a count whose data cannot fit in the rest of the file.
+    fn check_room(&self, n: u64, bytes_each: usize, what: &'static str) -> Result<usize, ParseError> {
+        let min = if self.binary { bytes_each as u64 } else { 2 };
+        if n.saturating_mul(min) > self.cur.remaining() as u64 + 1 {
+            return Err(self.cur.error(ParseErrorKind::Truncated { what, claimed: n, available: self.cur.remaining() }));
+        }
+        Ok(n as usize)
+    }
+
+    /// Reads `n` numbers of type `ty` as f64.
+    fn numbers(&mut self, n: u64, ty: (&str, usize), what: &'static str) -> Result<Vec<f64>, ParseError> {
+        let n = self.check_room(n, ty.1, what)?;
+        let mut out = Vec::with_capacity(n);
+        if !self.binary {
+            for _ in 0..n {
+                out.push(self.cur.f64_token(what)?);
+            }
+            return Ok(out);
+        }
+        let bytes = self.cur.take(n * ty.1, what)?;
+        for b in bytes.chunks_exact(ty.1) {
+            out.push(match (ty.0, b.len()) {
+                ("float", _) => f32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
+                ("double", _) => f64::from_be_bytes(b.try_into().expect("8 bytes")),
+                ("unsigned_char", _) => b[0] as f64,
+                ("char", _) => b[0] as i8 as f64,
+                ("short", _) => i16::from_be_bytes(b.try_into().expect("2 bytes")) as f64,
+                ("unsigned_short", _) => u16::from_be_bytes(b.try_into().expect("2 bytes")) as f64,
+                ("int", _) => i32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
+                ("unsigned_int", _) => u32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
+                ("vtktypeuint64" | "unsigned_long", _) => u64::from_be_bytes(b.try_into().expect("8 bytes")) as f64,
+                _ => i64::from_be_bytes(b.try_into().expect("8 bytes")) as f64,
+            });
+        }
+        self.cur.skip_newline();
+        Ok(out)
+    }
+
+    /// Reads `n` integers (cell sizes, indices, offsets).
+    fn integers(&mut self, n: u64, ty: (&str, usize), what: &'static str) -> Result<Vec<i64>, ParseError> {
+        let at = self.cur.at();
+        let vals = self.numbers(n, ty, what)?;
+        vals.iter()
+            .map(|&v| {
+                if v.fract() == 0.0 && v.abs() < 9.0e15 {
+                    Ok(v as i64)
+                } else {
+                    Err(ParseError { at, kind: ParseErrorKind::BadToken { expected: what, found: v.to_string() } })
+                }
+            })
+            .collect()
+    }
+}
+
+/// One cell section, as a flat list of cells (each a list of point ids).
+struct CellBlock {
+    keyword: &'static str,
+    cells: Vec<Vec<i64>>,
+}
+
+fn read_cells(r: &mut Reader, words: &[&str], version5: bool, keyword: &'static str) -> Result<CellBlock, ParseError> {
+    let n = r.count(words.get(1), "a cell count")?;
+    let size = r.count(words.get(2), "a cell list size")?;
+    let mut cells = Vec::new();
+    if version5 {
+        let offsets = read_array_line(r, "OFFSETS", n)?;
+        let conn = read_array_line(r, "CONNECTIVITY", size)?;
+        for w in offsets.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            if a < 0 || b < a || b as usize > conn.len() {
+                return Err(r.bad("non-decreasing cell offsets within the connectivity", &format!("{a}..{b}")));
+            }
+            cells.push(conn[a as usize..b as usize].to_vec());
+        }
+    } else {
+        let flat = r.integers(size, ("int", 4), "a cell list entry")?;
+        let mut i = 0;
+        while i < flat.len() {
+            let k = flat[i];
+            if k < 0 || i + 1 + k as usize > flat.len() {
+                return Err(r.bad("a cell size that fits in the cell list", &k.to_string()));
+            }
+            cells.push(flat[i + 1..i + 1 + k as usize].to_vec());
+            i += 1 + k as usize;
+        }
+        if cells.len() as u64 != n {
+            return Err(r.cur.error(ParseErrorKind::CountMismatch { what: "cells in the cell list", expected: n, found: cells.len() as u64 }));
+        }
+    }
+    Ok(CellBlock { keyword, cells })
+}
+
+fn read_array_line(r: &mut Reader, name: &'static str, n: u64) -> Result<Vec<i64>, ParseError> {
+    let words = r.keyword_line()?.ok_or_else(|| r.cur.error(ParseErrorKind::Missing { what: "OFFSETS/CONNECTIVITY arrays" }))?;
+    if words.first() != Some(&name) {
+        return Err(r.bad(if name == "OFFSETS" { "`OFFSETS type`" } else { "`CONNECTIVITY type`" }, words.first().unwrap_or(&"")));
+    }
+    let ty = r.dtype(words.get(1))?;
+    r.integers(n, ty, "a cell array entry")
+}
+
+/// Reads the attributes of a `POINT_DATA` or `CELL_DATA` block of `n`
+/// tuples; returns one-component arrays by name when `keep`.
+fn read_attributes<'a>(
+    r: &mut Reader<'a>,
+    n: u64,
+    keep: bool,
+    out: &mut Vec<(String, Vec<f64>)>,
+) -> Result<Option<Vec<&'a str>>, ParseError> {
+    loop {
+        let Some(words) = r.keyword_line()? else { return Ok(None) };
+        let name = words.get(1).copied().unwrap_or("").to_string();
+        match words[0] {
+            "SCALARS" => {
+                let ty = r.dtype(words.get(2))?;
+                let ncomp = match words.get(3) {
+                    Some(c) => r.count(Some(c), "a component count")?,
+                    None => 1,
+                };
+                let lut = r.keyword_line()?.unwrap_or_default();
+                if lut.first() != Some(&"LOOKUP_TABLE") {
+                    return Err(r.bad("`LOOKUP_TABLE name` after SCALARS", &lut.join(" ")));
+                }
+                let vals = r.numbers(n.saturating_mul(ncomp), ty, "a scalar value")?;
+                if keep && ncomp == 1 {
+                    out.push((name, vals));
+                }
+            }
+            "LOOKUP_TABLE" => {
+                let size = r.count(words.get(2), "a lookup table size")?;
+                let cbytes = if r.binary { 1 } else { 4 };
+                r.numbers(size.saturating_mul(4), ("unsigned_char", cbytes), "a lookup table entry")?;
+            }
+            "VECTORS" | "NORMALS" => {
+                let ty = r.dtype(words.get(2))?;
+                r.numbers(n.saturating_mul(3), ty, "a vector component")?;
+            }
+            "TENSORS" => {
+                let ty = r.dtype(words.get(2))?;
+                r.numbers(n.saturating_mul(9), ty, "a tensor component")?;
+            }
+            "TEXTURE_COORDINATES" => {
+                let dim = r.count(words.get(2), "a texture dimension")?;
+                let ty = r.dtype(words.get(3))?;
+                r.numbers(n.saturating_mul(dim), ty, "a texture coordinate")?;
+            }
+            "COLOR_SCALARS" => {
+                let k = r.count(words.get(2), "a colour component count")?;
+                let ty = if r.binary { ("unsigned_char", 1) } else { ("float", 4) };
+                r.numbers(n.saturating_mul(k), ty, "a colour component")?;
+            }
+            "FIELD" => {
+                let arrays = r.count(words.get(2), "a field array count")?;
+                for _ in 0..arrays {
+                    let w = r.keyword_line()?.ok_or_else(|| r.cur.error(ParseErrorKind::Eof { expected: "a field array header" }))?;
+                    let ncomp = r.count(w.get(1), "a component count")?;
+                    let ntup = r.count(w.get(2), "a tuple count")?;
+                    let ty = r.dtype(w.get(3))?;
+                    let vals = r.numbers(ncomp.saturating_mul(ntup), ty, "a field value")?;
+                    if keep && ncomp == 1 && ntup == n {
+                        out.push((w[0].to_string(), vals));
+                    }
+                }
+            }
+            "METADATA" => skip_metadata(r)?,
+            _ => return Ok(Some(words)),
+        }
+    }
+}
+
+fn skip_metadata(r: &mut Reader) -> Result<(), ParseError> {
+    while let Some(line) = r.cur.text_line("metadata")? {
+        if line.trim().is_empty() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Parses VTK legacy POLYDATA; `signal_name` selects the point-data array
+/// read as the signal (absent: no signal).
+pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseError> {
+    let mut r = Reader { cur: Cursor::new(data), binary: false };
+    let first = r.cur.text_line("`# vtk DataFile Version x.y`")?.unwrap_or("");
+    let version = first
+        .strip_prefix("# vtk DataFile Version ")
+        .and_then(|v| v.trim().split('.').next()?.parse::<u32>().ok())
+        .ok_or_else(|| ParseError { at: super::Location::Line(1), kind: ParseErrorKind::BadToken { expected: "`# vtk DataFile Version x.y`", found: lossy(first.as_bytes()) } })?;
+    let title = r.cur.text_line("a title line")?.unwrap_or("").trim().to_string();
+    let enc = r.cur.text_line("ASCII or BINARY")?.unwrap_or("").trim().to_ascii_uppercase();
+    r.binary = match enc.as_str() {
+        "ASCII" => false,
+        "BINARY" => true,
+        _ => return Err(r.bad("ASCII or BINARY", &enc)),
+    };
+    r.cur.binary = r.binary;
+    let ds = r.keyword_line()?.unwrap_or_default();
+    if ds.first() != Some(&"DATASET") || ds.get(1) != Some(&"POLYDATA") {
+        return Err(r.cur.error(ParseErrorKind::Unsupported { what: "VTK dataset (fshape reads DATASET POLYDATA)", found: ds.join(" ") }));
+    }
+    let mut points: Option<Vec<f64>> = None;
+    let mut blocks: Vec<CellBlock> = Vec::new();
+    let mut arrays = Vec::new();
+    let mut pending = r.keyword_line()?;
+    while let Some(words) = pending.take() {
+        match words[0] {
+            "POINTS" => {
+                let n = r.count(words.get(1), "a point count")?;
+                let ty = r.dtype(words.get(2))?;
+                points = Some(r.numbers(n.saturating_mul(3), ty, "a point coordinate")?);
+            }
+            "POLYGONS" => blocks.push(read_cells(&mut r, &words, version >= 5, "POLYGONS")?),
+            "TRIANGLE_STRIPS" => blocks.push(read_cells(&mut r, &words, version >= 5, "TRIANGLE_STRIPS")?),
+            "LINES" => blocks.push(read_cells(&mut r, &words, version >= 5, "LINES")?),
+            "VERTICES" => {
+                read_cells(&mut r, &words, version >= 5, "VERTICES")?;
+            }
+            "METADATA" => skip_metadata(&mut r)?,
+            "POINT_DATA" | "CELL_DATA" => {
+                let n = r.count(words.get(1), "a tuple count")?;
+                let keep = words[0] == "POINT_DATA";
+                if keep {
+                    let np = points.as_ref().map_or(0, |p| p.len() as u64 / 3);
+                    if n != np {
+                        return Err(r.cur.error(ParseErrorKind::CountMismatch { what: "POINT_DATA tuples (one per point)", expected: np, found: n }));
+                    }
+                }
+                pending = read_attributes(&mut r, n, keep, &mut arrays)?;
+                continue;
+            }
+            other => return Err(r.cur.error(ParseErrorKind::Unsupported { what: "VTK POLYDATA section", found: lossy(other.as_bytes()) })),
+        }
+        pending = r.keyword_line()?;
+    }
+    let points = points.ok_or_else(|| r.cur.error(ParseErrorKind::Missing { what: "POINTS" }))?;
+    let mut raw = RawMesh { dim: 3, points, ..RawMesh::default() };
+    fill_cells(&mut raw, blocks).map_err(|kind| r.cur.error(kind))?;
+    raw.scalars = arrays.iter().map(|a| a.0.clone()).collect();
+    raw.signal = arrays.into_iter().find(|a| a.0 == signal_name).map(|a| a.1);
+    if title == PLANAR_TITLE && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
+        raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
+        raw.dim = 2;
+    }
+    Ok(raw)
+}
+
+fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErrorKind> {
+    let has_tri = blocks.iter().any(|b| b.keyword != "LINES" && !b.cells.is_empty());
+    let has_lines = blocks.iter().any(|b| b.keyword == "LINES" && !b.cells.is_empty());
+    if has_tri && has_lines {
+        return Err(ParseErrorKind::MixedCellSizes { cell: 0, found: 2, expected: 3 });
+    }
+    raw.cell_size = Some(if has_lines { 2 } else { 3 });
+    let mut cell = 0;
+    for b in blocks {
+        for c in b.cells {
+            let ids: Vec<usize> = c
+                .iter()
+                .map(|&v| usize::try_from(v).map_err(|_| ParseErrorKind::NegativeIndex { cell, value: v }))
+                .collect::<Result<_, _>>()?;
+            match b.keyword {
+                "POLYGONS" if ids.len() == 3 => raw.cells.extend_from_slice(&ids),
+                "POLYGONS" => return Err(ParseErrorKind::CellSize { cell, found: ids.len() }),
+                "TRIANGLE_STRIPS" => {
+                    for (k, w) in ids.windows(3).enumerate() {
+                        // Every other triangle of a strip is flipped to keep
+                        // one orientation.
+                        let t = if k % 2 == 0 { [w[0], w[1], w[2]] } else { [w[1], w[0], w[2]] };
+                        raw.cells.extend_from_slice(&t);
+                    }
+                }
+                _ => {
+                    for w in ids.windows(2) {
+                        raw.cells.extend_from_slice(w);
+                    }
+                }
+            }
+            cell += 1;
+        }
+    }
+    Ok(())
+}
+
+/// Writes `shape` as VTK legacy POLYDATA, version 4.2.
+pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
+    let ascii = encoding == Encoding::Ascii;
+    let title = if shape.dim() == 2 { PLANAR_TITLE } else { "fshape" };
+    let enc = if ascii { "ASCII" } else { "BINARY" };
+    writeln!(w, "# vtk DataFile Version 4.2\n{title}\n{enc}\nDATASET POLYDATA")?;
+    writeln!(w, "POINTS {} double", shape.n_vertices())?;
+    let put = |w: &mut dyn Write, vals: &[f64]| -> io::Result<()> {
+        if ascii {
+            let line: Vec<String> = vals.iter().map(|x| format!("{x:e}")).collect();
+            writeln!(w, "{}", line.join(" "))
+        } else {
+            vals.iter().try_for_each(|x| w.write_all(&x.to_be_bytes()))
+        }
+    };
+    for v in 0..shape.n_vertices() {
+        let p = shape.point(v);
+        put(w, &[p[0], p[1], if shape.dim() == 3 { p[2] } else { 0.0 }])?;
+    }
+    if !ascii {
+        writeln!(w)?;
+    }
+    let k = shape.kind().n_corners();
+    let keyword = if shape.kind() == CellKind::Triangle { "POLYGONS" } else { "LINES" };
+    writeln!(w, "{keyword} {} {}", shape.n_cells(), shape.n_cells() * (k + 1))?;
+    for c in shape.cell_iter() {
+        let ids: Vec<i32> = std::iter::once(Ok(k as i32))
+            .chain(c.iter().map(|&v| i32::try_from(v).map_err(|_| io::Error::other("vertex index exceeds the VTK int range"))))
+            .collect::<io::Result<_>>()?;
+        if ascii {
+            let line: Vec<String> = ids.iter().map(i32::to_string).collect();
+            writeln!(w, "{}", line.join(" "))?;
+        } else {
+            ids.iter().try_for_each(|x| w.write_all(&x.to_be_bytes()))?;
+        }
+    }
+    if !ascii {
+        writeln!(w)?;
+    }
+    if let Some(f) = shape.signal() {
+        writeln!(w, "POINT_DATA {}\nSCALARS signal double 1\nLOOKUP_TABLE default", shape.n_vertices())?;
+        for &x in f {
+            put(w, &[x])?;
+        }
+        if !ascii {
+            writeln!(w)?;
+        }
+    }
+    Ok(())
+}

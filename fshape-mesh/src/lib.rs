@@ -1,0 +1,49 @@
+//! Discrete functional shapes ("fshapes"): a mesh whose vertices carry one
+//! real signal value each, as in Charon, Charlier & Trouvé, *Metamorphoses
+//! of functional shapes in Sobolev spaces*, section 4.
+//!
+//! An fshape is X = (x, f, C): vertices x ∈ R^{P×n} (n = 2 or 3), cells
+//! C ∈ {0..P}^{T×(d+1)} (segments, d = 1, or triangles, d = 2) and a signal
+//! f ∈ R^P (optional: a purely geometric shape has none). This crate owns
+//! that type and everything about it that needs no kernel or finite
+//! element:
+//!
+//! - [`FShape`]: construction with checks, accessors, cell geometry (volumes
+//!   r_τ, centres, area-weighted normals or tangents, lumped vertex volumes),
+//!   [`FShape::topology`] (boundary, components, orientation).
+//! - [`FShape::validate`]: every problem with its index, split into errors
+//!   and warnings ([`Problem`], [`Severity`]), and [`FShape::repaired`].
+//! - [`io`]: PLY, OBJ and VTK legacy readers and writers (ASCII and binary,
+//!   gzip by magic bytes or `.gz`), per-vertex signal CSV, images (EXR, digit
+//!   CSV). Parsers never panic or over-allocate on bad input, and report the
+//!   file and line or byte offset; writers are atomic.
+//! - [`generate`]: icospheres, Delaunay squares, circles, image grids.
+//! - `test_support` (feature `test-support`): finite-difference checks,
+//!   convergence orders and proptest strategies for the other fshape crates.
+//!
+//! Conventions: f64 everywhere; points and cells are flat row-major arrays;
+//! triangles are counter-clockwise seen from their normal's side.
+//!
+//! ```
+//! use fshape_mesh::generate::icosphere;
+//! let sphere = icosphere(3, 1.0);
+//! let area = sphere.total_volume();
+//! assert!((area - 4.0 * std::f64::consts::PI).abs() < 0.05); // inscribed: slightly less than 4π
+//! assert!(sphere.topology().is_closed());
+//! assert!(sphere.validate().is_clean());
+//! ```
+
+mod geometry;
+mod shape;
+mod topology;
+mod validate;
+
+pub mod generate;
+pub mod io;
+#[cfg(feature = "test-support")]
+pub mod test_support;
+
+pub use geometry::BoundingBox;
+pub use shape::{CellKind, FShape, ShapeError};
+pub use topology::{Facet, Topology};
+pub use validate::{Problem, RepairLog, Repairs, Severity, Validation, ZERO_VOLUME_REL, summarise};

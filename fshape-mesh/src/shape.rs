@@ -1,0 +1,216 @@
+//! The discrete functional shape: vertices, cells and an optional signal.
+
+use crate::validate::{self, Problem, Validation};
+
+/// The kind of cell an fshape is made of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CellKind {
+    /// Segments (d = 1): polygonal curves in R² or R³.
+    Segment,
+    /// Triangles (d = 2): surfaces in R³ or flat triangulated domains in R².
+    Triangle,
+}
+
+impl CellKind {
+    /// Number of vertices of one cell, d + 1.
+    pub fn n_corners(self) -> usize {
+        match self {
+            CellKind::Segment => 2,
+            CellKind::Triangle => 3,
+        }
+    }
+
+    /// Intrinsic dimension d of the cells.
+    pub fn dim(self) -> usize {
+        self.n_corners() - 1
+    }
+
+    /// A lower-case name (`"segment"`, `"triangle"`), used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            CellKind::Segment => "segment",
+            CellKind::Triangle => "triangle",
+        }
+    }
+}
+
+/// Why an [`FShape`] could not be built.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum ShapeError {
+    /// The ambient dimension is not 2 or 3. Pass `dim = 2` for curves or
+    /// flat domains in the plane, `dim = 3` otherwise.
+    #[error("ambient dimension {dim} is not supported (use 2 or 3)")]
+    Dimension {
+        /// The dimension given.
+        dim: usize,
+    },
+    /// The flat coordinate array does not hold a whole number of points.
+    #[error("{len} coordinates do not make whole {dim}-D points")]
+    PointsLength {
+        /// Length of the coordinate array.
+        len: usize,
+        /// Ambient dimension.
+        dim: usize,
+    },
+    /// The flat cell array does not hold a whole number of cells.
+    #[error("{len} cell indices do not make whole {kind}s of {corners} vertices")]
+    CellsLength {
+        /// Length of the index array.
+        len: usize,
+        /// Cell kind name.
+        kind: &'static str,
+        /// Vertices per cell.
+        corners: usize,
+    },
+    /// The data is well formed but some values make the shape unusable
+    /// (NaN coordinates, an index out of range, ...). Every such problem is
+    /// listed with its index; fix the input or use the repairs of
+    /// [`FShape::repaired`] for the ones it can fix.
+    #[error("invalid fshape: {}", validate::summarise(.problems))]
+    Invalid {
+        /// Every blocking problem found, in index order.
+        problems: Vec<Problem>,
+    },
+}
+
+/// A discrete functional shape (paper section 4): vertices `x` (P × n, flat
+/// row-major), cells `C` (T × (d+1), flat) and an optional per-vertex signal
+/// `f` (P values). Absent signal means a purely geometric shape.
+///
+/// The type guarantees what every computation needs: finite coordinates and
+/// signal, cell indices in range, no repeated index inside a cell, a signal
+/// of the right length. Conditions that still allow computing (unused
+/// vertices, zero-volume or duplicate cells, boundaries, non-manifold edges,
+/// inconsistent orientation) are reported by [`FShape::validate`] as
+/// warnings.
+///
+/// ```
+/// use fshape_mesh::{CellKind, FShape};
+/// // The unit right triangle has area 1/2.
+/// let s = FShape::try_new(2, CellKind::Triangle, vec![0., 0., 1., 0., 0., 1.], vec![0, 1, 2], None)?;
+/// assert_eq!(s.total_volume(), 0.5);
+/// # Ok::<(), fshape_mesh::ShapeError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct FShape {
+    dim: usize,
+    kind: CellKind,
+    points: Vec<f64>,
+    cells: Vec<usize>,
+    signal: Option<Vec<f64>>,
+}
+
+impl FShape {
+    /// Builds an fshape, checking everything a computation relies on.
+    ///
+    /// `points` holds `dim` coordinates per vertex, `cells` holds
+    /// `kind.n_corners()` vertex indices per cell, `signal` one value per
+    /// vertex. Every blocking problem is reported at once with its index.
+    pub fn try_new(
+        dim: usize,
+        kind: CellKind,
+        points: Vec<f64>,
+        cells: Vec<usize>,
+        signal: Option<Vec<f64>>,
+    ) -> Result<Self, ShapeError> {
+        if dim != 2 && dim != 3 {
+            return Err(ShapeError::Dimension { dim });
+        }
+        if points.len() % dim != 0 {
+            return Err(ShapeError::PointsLength { len: points.len(), dim });
+        }
+        if cells.len() % kind.n_corners() != 0 {
+            return Err(ShapeError::CellsLength {
+                len: cells.len(),
+                kind: kind.name(),
+                corners: kind.n_corners(),
+            });
+        }
+        let problems = validate::blocking_problems(dim, kind, &points, &cells, signal.as_deref());
+        if !problems.is_empty() {
+            return Err(ShapeError::Invalid { problems });
+        }
+        Ok(FShape { dim, kind, points, cells, signal })
+    }
+
+    /// Replaces (or removes) the signal, checking its length and values.
+    pub fn with_signal(self, signal: Option<Vec<f64>>) -> Result<Self, ShapeError> {
+        FShape::try_new(self.dim, self.kind, self.points, self.cells, signal)
+    }
+
+    /// Replaces the vertex positions (same count, same dimension), as when a
+    /// shape moves along a deformation.
+    pub fn with_points(self, points: Vec<f64>) -> Result<Self, ShapeError> {
+        FShape::try_new(self.dim, self.kind, points, self.cells, self.signal)
+    }
+
+    /// Ambient dimension n (2 or 3).
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Cell kind (segment or triangle).
+    pub fn kind(&self) -> CellKind {
+        self.kind
+    }
+
+    /// Number of vertices P.
+    pub fn n_vertices(&self) -> usize {
+        self.points.len() / self.dim
+    }
+
+    /// Number of cells T.
+    pub fn n_cells(&self) -> usize {
+        self.cells.len() / self.kind.n_corners()
+    }
+
+    /// All coordinates, `dim` per vertex.
+    pub fn points(&self) -> &[f64] {
+        &self.points
+    }
+
+    /// The coordinates of vertex `i`.
+    ///
+    /// # Panics
+    /// If `i >= self.n_vertices()`.
+    #[track_caller]
+    pub fn point(&self, i: usize) -> &[f64] {
+        &self.points[i * self.dim..(i + 1) * self.dim]
+    }
+
+    /// All cell indices, `kind.n_corners()` per cell.
+    pub fn cells(&self) -> &[usize] {
+        &self.cells
+    }
+
+    /// The vertex indices of cell `t`.
+    ///
+    /// # Panics
+    /// If `t >= self.n_cells()`.
+    #[track_caller]
+    pub fn cell(&self, t: usize) -> &[usize] {
+        let c = self.kind.n_corners();
+        &self.cells[t * c..(t + 1) * c]
+    }
+
+    /// Iterator over the cells.
+    pub fn cell_iter(&self) -> std::slice::ChunksExact<'_, usize> {
+        self.cells.chunks_exact(self.kind.n_corners())
+    }
+
+    /// The signal, one value per vertex, if any.
+    pub fn signal(&self) -> Option<&[f64]> {
+        self.signal.as_deref()
+    }
+
+    /// Takes the parts apart: `(dim, kind, points, cells, signal)`.
+    pub fn into_parts(self) -> (usize, CellKind, Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
+        (self.dim, self.kind, self.points, self.cells, self.signal)
+    }
+
+    /// Every problem of the shape, blocking or not (see [`Validation`]).
+    pub fn validate(&self) -> Validation {
+        validate::validate(self)
+    }
+}

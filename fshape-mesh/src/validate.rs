@@ -1,0 +1,414 @@
+//! Validation: every problem of an fshape with its index, split into errors
+//! (nothing can be computed) and warnings (computations are defined), and
+//! the usual repairs.
+
+use std::fmt;
+
+use crate::shape::{CellKind, FShape};
+use crate::topology::Facet;
+
+/// Whether a problem blocks computation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Severity {
+    /// Nothing can be computed on the shape until it is fixed.
+    Error,
+    /// Computations are defined; the result may not be what was meant.
+    Warning,
+}
+
+/// Cells whose volume is at most this fraction of diag^d (diag = bounding
+/// box diagonal) count as zero-volume: below it the cell's normal is noise.
+pub const ZERO_VOLUME_REL: f64 = 1e-12;
+
+/// One problem of an fshape, naming where it is.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Problem {
+    /// A coordinate is NaN or infinite. Error.
+    NonFiniteCoordinate {
+        /// Vertex index.
+        vertex: usize,
+    },
+    /// A signal value is NaN or infinite (a missing value). Error: fill or
+    /// drop missing values before building the shape.
+    NonFiniteSignal {
+        /// Vertex index.
+        vertex: usize,
+    },
+    /// The signal does not have one value per vertex. Error.
+    SignalLength {
+        /// Number of vertices.
+        expected: usize,
+        /// Number of signal values.
+        found: usize,
+    },
+    /// A cell refers to a vertex that does not exist. Error.
+    IndexOutOfRange {
+        /// Cell index.
+        cell: usize,
+        /// The offending vertex index.
+        index: usize,
+        /// Number of vertices.
+        n_vertices: usize,
+    },
+    /// A cell uses the same vertex twice. Error.
+    RepeatedIndex {
+        /// Cell index.
+        cell: usize,
+        /// The repeated vertex.
+        vertex: usize,
+    },
+    /// A cell has (numerically) zero volume: it carries no mass in the
+    /// signal norms and data terms, and has no normal. Warning; repair:
+    /// drop zero-volume cells.
+    ZeroVolumeCell {
+        /// Cell index.
+        cell: usize,
+        /// Its volume.
+        volume: f64,
+    },
+    /// A cell uses the same vertices as an earlier one. Warning; repair:
+    /// drop duplicate cells.
+    DuplicateCell {
+        /// Cell index.
+        cell: usize,
+        /// The earlier cell with the same vertices.
+        first: usize,
+        /// Whether both have the same orientation.
+        same_orientation: bool,
+    },
+    /// No cell uses this vertex: it carries no mass. Warning; repair: drop
+    /// unused vertices.
+    UnusedVertex {
+        /// Vertex index.
+        vertex: usize,
+    },
+    /// More than two cells share this facet (edge of a surface, vertex of a
+    /// curve). Warning.
+    NonManifoldFacet {
+        /// The facet (for a curve both entries are the vertex).
+        facet: Facet,
+        /// Number of cells sharing it.
+        cells: usize,
+    },
+    /// Two cells traverse this directed facet the same way, so their normals
+    /// (tangents) disagree. Warning: oriented data terms (currents) then see
+    /// cancellations.
+    InconsistentOrientation {
+        /// The directed edge `[a, b]` used twice (for a curve both entries
+        /// are the vertex).
+        facet: Facet,
+    },
+    /// The shape has a boundary. Warning (informational): boundaries are
+    /// normal for open surfaces, curves and image domains.
+    Boundary {
+        /// Number of boundary facets.
+        facets: usize,
+        /// Number of boundary loops (surfaces) or end points (curves).
+        loops: usize,
+    },
+}
+
+impl Problem {
+    /// Whether the problem blocks computation.
+    pub fn severity(&self) -> Severity {
+        match self {
+            Problem::NonFiniteCoordinate { .. }
+            | Problem::NonFiniteSignal { .. }
+            | Problem::SignalLength { .. }
+            | Problem::IndexOutOfRange { .. }
+            | Problem::RepeatedIndex { .. } => Severity::Error,
+            _ => Severity::Warning,
+        }
+    }
+
+    /// A short stable name for the kind of problem (used to group reports
+    /// and in JSON output).
+    pub fn code(&self) -> &'static str {
+        match self {
+            Problem::NonFiniteCoordinate { .. } => "non_finite_coordinate",
+            Problem::NonFiniteSignal { .. } => "non_finite_signal",
+            Problem::SignalLength { .. } => "signal_length",
+            Problem::IndexOutOfRange { .. } => "index_out_of_range",
+            Problem::RepeatedIndex { .. } => "repeated_index",
+            Problem::ZeroVolumeCell { .. } => "zero_volume_cell",
+            Problem::DuplicateCell { .. } => "duplicate_cell",
+            Problem::UnusedVertex { .. } => "unused_vertex",
+            Problem::NonManifoldFacet { .. } => "non_manifold_facet",
+            Problem::InconsistentOrientation { .. } => "inconsistent_orientation",
+            Problem::Boundary { .. } => "boundary",
+        }
+    }
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Problem::NonFiniteCoordinate { vertex } => write!(f, "vertex {vertex} has a NaN or infinite coordinate"),
+            Problem::NonFiniteSignal { vertex } => {
+                write!(f, "vertex {vertex} has a NaN or infinite (missing) signal value")
+            }
+            Problem::SignalLength { expected, found } => {
+                write!(f, "the signal has {found} values for {expected} vertices")
+            }
+            Problem::IndexOutOfRange { cell, index, n_vertices } => {
+                write!(f, "cell {cell} uses vertex {index}, but there are only {n_vertices} vertices")
+            }
+            Problem::RepeatedIndex { cell, vertex } => write!(f, "cell {cell} uses vertex {vertex} twice"),
+            Problem::ZeroVolumeCell { cell, volume } => write!(f, "cell {cell} has zero volume ({volume:e})"),
+            Problem::DuplicateCell { cell, first, same_orientation } => {
+                let o = if *same_orientation { "same" } else { "opposite" };
+                write!(f, "cell {cell} repeats cell {first} ({o} orientation)")
+            }
+            Problem::UnusedVertex { vertex } => write!(f, "vertex {vertex} is used by no cell"),
+            Problem::NonManifoldFacet { facet, cells } => write!(f, "{} is shared by {cells} cells", facet_name(*facet, false)),
+            Problem::InconsistentOrientation { facet } => {
+                write!(f, "{} is traversed the same way by two cells (inconsistent orientation)", facet_name(*facet, true))
+            }
+            Problem::Boundary { facets, loops } => write!(f, "{facets} boundary facets in {loops} loops (or curve end points)"),
+        }
+    }
+}
+
+fn facet_name([a, b]: Facet, directed: bool) -> String {
+    match (a == b, directed) {
+        (true, _) => format!("vertex {a}"),
+        (false, true) => format!("edge {a}→{b}"),
+        (false, false) => format!("edge ({a}, {b})"),
+    }
+}
+
+/// A one-paragraph summary of a problem list: counts per kind and the first
+/// few instances of each.
+pub fn summarise(problems: &[Problem]) -> String {
+    const SHOWN: usize = 3;
+    let mut codes: Vec<&'static str> = problems.iter().map(Problem::code).collect();
+    codes.dedup();
+    let mut seen = Vec::new();
+    let mut parts = Vec::new();
+    for code in codes {
+        if seen.contains(&code) {
+            continue;
+        }
+        seen.push(code);
+        let of_kind: Vec<&Problem> = problems.iter().filter(|p| p.code() == code).collect();
+        let shown: Vec<String> = of_kind.iter().take(SHOWN).map(|p| p.to_string()).collect();
+        let more = of_kind.len().saturating_sub(SHOWN);
+        let tail = if more > 0 { format!("; and {more} more") } else { String::new() };
+        parts.push(format!("{} × {code}: {}{tail}", of_kind.len(), shown.join("; ")));
+    }
+    parts.join(" | ")
+}
+
+/// The full validation report of an fshape.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Validation {
+    /// Every problem found, errors first, each group in index order.
+    pub problems: Vec<Problem>,
+}
+
+impl Validation {
+    /// The problems that block computation.
+    pub fn errors(&self) -> impl Iterator<Item = &Problem> {
+        self.problems.iter().filter(|p| p.severity() == Severity::Error)
+    }
+
+    /// The problems that allow computation.
+    pub fn warnings(&self) -> impl Iterator<Item = &Problem> {
+        self.problems.iter().filter(|p| p.severity() == Severity::Warning)
+    }
+
+    /// Number of problems with the given [`Problem::code`].
+    pub fn count(&self, code: &str) -> usize {
+        self.problems.iter().filter(|p| p.code() == code).count()
+    }
+
+    /// True when there is no problem at all.
+    pub fn is_clean(&self) -> bool {
+        self.problems.is_empty()
+    }
+}
+
+impl fmt::Display for Validation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.problems.is_empty() {
+            return f.write_str("no problems");
+        }
+        f.write_str(&summarise(&self.problems))
+    }
+}
+
+/// The problems that make a shape unusable. Called by [`FShape::try_new`]
+/// on raw arrays whose lengths are already consistent.
+pub(crate) fn blocking_problems(
+    dim: usize,
+    kind: CellKind,
+    points: &[f64],
+    cells: &[usize],
+    signal: Option<&[f64]>,
+) -> Vec<Problem> {
+    let n_vertices = points.len() / dim;
+    let mut out = Vec::new();
+    for (vertex, p) in points.chunks_exact(dim).enumerate() {
+        if p.iter().any(|x| !x.is_finite()) {
+            out.push(Problem::NonFiniteCoordinate { vertex });
+        }
+    }
+    if let Some(f) = signal {
+        if f.len() != n_vertices {
+            out.push(Problem::SignalLength { expected: n_vertices, found: f.len() });
+        }
+        out.extend(f.iter().enumerate().filter(|(_, x)| !x.is_finite()).map(|(vertex, _)| Problem::NonFiniteSignal { vertex }));
+    }
+    for (cell, c) in cells.chunks_exact(kind.n_corners()).enumerate() {
+        for (i, &index) in c.iter().enumerate() {
+            if index >= n_vertices {
+                out.push(Problem::IndexOutOfRange { cell, index, n_vertices });
+            } else if c[..i].contains(&index) {
+                out.push(Problem::RepeatedIndex { cell, vertex: index });
+            }
+        }
+    }
+    out
+}
+
+/// Sorted corner list and orientation parity of a cell, for duplicate
+/// detection.
+fn cell_key(c: &[usize]) -> ([usize; 3], bool) {
+    match *c {
+        [a, b] => ([a.min(b), a.max(b), usize::MAX], a < b),
+        [a, b, d] => {
+            let mut k = [a, b, d];
+            k.sort_unstable();
+            // A triangle keeps its orientation under cyclic rotations: it is
+            // "even" when, rotated to start at its smallest index, it is sorted.
+            let m = c.iter().position(|&v| v == k[0]).unwrap_or(0);
+            (k, c[(m + 1) % 3] == k[1])
+        }
+        _ => ([usize::MAX; 3], true),
+    }
+}
+
+pub(crate) fn validate(shape: &FShape) -> Validation {
+    let mut problems =
+        blocking_problems(shape.dim(), shape.kind(), shape.points(), shape.cells(), shape.signal());
+    let d = shape.kind().dim() as i32;
+    let tol = ZERO_VOLUME_REL * shape.bounding_box().diagonal().powi(d);
+    for t in 0..shape.n_cells() {
+        let volume = shape.cell_volume(t);
+        if volume <= tol {
+            problems.push(Problem::ZeroVolumeCell { cell: t, volume });
+        }
+    }
+    problems.extend(duplicate_cells(shape));
+    let topo = shape.topology();
+    for (vertex, c) in topo.vertex_component.iter().enumerate() {
+        if c.is_none() {
+            problems.push(Problem::UnusedVertex { vertex });
+        }
+    }
+    for &(facet, cells) in &topo.nonmanifold_facets {
+        problems.push(Problem::NonManifoldFacet { facet, cells });
+    }
+    for &facet in &topo.misoriented_facets {
+        problems.push(Problem::InconsistentOrientation { facet });
+    }
+    if !topo.is_closed() {
+        problems.push(Problem::Boundary { facets: topo.boundary_facets.len(), loops: topo.n_boundary_loops });
+    }
+    Validation { problems }
+}
+
+fn duplicate_cells(shape: &FShape) -> Vec<Problem> {
+    let mut keyed: Vec<([usize; 3], bool, usize)> =
+        shape.cell_iter().enumerate().map(|(t, c)| { let (k, o) = cell_key(c); (k, o, t) }).collect();
+    keyed.sort_unstable();
+    let mut out = Vec::new();
+    for group in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let first = group.iter().min_by_key(|g| g.2).map_or(0, |g| g.2);
+        let first_o = group.iter().find(|g| g.2 == first).map_or(true, |g| g.1);
+        for g in group.iter().filter(|g| g.2 != first) {
+            out.push(Problem::DuplicateCell { cell: g.2, first, same_orientation: g.1 == first_o });
+        }
+    }
+    out.sort_unstable_by_key(|p| match p {
+        Problem::DuplicateCell { cell, .. } => *cell,
+        _ => 0,
+    });
+    out
+}
+
+/// Which repairs [`FShape::repaired`] applies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Repairs {
+    /// Remove vertices no cell uses (renumbering the rest, signal kept).
+    pub drop_unused_vertices: bool,
+    /// Remove cells with zero volume ([`ZERO_VOLUME_REL`]).
+    pub drop_zero_volume_cells: bool,
+    /// Remove cells that repeat an earlier cell's vertices (whatever their
+    /// orientation); the first is kept.
+    pub drop_duplicate_cells: bool,
+}
+
+impl Repairs {
+    /// Every repair.
+    pub const ALL: Repairs =
+        Repairs { drop_unused_vertices: true, drop_zero_volume_cells: true, drop_duplicate_cells: true };
+}
+
+/// What [`FShape::repaired`] removed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RepairLog {
+    /// Removed cells (original indices).
+    pub dropped_cells: Vec<usize>,
+    /// Removed vertices (original indices).
+    pub dropped_vertices: Vec<usize>,
+    /// For each original vertex, its new index (`None` if removed).
+    pub vertex_map: Vec<Option<usize>>,
+}
+
+impl FShape {
+    /// A copy with the chosen repairs applied, and what was removed. Cells
+    /// are dropped first, so vertices used only by dropped cells become
+    /// unused and are dropped too when `drop_unused_vertices` is set.
+    pub fn repaired(&self, repairs: Repairs) -> (FShape, RepairLog) {
+        let mut drop_cell = vec![false; self.n_cells()];
+        for p in validate(self).problems {
+            match p {
+                Problem::ZeroVolumeCell { cell, .. } if repairs.drop_zero_volume_cells => drop_cell[cell] = true,
+                Problem::DuplicateCell { cell, .. } if repairs.drop_duplicate_cells => drop_cell[cell] = true,
+                _ => {}
+            }
+        }
+        let mut log = RepairLog::default();
+        let mut used = vec![!repairs.drop_unused_vertices; self.n_vertices()];
+        let mut kept_cells = Vec::new();
+        for (t, c) in self.cell_iter().enumerate() {
+            if drop_cell[t] {
+                log.dropped_cells.push(t);
+            } else {
+                kept_cells.extend_from_slice(c);
+                c.iter().for_each(|&v| used[v] = true);
+            }
+        }
+        let mut next = 0;
+        log.vertex_map = used
+            .iter()
+            .map(|&u| {
+                u.then(|| {
+                    next += 1;
+                    next - 1
+                })
+            })
+            .collect();
+        log.dropped_vertices = (0..self.n_vertices()).filter(|&v| !used[v]).collect();
+        let n = self.dim();
+        let points: Vec<f64> = (0..self.n_vertices()).filter(|&v| used[v]).flat_map(|v| self.point(v).to_vec()).collect();
+        let cells = kept_cells.iter().map(|&v| log.vertex_map[v].unwrap_or(usize::MAX)).collect();
+        let signal = self.signal().map(|f| (0..f.len()).filter(|&v| used[v]).map(|v| f[v]).collect());
+        debug_assert_eq!(points.len() % n, 0);
+        let shape = FShape::try_new(n, self.kind(), points, cells, signal)
+            .expect("repairs of a valid shape keep it valid");
+        (shape, log)
+    }
+}
