@@ -3,7 +3,9 @@
 
 use std::collections::HashMap;
 
-use spade::{AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation};
+use spade::{
+    AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation,
+};
 
 use crate::io::image::Image;
 use crate::shape::{CellKind, FShape};
@@ -49,18 +51,43 @@ impl SplitMix64 {
 pub fn icosphere(level: u32, radius: f64) -> FShape {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut pts: Vec<[f64; 3]> = [
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
     ]
     .iter()
     .map(|p| normalise(*p))
     .collect();
     let mut tris: Vec<[usize; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..level {
         let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
@@ -80,7 +107,8 @@ pub fn icosphere(level: u32, radius: f64) -> FShape {
     }
     let points = pts.iter().flat_map(|p| p.map(|x| x * radius)).collect();
     let cells = tris.iter().flatten().copied().collect();
-    FShape::try_new(3, CellKind::Triangle, points, cells, None).expect("the icosphere is a valid shape")
+    FShape::try_new(3, CellKind::Triangle, points, cells, None)
+        .expect("the icosphere is a valid shape")
 }
 
 fn normalise(p: [f64; 3]) -> [f64; 3] {
@@ -107,7 +135,12 @@ pub fn square(target: usize, seed: u64) -> FShape {
     let mut verts = Vec::new();
     for k in 0..per_side {
         let s = -1.0 + 2.0 * k as f64 / per_side as f64;
-        verts.extend([Point2::new(s, -1.0), Point2::new(1.0, s), Point2::new(-s, 1.0), Point2::new(-1.0, -s)]);
+        verts.extend([
+            Point2::new(s, -1.0),
+            Point2::new(1.0, s),
+            Point2::new(-s, 1.0),
+            Point2::new(-1.0, -s),
+        ]);
     }
     let n_b = verts.len();
     let mut rng = SplitMix64(seed);
@@ -132,9 +165,16 @@ pub fn square(target: usize, seed: u64) -> FShape {
             .with_max_allowed_area(max_area)
             .with_max_additional_vertices(20 * target + 1000),
     );
-    let points = cdt.vertices().flat_map(|v| [v.position().x, v.position().y]).collect();
-    let cells = cdt.inner_faces().flat_map(|f| f.vertices().map(|v| v.fix().index())).collect();
-    FShape::try_new(2, CellKind::Triangle, points, cells, None).expect("spade returns a valid triangulation")
+    let points = cdt
+        .vertices()
+        .flat_map(|v| [v.position().x, v.position().y])
+        .collect();
+    let cells = cdt
+        .inner_faces()
+        .flat_map(|f| f.vertices().map(|v| v.fix().index()))
+        .collect();
+    FShape::try_new(2, CellKind::Triangle, points, cells, None)
+        .expect("spade returns a valid triangulation")
 }
 
 fn angle(p: Point2<f64>) -> f64 {
@@ -177,17 +217,38 @@ pub fn polyline(dim: usize, points: Vec<f64>, closed: bool) -> Result<FShape, cr
 /// Fails (naming the pixel as a vertex) if a value is not finite.
 pub fn image_grid(image: &Image) -> Result<FShape, crate::ShapeError> {
     let (w, h) = (image.width, image.height);
-    let points = (0..h).flat_map(|r| (0..w).flat_map(move |c| [c, r])).collect::<Vec<_>>();
-    let points = points.chunks_exact(2).flat_map(|cr| { let (x, y) = image.pixel_centre(cr[0], cr[1]); [x, y] }).collect();
+    let points = (0..h)
+        .flat_map(|r| (0..w).flat_map(move |c| [c, r]))
+        .collect::<Vec<_>>();
+    let points = points
+        .chunks_exact(2)
+        .flat_map(|cr| {
+            let (x, y) = image.pixel_centre(cr[0], cr[1]);
+            [x, y]
+        })
+        .collect();
     let id = |c: usize, r: usize| r * w + c;
     let mut cells = Vec::new();
     for r in 0..h.saturating_sub(1) {
         for c in 0..w.saturating_sub(1) {
             // Rows go down in y, so (c,r) → (c,r+1) → (c+1,r+1) is counter-clockwise.
-            cells.extend([id(c, r), id(c, r + 1), id(c + 1, r + 1), id(c, r), id(c + 1, r + 1), id(c + 1, r)]);
+            cells.extend([
+                id(c, r),
+                id(c, r + 1),
+                id(c + 1, r + 1),
+                id(c, r),
+                id(c + 1, r + 1),
+                id(c + 1, r),
+            ]);
         }
     }
-    FShape::try_new(2, CellKind::Triangle, points, cells, Some(image.values.clone()))
+    FShape::try_new(
+        2,
+        CellKind::Triangle,
+        points,
+        cells,
+        Some(image.values.clone()),
+    )
 }
 
 /// The image sampled at every vertex of a planar shape by bilinear
@@ -198,5 +259,9 @@ pub fn image_grid(image: &Image) -> Result<FShape, crate::ShapeError> {
 #[track_caller]
 pub fn sample_image(image: &Image, shape: &FShape) -> Vec<f64> {
     assert_eq!(shape.dim(), 2, "images are sampled onto planar shapes");
-    shape.points().chunks_exact(2).map(|p| image.sample(p[0], p[1])).collect()
+    shape
+        .points()
+        .chunks_exact(2)
+        .map(|p| image.sample(p[0], p[1]))
+        .collect()
 }

@@ -118,7 +118,10 @@ impl FShape {
             return Err(ShapeError::Dimension { dim });
         }
         if points.len() % dim != 0 {
-            return Err(ShapeError::PointsLength { len: points.len(), dim });
+            return Err(ShapeError::PointsLength {
+                len: points.len(),
+                dim,
+            });
         }
         if cells.len() % kind.n_corners() != 0 {
             return Err(ShapeError::CellsLength {
@@ -131,7 +134,13 @@ impl FShape {
         if !problems.is_empty() {
             return Err(ShapeError::Invalid { problems });
         }
-        Ok(FShape { dim, kind, points, cells, signal })
+        Ok(FShape {
+            dim,
+            kind,
+            points,
+            cells,
+            signal,
+        })
     }
 
     /// Replaces (or removes) the signal, checking its length and values.

@@ -35,16 +35,33 @@ fn type_size(name: &str) -> Option<usize> {
 struct Reader<'a> {
     cur: Cursor<'a>,
     binary: bool,
+    /// Where the last keyword line started: errors about its words point there.
+    line_at: super::Location,
 }
 
 impl<'a> Reader<'a> {
+    /// An error about the last keyword line.
     fn bad(&self, expected: &'static str, found: &str) -> ParseError {
-        self.cur.error(ParseErrorKind::BadToken { expected, found: lossy(found.as_bytes()) })
+        self.line_error(ParseErrorKind::BadToken {
+            expected,
+            found: lossy(found.as_bytes()),
+        })
+    }
+
+    fn line_error(&self, kind: ParseErrorKind) -> ParseError {
+        ParseError {
+            at: self.line_at,
+            kind,
+        }
     }
 
     /// The next non-empty line, split into words; `None` at the end.
     fn keyword_line(&mut self) -> Result<Option<Vec<&'a str>>, ParseError> {
-        while let Some(line) = self.cur.text_line("a VTK keyword line")? {
+        loop {
+            self.line_at = self.cur.mark();
+            let Some(line) = self.cur.text_line("a VTK keyword line")? else {
+                break;
+            };
             let words: Vec<&str> = line.split_whitespace().collect();
             if !words.is_empty() {
                 return Ok(Some(words));
@@ -62,22 +79,34 @@ impl<'a> Reader<'a> {
         let w = word.copied().unwrap_or("");
         match type_size(w) {
             Some(s) => Ok((w, s)),
-            None => Err(self.cur.error(ParseErrorKind::Unsupported { what: "VTK data type", found: lossy(w.as_bytes()) })),
+            None => Err(self.line_error(ParseErrorKind::Unsupported {
+                what: "VTK data type",
+                found: lossy(w.as_bytes()),
+            })),
         }
     }
 
     /// Refuses a count whose data cannot fit in the rest of the file.
-    fn check_room(&self, n: u64, bytes_each: usize, what: &'static str) -> Result<usize, ParseError> {
+    fn check_room(&self, n: u64, bytes_each: usize) -> Result<usize, ParseError> {
         let min = if self.binary { bytes_each as u64 } else { 2 };
         if n.saturating_mul(min) > self.cur.remaining() as u64 + 1 {
-            return Err(self.cur.error(ParseErrorKind::Truncated { what, claimed: n, available: self.cur.remaining() }));
+            return Err(self.line_error(ParseErrorKind::Truncated {
+                what: "values",
+                claimed: n,
+                available: self.cur.remaining(),
+            }));
         }
         Ok(n as usize)
     }
 
     /// Reads `n` numbers of type `ty` as f64.
-    fn numbers(&mut self, n: u64, ty: (&str, usize), what: &'static str) -> Result<Vec<f64>, ParseError> {
-        let n = self.check_room(n, ty.1, what)?;
+    fn numbers(
+        &mut self,
+        n: u64,
+        ty: (&str, usize),
+        what: &'static str,
+    ) -> Result<Vec<f64>, ParseError> {
+        let n = self.check_room(n, ty.1)?;
         let mut out = Vec::with_capacity(n);
         if !self.binary {
             for _ in 0..n {
@@ -96,7 +125,9 @@ impl<'a> Reader<'a> {
                 ("unsigned_short", _) => u16::from_be_bytes(b.try_into().expect("2 bytes")) as f64,
                 ("int", _) => i32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
                 ("unsigned_int", _) => u32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
-                ("vtktypeuint64" | "unsigned_long", _) => u64::from_be_bytes(b.try_into().expect("8 bytes")) as f64,
+                ("vtktypeuint64" | "unsigned_long", _) => {
+                    u64::from_be_bytes(b.try_into().expect("8 bytes")) as f64
+                }
                 _ => i64::from_be_bytes(b.try_into().expect("8 bytes")) as f64,
             });
         }
@@ -105,15 +136,26 @@ impl<'a> Reader<'a> {
     }
 
     /// Reads `n` integers (cell sizes, indices, offsets).
-    fn integers(&mut self, n: u64, ty: (&str, usize), what: &'static str) -> Result<Vec<i64>, ParseError> {
-        let at = self.cur.at();
+    fn integers(
+        &mut self,
+        n: u64,
+        ty: (&str, usize),
+        what: &'static str,
+    ) -> Result<Vec<i64>, ParseError> {
+        let at = self.cur.mark();
         let vals = self.numbers(n, ty, what)?;
         vals.iter()
             .map(|&v| {
                 if v.fract() == 0.0 && v.abs() < 9.0e15 {
                     Ok(v as i64)
                 } else {
-                    Err(ParseError { at, kind: ParseErrorKind::BadToken { expected: what, found: v.to_string() } })
+                    Err(ParseError {
+                        at,
+                        kind: ParseErrorKind::BadToken {
+                            expected: what,
+                            found: v.to_string(),
+                        },
+                    })
                 }
             })
             .collect()
@@ -126,7 +168,12 @@ struct CellBlock {
     cells: Vec<Vec<i64>>,
 }
 
-fn read_cells(r: &mut Reader, words: &[&str], version5: bool, keyword: &'static str) -> Result<CellBlock, ParseError> {
+fn read_cells(
+    r: &mut Reader,
+    words: &[&str],
+    version5: bool,
+    keyword: &'static str,
+) -> Result<CellBlock, ParseError> {
     let n = r.count(words.get(1), "a cell count")?;
     let size = r.count(words.get(2), "a cell list size")?;
     let mut cells = Vec::new();
@@ -136,7 +183,10 @@ fn read_cells(r: &mut Reader, words: &[&str], version5: bool, keyword: &'static 
         for w in offsets.windows(2) {
             let (a, b) = (w[0], w[1]);
             if a < 0 || b < a || b as usize > conn.len() {
-                return Err(r.bad("non-decreasing cell offsets within the connectivity", &format!("{a}..{b}")));
+                return Err(r.bad(
+                    "non-decreasing cell offsets within the connectivity",
+                    &format!("{a}..{b}"),
+                ));
             }
             cells.push(conn[a as usize..b as usize].to_vec());
         }
@@ -152,16 +202,31 @@ fn read_cells(r: &mut Reader, words: &[&str], version5: bool, keyword: &'static 
             i += 1 + k as usize;
         }
         if cells.len() as u64 != n {
-            return Err(r.cur.error(ParseErrorKind::CountMismatch { what: "cells in the cell list", expected: n, found: cells.len() as u64 }));
+            return Err(r.cur.error(ParseErrorKind::CountMismatch {
+                what: "cells in the cell list",
+                expected: n,
+                found: cells.len() as u64,
+            }));
         }
     }
     Ok(CellBlock { keyword, cells })
 }
 
 fn read_array_line(r: &mut Reader, name: &'static str, n: u64) -> Result<Vec<i64>, ParseError> {
-    let words = r.keyword_line()?.ok_or_else(|| r.cur.error(ParseErrorKind::Missing { what: "OFFSETS/CONNECTIVITY arrays" }))?;
+    let words = r.keyword_line()?.ok_or_else(|| {
+        r.cur.error(ParseErrorKind::Missing {
+            what: "OFFSETS/CONNECTIVITY arrays",
+        })
+    })?;
     if words.first() != Some(&name) {
-        return Err(r.bad(if name == "OFFSETS" { "`OFFSETS type`" } else { "`CONNECTIVITY type`" }, words.first().unwrap_or(&"")));
+        return Err(r.bad(
+            if name == "OFFSETS" {
+                "`OFFSETS type`"
+            } else {
+                "`CONNECTIVITY type`"
+            },
+            words.first().unwrap_or(&""),
+        ));
     }
     let ty = r.dtype(words.get(1))?;
     r.integers(n, ty, "a cell array entry")
@@ -176,7 +241,9 @@ fn read_attributes<'a>(
     out: &mut Vec<(String, Vec<f64>)>,
 ) -> Result<Option<Vec<&'a str>>, ParseError> {
     loop {
-        let Some(words) = r.keyword_line()? else { return Ok(None) };
+        let Some(words) = r.keyword_line()? else {
+            return Ok(None);
+        };
         let name = words.get(1).copied().unwrap_or("").to_string();
         match words[0] {
             "SCALARS" => {
@@ -197,7 +264,11 @@ fn read_attributes<'a>(
             "LOOKUP_TABLE" => {
                 let size = r.count(words.get(2), "a lookup table size")?;
                 let cbytes = if r.binary { 1 } else { 4 };
-                r.numbers(size.saturating_mul(4), ("unsigned_char", cbytes), "a lookup table entry")?;
+                r.numbers(
+                    size.saturating_mul(4),
+                    ("unsigned_char", cbytes),
+                    "a lookup table entry",
+                )?;
             }
             "VECTORS" | "NORMALS" => {
                 let ty = r.dtype(words.get(2))?;
@@ -214,13 +285,21 @@ fn read_attributes<'a>(
             }
             "COLOR_SCALARS" => {
                 let k = r.count(words.get(2), "a colour component count")?;
-                let ty = if r.binary { ("unsigned_char", 1) } else { ("float", 4) };
+                let ty = if r.binary {
+                    ("unsigned_char", 1)
+                } else {
+                    ("float", 4)
+                };
                 r.numbers(n.saturating_mul(k), ty, "a colour component")?;
             }
             "FIELD" => {
                 let arrays = r.count(words.get(2), "a field array count")?;
                 for _ in 0..arrays {
-                    let w = r.keyword_line()?.ok_or_else(|| r.cur.error(ParseErrorKind::Eof { expected: "a field array header" }))?;
+                    let w = r.keyword_line()?.ok_or_else(|| {
+                        r.cur.error(ParseErrorKind::Eof {
+                            expected: "a field array header",
+                        })
+                    })?;
                     let ncomp = r.count(w.get(1), "a component count")?;
                     let ntup = r.count(w.get(2), "a tuple count")?;
                     let ty = r.dtype(w.get(3))?;
@@ -248,14 +327,38 @@ fn skip_metadata(r: &mut Reader) -> Result<(), ParseError> {
 /// Parses VTK legacy POLYDATA; `signal_name` selects the point-data array
 /// read as the signal (absent: no signal).
 pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseError> {
-    let mut r = Reader { cur: Cursor::new(data), binary: false };
-    let first = r.cur.text_line("`# vtk DataFile Version x.y`")?.unwrap_or("");
+    let mut r = Reader {
+        cur: Cursor::new(data),
+        binary: false,
+        line_at: super::Location::Line(1),
+    };
+    let first = r
+        .cur
+        .text_line("`# vtk DataFile Version x.y`")?
+        .unwrap_or("");
     let version = first
         .strip_prefix("# vtk DataFile Version ")
         .and_then(|v| v.trim().split('.').next()?.parse::<u32>().ok())
-        .ok_or_else(|| ParseError { at: super::Location::Line(1), kind: ParseErrorKind::BadToken { expected: "`# vtk DataFile Version x.y`", found: lossy(first.as_bytes()) } })?;
-    let title = r.cur.text_line("a title line")?.unwrap_or("").trim().to_string();
-    let enc = r.cur.text_line("ASCII or BINARY")?.unwrap_or("").trim().to_ascii_uppercase();
+        .ok_or_else(|| ParseError {
+            at: super::Location::Line(1),
+            kind: ParseErrorKind::BadToken {
+                expected: "`# vtk DataFile Version x.y`",
+                found: lossy(first.as_bytes()),
+            },
+        })?;
+    let title = r
+        .cur
+        .text_line("a title line")?
+        .unwrap_or("")
+        .trim()
+        .to_string();
+    r.line_at = r.cur.at();
+    let enc = r
+        .cur
+        .text_line("ASCII or BINARY")?
+        .unwrap_or("")
+        .trim()
+        .to_ascii_uppercase();
     r.binary = match enc.as_str() {
         "ASCII" => false,
         "BINARY" => true,
@@ -264,7 +367,10 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
     r.cur.binary = r.binary;
     let ds = r.keyword_line()?.unwrap_or_default();
     if ds.first() != Some(&"DATASET") || ds.get(1) != Some(&"POLYDATA") {
-        return Err(r.cur.error(ParseErrorKind::Unsupported { what: "VTK dataset (fshape reads DATASET POLYDATA)", found: ds.join(" ") }));
+        return Err(r.line_error(ParseErrorKind::Unsupported {
+            what: "VTK dataset (fshape reads DATASET POLYDATA)",
+            found: ds.join(" "),
+        }));
     }
     let mut points: Option<Vec<f64>> = None;
     let mut blocks: Vec<CellBlock> = Vec::new();
@@ -278,7 +384,9 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
                 points = Some(r.numbers(n.saturating_mul(3), ty, "a point coordinate")?);
             }
             "POLYGONS" => blocks.push(read_cells(&mut r, &words, version >= 5, "POLYGONS")?),
-            "TRIANGLE_STRIPS" => blocks.push(read_cells(&mut r, &words, version >= 5, "TRIANGLE_STRIPS")?),
+            "TRIANGLE_STRIPS" => {
+                blocks.push(read_cells(&mut r, &words, version >= 5, "TRIANGLE_STRIPS")?)
+            }
             "LINES" => blocks.push(read_cells(&mut r, &words, version >= 5, "LINES")?),
             "VERTICES" => {
                 read_cells(&mut r, &words, version >= 5, "VERTICES")?;
@@ -290,33 +398,58 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
                 if keep {
                     let np = points.as_ref().map_or(0, |p| p.len() as u64 / 3);
                     if n != np {
-                        return Err(r.cur.error(ParseErrorKind::CountMismatch { what: "POINT_DATA tuples (one per point)", expected: np, found: n }));
+                        return Err(r.line_error(ParseErrorKind::CountMismatch {
+                            what: "POINT_DATA tuples (one per point)",
+                            expected: np,
+                            found: n,
+                        }));
                     }
                 }
                 pending = read_attributes(&mut r, n, keep, &mut arrays)?;
                 continue;
             }
-            other => return Err(r.cur.error(ParseErrorKind::Unsupported { what: "VTK POLYDATA section", found: lossy(other.as_bytes()) })),
+            other => {
+                return Err(r.line_error(ParseErrorKind::Unsupported {
+                    what: "VTK POLYDATA section",
+                    found: lossy(other.as_bytes()),
+                }));
+            }
         }
         pending = r.keyword_line()?;
     }
     let points = points.ok_or_else(|| r.cur.error(ParseErrorKind::Missing { what: "POINTS" }))?;
-    let mut raw = RawMesh { dim: 3, points, ..RawMesh::default() };
+    let mut raw = RawMesh {
+        dim: 3,
+        points,
+        ..RawMesh::default()
+    };
     fill_cells(&mut raw, blocks).map_err(|kind| r.cur.error(kind))?;
     raw.scalars = arrays.iter().map(|a| a.0.clone()).collect();
     raw.signal = arrays.into_iter().find(|a| a.0 == signal_name).map(|a| a.1);
     if title == PLANAR_TITLE && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
-        raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
+        raw.points = raw
+            .points
+            .chunks_exact(3)
+            .flat_map(|p| [p[0], p[1]])
+            .collect();
         raw.dim = 2;
     }
     Ok(raw)
 }
 
 fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErrorKind> {
-    let has_tri = blocks.iter().any(|b| b.keyword != "LINES" && !b.cells.is_empty());
-    let has_lines = blocks.iter().any(|b| b.keyword == "LINES" && !b.cells.is_empty());
+    let has_tri = blocks
+        .iter()
+        .any(|b| b.keyword != "LINES" && !b.cells.is_empty());
+    let has_lines = blocks
+        .iter()
+        .any(|b| b.keyword == "LINES" && !b.cells.is_empty());
     if has_tri && has_lines {
-        return Err(ParseErrorKind::MixedCellSizes { cell: 0, found: 2, expected: 3 });
+        return Err(ParseErrorKind::MixedCellSizes {
+            cell: 0,
+            found: 2,
+            expected: 3,
+        });
     }
     raw.cell_size = Some(if has_lines { 2 } else { 3 });
     let mut cell = 0;
@@ -324,16 +457,27 @@ fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErro
         for c in b.cells {
             let ids: Vec<usize> = c
                 .iter()
-                .map(|&v| usize::try_from(v).map_err(|_| ParseErrorKind::NegativeIndex { cell, value: v }))
+                .map(|&v| {
+                    usize::try_from(v).map_err(|_| ParseErrorKind::NegativeIndex { cell, value: v })
+                })
                 .collect::<Result<_, _>>()?;
             match b.keyword {
                 "POLYGONS" if ids.len() == 3 => raw.cells.extend_from_slice(&ids),
-                "POLYGONS" => return Err(ParseErrorKind::CellSize { cell, found: ids.len() }),
+                "POLYGONS" => {
+                    return Err(ParseErrorKind::CellSize {
+                        cell,
+                        found: ids.len(),
+                    });
+                }
                 "TRIANGLE_STRIPS" => {
                     for (k, w) in ids.windows(3).enumerate() {
                         // Every other triangle of a strip is flipped to keep
                         // one orientation.
-                        let t = if k % 2 == 0 { [w[0], w[1], w[2]] } else { [w[1], w[0], w[2]] };
+                        let t = if k % 2 == 0 {
+                            [w[0], w[1], w[2]]
+                        } else {
+                            [w[1], w[0], w[2]]
+                        };
                         raw.cells.extend_from_slice(&t);
                     }
                 }
@@ -352,9 +496,16 @@ fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErro
 /// Writes `shape` as VTK legacy POLYDATA, version 4.2.
 pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
     let ascii = encoding == Encoding::Ascii;
-    let title = if shape.dim() == 2 { PLANAR_TITLE } else { "fshape" };
+    let title = if shape.dim() == 2 {
+        PLANAR_TITLE
+    } else {
+        "fshape"
+    };
     let enc = if ascii { "ASCII" } else { "BINARY" };
-    writeln!(w, "# vtk DataFile Version 4.2\n{title}\n{enc}\nDATASET POLYDATA")?;
+    writeln!(
+        w,
+        "# vtk DataFile Version 4.2\n{title}\n{enc}\nDATASET POLYDATA"
+    )?;
     writeln!(w, "POINTS {} double", shape.n_vertices())?;
     let put = |w: &mut dyn Write, vals: &[f64]| -> io::Result<()> {
         if ascii {
@@ -372,11 +523,23 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         writeln!(w)?;
     }
     let k = shape.kind().n_corners();
-    let keyword = if shape.kind() == CellKind::Triangle { "POLYGONS" } else { "LINES" };
-    writeln!(w, "{keyword} {} {}", shape.n_cells(), shape.n_cells() * (k + 1))?;
+    let keyword = if shape.kind() == CellKind::Triangle {
+        "POLYGONS"
+    } else {
+        "LINES"
+    };
+    writeln!(
+        w,
+        "{keyword} {} {}",
+        shape.n_cells(),
+        shape.n_cells() * (k + 1)
+    )?;
     for c in shape.cell_iter() {
         let ids: Vec<i32> = std::iter::once(Ok(k as i32))
-            .chain(c.iter().map(|&v| i32::try_from(v).map_err(|_| io::Error::other("vertex index exceeds the VTK int range"))))
+            .chain(c.iter().map(|&v| {
+                i32::try_from(v)
+                    .map_err(|_| io::Error::other("vertex index exceeds the VTK int range"))
+            }))
             .collect::<io::Result<_>>()?;
         if ascii {
             let line: Vec<String> = ids.iter().map(i32::to_string).collect();
@@ -389,7 +552,11 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         writeln!(w)?;
     }
     if let Some(f) = shape.signal() {
-        writeln!(w, "POINT_DATA {}\nSCALARS signal double 1\nLOOKUP_TABLE default", shape.n_vertices())?;
+        writeln!(
+            w,
+            "POINT_DATA {}\nSCALARS signal double 1\nLOOKUP_TABLE default",
+            shape.n_vertices()
+        )?;
         for &x in f {
             put(w, &[x])?;
         }

@@ -1,0 +1,299 @@
+//! Write → read round trips on random fshapes, exact, in every format; and
+//! files checked by independent readers and writers (ply-rs-bw, vtkio,
+//! tobj) to show other tools agree with ours.
+
+use std::path::{Path, PathBuf};
+
+use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
+use fshape_mesh::test_support::strategies;
+use fshape_mesh::{CellKind, FShape};
+use proptest::prelude::*;
+use proptest::test_runner::{Config, RngSeed};
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fshape-mesh-tests-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn config() -> Config {
+    Config {
+        cases: 24,
+        rng_seed: RngSeed::Fixed(0x5eed_f5ba),
+        failure_persistence: None,
+        ..Config::default()
+    }
+}
+
+fn geometry_only(s: &FShape) -> FShape {
+    s.clone().with_signal(None).unwrap()
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    #[test]
+    fn every_format_round_trips_exactly(shape in strategies::any_small(), case in 0u32..1000) {
+        for (ext, enc) in [
+            ("ply", Encoding::Ascii), ("ply", Encoding::Binary), ("ply.gz", Encoding::Binary),
+            ("vtk", Encoding::Ascii), ("vtk", Encoding::Binary), ("vtk.gz", Encoding::Ascii),
+            ("obj", Encoding::Ascii), ("obj.gz", Encoding::Ascii),
+        ] {
+            let path = tmp(&format!("rt{case}.{ext}"));
+            write_mesh(&path, &shape, enc).unwrap();
+            let back = read_mesh(&path, &ReadOptions::default()).unwrap();
+            // OBJ carries no signal; everything else is bitwise equal,
+            // ASCII included ({:e} is Rust's shortest round-trip form).
+            let expect = if ext.starts_with("obj") { geometry_only(&shape) } else { shape.clone() };
+            prop_assert_eq!(&back, &expect, "{} {:?}", ext, enc);
+            std::fs::remove_file(&path).unwrap();
+        }
+    }
+
+    #[test]
+    fn ply_rs_reads_our_ply(shape in strategies::any_small(), ascii in any::<bool>(), case in 0u32..1000) {
+        let path = tmp(&format!("ind{case}.ply"));
+        write_mesh(&path, &shape, if ascii { Encoding::Ascii } else { Encoding::Binary }).unwrap();
+        let (pts, cells, signal) = read_with_ply_rs(&path);
+        std::fs::remove_file(&path).unwrap();
+        let n = shape.dim();
+        let ours: Vec<f64> = shape.points().chunks_exact(n).flat_map(|p| [p[0], p[1], if n == 3 { p[2] } else { 0.0 }]).collect();
+        prop_assert_eq!(pts, ours);
+        prop_assert_eq!(cells, shape.cells().to_vec());
+        prop_assert_eq!(signal.as_deref(), shape.signal());
+    }
+
+    #[test]
+    fn vtkio_reads_our_vtk(shape in strategies::any_small(), ascii in any::<bool>(), case in 0u32..1000) {
+        let path = tmp(&format!("ind{case}.vtk"));
+        write_mesh(&path, &shape, if ascii { Encoding::Ascii } else { Encoding::Binary }).unwrap();
+        let (pts, cells, signal) = read_with_vtkio(&path, shape.kind());
+        std::fs::remove_file(&path).unwrap();
+        let n = shape.dim();
+        let ours: Vec<f64> = shape.points().chunks_exact(n).flat_map(|p| [p[0], p[1], if n == 3 { p[2] } else { 0.0 }]).collect();
+        prop_assert_eq!(pts, ours);
+        prop_assert_eq!(cells, shape.cells().to_vec());
+        prop_assert_eq!(signal.as_deref(), shape.signal());
+    }
+}
+
+/// Points (x, y, z), cell indices and `signal` as ply-rs-bw sees them.
+fn read_with_ply_rs(path: &Path) -> (Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
+    use ply_rs_bw::parser::Parser;
+    use ply_rs_bw::ply::{DefaultElement, Property};
+    let file = std::fs::File::open(path).unwrap();
+    let ply = Parser::<DefaultElement>::new()
+        .read_ply(&mut std::io::BufReader::new(file))
+        .unwrap();
+    let num = |p: &Property| match p {
+        Property::Double(x) => *x,
+        Property::Int(i) => *i as f64,
+        other => panic!("unexpected property {other:?}"),
+    };
+    let verts = &ply.payload["vertex"];
+    let pts = verts
+        .iter()
+        .flat_map(|v| ["x", "y", "z"].map(|k| num(&v[k])))
+        .collect();
+    let signal = verts
+        .first()
+        .and_then(|v| v.get("signal"))
+        .map(|_| verts.iter().map(|v| num(&v["signal"])).collect());
+    let cells = if let Some(faces) = ply.payload.get("face") {
+        faces
+            .iter()
+            .flat_map(|f| match &f["vertex_indices"] {
+                Property::ListInt(l) => l.iter().map(|&i| i as usize).collect::<Vec<_>>(),
+                other => panic!("unexpected face list {other:?}"),
+            })
+            .collect()
+    } else {
+        ply.payload.get("edge").map_or(vec![], |e| {
+            e.iter()
+                .flat_map(|e| [num(&e["vertex1"]) as usize, num(&e["vertex2"]) as usize])
+                .collect()
+        })
+    };
+    (pts, cells, signal)
+}
+
+/// Points, cell indices and the `signal` array as vtkio sees them.
+fn read_with_vtkio(path: &Path, kind: CellKind) -> (Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
+    use vtkio::model::{Attribute, DataSet, Piece};
+    let vtk = vtkio::Vtk::import(path).unwrap();
+    let DataSet::PolyData { pieces, .. } = vtk.data else {
+        panic!("not polydata")
+    };
+    let Piece::Inline(piece) = pieces.into_iter().next().unwrap() else {
+        panic!("not inline")
+    };
+    let pts = piece.points.cast_into::<f64>().unwrap();
+    let topo = if kind == CellKind::Triangle {
+        piece.polys
+    } else {
+        piece.lines
+    };
+    let (_, flat) = topo.map(|t| t.into_legacy()).unwrap_or((0, vec![]));
+    let mut cells = Vec::new();
+    let mut i = 0;
+    while i < flat.len() {
+        let k = flat[i] as usize;
+        cells.extend(flat[i + 1..i + 1 + k].iter().map(|&v| v as usize));
+        i += 1 + k;
+    }
+    let signal = piece.data.point.iter().find_map(|a| match a {
+        Attribute::DataArray(d) if d.name == "signal" => d.data.cast_into::<f64>(),
+        _ => None,
+    });
+    (pts, cells, signal)
+}
+
+#[test]
+fn tobj_reads_our_obj() {
+    let shape = fshape_mesh::test_support::perturbed_icosphere(2, 0.1, 3);
+    let path = tmp("ind.obj");
+    write_mesh(&path, &shape, Encoding::Ascii).unwrap();
+    let (models, _) = tobj::load_obj(&path, &tobj::LoadOptions::default()).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    let m = &models[0].mesh;
+    for (k, &i) in m.indices.iter().enumerate() {
+        assert_eq!(
+            &m.positions[3 * i as usize..3 * i as usize + 3],
+            shape.point(shape.cells()[k])
+        );
+    }
+}
+
+#[test]
+fn we_read_files_written_by_ply_rs_big_endian_with_extra_properties() {
+    use ply_rs_bw::ply::{
+        Addable, DefaultElement, ElementDef, Encoding as PEnc, Ply, Property, PropertyDef,
+        PropertyType, ScalarType,
+    };
+    use ply_rs_bw::writer::Writer;
+    let shape = fshape_mesh::test_support::perturbed_icosphere(1, 0.1, 9);
+    for enc in [PEnc::BinaryBigEndian, PEnc::BinaryLittleEndian, PEnc::Ascii] {
+        let mut ply = Ply::<DefaultElement>::new();
+        ply.header.encoding = enc;
+        let mut vdef = ElementDef::new("vertex".to_string());
+        for name in ["x", "y", "z", "confidence", "signal"] {
+            vdef.properties.add(PropertyDef::new(
+                name.to_string(),
+                PropertyType::Scalar(ScalarType::Double),
+            ));
+        }
+        let mut fdef = ElementDef::new("face".to_string());
+        fdef.properties.add(PropertyDef::new(
+            "vertex_index".to_string(),
+            PropertyType::List(ScalarType::UChar, ScalarType::UInt),
+        ));
+        ply.header.elements.add(vdef);
+        ply.header.elements.add(fdef);
+        let f = shape.signal().unwrap();
+        let verts = (0..shape.n_vertices())
+            .map(|v| {
+                let mut e = DefaultElement::new();
+                let p = shape.point(v);
+                for (k, name) in ["x", "y", "z"].iter().enumerate() {
+                    e.insert(name.to_string(), Property::Double(p[k]));
+                }
+                e.insert("confidence".to_string(), Property::Double(0.5));
+                e.insert("signal".to_string(), Property::Double(f[v]));
+                e
+            })
+            .collect();
+        let faces = shape
+            .cell_iter()
+            .map(|c| {
+                let mut e = DefaultElement::new();
+                e.insert(
+                    "vertex_index".to_string(),
+                    Property::ListUInt(c.iter().map(|&v| v as u32).collect()),
+                );
+                e
+            })
+            .collect();
+        ply.payload.insert("vertex".to_string(), verts);
+        ply.payload.insert("face".to_string(), faces);
+        let mut buf = Vec::new();
+        Writer::new().write_ply(&mut buf, &mut ply).unwrap();
+        let path = tmp("plyrs.ply");
+        std::fs::write(&path, &buf).unwrap();
+        let back = read_mesh(&path, &ReadOptions::default()).unwrap();
+        assert_eq!(back, shape, "{enc:?}");
+    }
+}
+
+/// vtkio writes VTK 5.1's OFFSETS/CONNECTIVITY layout only for unstructured
+/// grids (its POLYDATA keeps the legacy layout under a 5.1 header, which VTK
+/// 9 itself rejects), so it is our oracle for version 4.2; the 5.1 layout is
+/// checked on a hand-written file below.
+#[test]
+fn we_read_files_written_by_vtkio_legacy_4() {
+    use vtkio::model::{
+        Attributes, ByteOrder, DataSet, PolyDataPiece, Version, VertexNumbers, Vtk,
+    };
+    let shape = fshape_mesh::test_support::perturbed_icosphere(1, 0.1, 4)
+        .with_signal(None)
+        .unwrap();
+    let pts = shape.points().to_vec();
+    let legacy: Vec<u32> = shape
+        .cell_iter()
+        .flat_map(|c| std::iter::once(3).chain(c.iter().map(|&v| v as u32)))
+        .collect();
+    for (version, polys) in [
+        (
+            Version::new_legacy(4, 2),
+            VertexNumbers::Legacy {
+                num_cells: shape.n_cells() as u32,
+                vertices: legacy.clone(),
+            },
+        ),
+        (
+            Version::new_legacy(3, 0),
+            VertexNumbers::Legacy {
+                num_cells: shape.n_cells() as u32,
+                vertices: legacy.clone(),
+            },
+        ),
+    ] {
+        for binary in [false, true] {
+            let vtk = Vtk {
+                version,
+                title: "written by vtkio".into(),
+                byte_order: ByteOrder::BigEndian,
+                file_path: None,
+                data: DataSet::inline(PolyDataPiece {
+                    points: pts.clone().into(),
+                    polys: Some(polys.clone()),
+                    data: Attributes::new(),
+                    ..Default::default()
+                }),
+            };
+            let path = tmp("vtkio.vtk");
+            if binary {
+                vtk.export_be(&path).unwrap()
+            } else {
+                vtk.export_ascii(&path).unwrap()
+            }
+            let back = read_mesh(&path, &ReadOptions::default())
+                .unwrap_or_else(|e| panic!("{version:?} binary={binary}: {e}"));
+            assert_eq!(back, shape, "{version:?} binary={binary}");
+        }
+    }
+}
+
+#[test]
+fn we_read_the_vtk_5_1_offsets_layout() {
+    // Two triangles and a point array in the layout VTK 9 writes: n+1
+    // offsets starting at 0, then the connectivity.
+    let text = "# vtk DataFile Version 5.1\nvtk output\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n\
+        0 0 0 1 0 0 0 1 0\n1 1 0\n\nPOLYGONS 3 6\nOFFSETS vtktypeint64\n0 3 6\nCONNECTIVITY vtktypeint64\n\
+        0 1 2 2 1 3\n\nPOINT_DATA 4\nFIELD FieldData 1\nsignal 1 4 double\n0.5 1.5 2.5 3.5\nMETADATA\nINFORMATION 0\n\n";
+    let path = tmp("v51.vtk");
+    std::fs::write(&path, text).unwrap();
+    let s = read_mesh(&path, &ReadOptions::default()).unwrap();
+    assert_eq!(s.cells(), &[0, 1, 2, 2, 1, 3]);
+    assert_eq!(s.points()[9..12], [1.0, 1.0, 0.0]);
+    assert_eq!(s.signal().unwrap(), &[0.5, 1.5, 2.5, 3.5]);
+}

@@ -1,0 +1,142 @@
+//! Validation on hand-made shapes: each problem found, with its index.
+
+use fshape_mesh::{CellKind, FShape, Problem, Repairs, Severity, ShapeError};
+
+/// Two triangles sharing the edge (1, 2), consistently oriented.
+fn square_pts() -> Vec<f64> {
+    vec![0., 0., 1., 0., 1., 1., 0., 1.]
+}
+
+#[test]
+fn every_blocking_problem_is_reported_at_once() {
+    let mut pts = square_pts();
+    pts[3] = f64::NAN; // vertex 1
+    let err = FShape::try_new(
+        2,
+        CellKind::Triangle,
+        pts,
+        vec![0, 1, 2, 0, 2, 9, 3, 3, 1],
+        Some(vec![0.0, f64::INFINITY, 0.0]),
+    )
+    .unwrap_err();
+    let ShapeError::Invalid { problems } = &err else {
+        panic!("{err}")
+    };
+    assert_eq!(
+        problems,
+        &vec![
+            Problem::NonFiniteCoordinate { vertex: 1 },
+            Problem::SignalLength {
+                expected: 4,
+                found: 3
+            },
+            Problem::NonFiniteSignal { vertex: 1 },
+            Problem::IndexOutOfRange {
+                cell: 1,
+                index: 9,
+                n_vertices: 4
+            },
+            Problem::RepeatedIndex { cell: 2, vertex: 3 },
+        ]
+    );
+    assert!(problems.iter().all(|p| p.severity() == Severity::Error));
+    let msg = err.to_string();
+    assert!(
+        msg.contains("cell 1 uses vertex 9, but there are only 4 vertices"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("vertex 1 has a NaN or infinite coordinate"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn structural_mismatches_are_errors() {
+    assert_eq!(
+        FShape::try_new(4, CellKind::Triangle, vec![], vec![], None).unwrap_err(),
+        ShapeError::Dimension { dim: 4 }
+    );
+    assert!(matches!(
+        FShape::try_new(3, CellKind::Triangle, vec![0.0; 4], vec![], None),
+        Err(ShapeError::PointsLength { len: 4, dim: 3 })
+    ));
+    assert!(matches!(
+        FShape::try_new(2, CellKind::Triangle, vec![0.0; 6], vec![0, 1], None),
+        Err(ShapeError::CellsLength { .. })
+    ));
+}
+
+#[test]
+fn warnings_name_their_cells_and_vertices() {
+    // Vertex 4 unused; cell 2 repeats cell 0 reversed; cell 3 is flat
+    // (collinear 0, 1, 5); cell 1 traverses 0→2 like cell 4 does.
+    let pts = vec![0., 0., 1., 0., 1., 1., 0., 1., 5., 5., 2., 0.];
+    let cells = vec![0, 1, 2, 0, 2, 3, 2, 1, 0, 0, 1, 5, 0, 2, 3];
+    let s = FShape::try_new(2, CellKind::Triangle, pts, cells, None).unwrap();
+    let r = s.validate();
+    assert_eq!(r.errors().count(), 0);
+    assert!(r.problems.contains(&Problem::UnusedVertex { vertex: 4 }));
+    assert!(r.problems.contains(&Problem::DuplicateCell {
+        cell: 2,
+        first: 0,
+        same_orientation: false
+    }));
+    assert!(r.problems.contains(&Problem::DuplicateCell {
+        cell: 4,
+        first: 1,
+        same_orientation: true
+    }));
+    assert!(r.problems.contains(&Problem::ZeroVolumeCell {
+        cell: 3,
+        volume: 0.0
+    }));
+    // Edge (0, 1) is in cells 0, 2 and 3: non-manifold.
+    assert!(r.problems.contains(&Problem::NonManifoldFacet {
+        facet: [0, 1],
+        cells: 3
+    }));
+    // Cells 1 and 4 both traverse 2→3.
+    assert!(
+        r.problems
+            .contains(&Problem::InconsistentOrientation { facet: [2, 3] })
+    );
+    assert!(r.warnings().all(|p| p.severity() == Severity::Warning));
+
+    let (fixed, log) = s.repaired(Repairs::ALL);
+    assert_eq!(log.dropped_cells, vec![2, 3, 4]);
+    assert_eq!(log.dropped_vertices, vec![4, 5]);
+    assert_eq!(
+        log.vertex_map,
+        vec![Some(0), Some(1), Some(2), Some(3), None, None]
+    );
+    assert_eq!(fixed.cells(), &[0, 1, 2, 0, 2, 3]);
+    let left: Vec<&str> = fixed
+        .validate()
+        .problems
+        .iter()
+        .map(Problem::code)
+        .collect();
+    assert_eq!(
+        left,
+        vec!["boundary"],
+        "only the boundary of the unit square remains"
+    );
+}
+
+#[test]
+fn curve_topology() {
+    // A "Y": vertex 0 has three segments; segments 0 and 1 both start at 0.
+    let s = FShape::try_new(
+        2,
+        CellKind::Segment,
+        vec![0., 0., 1., 0., 0., 1., -1., -1.],
+        vec![0, 1, 0, 2, 3, 0],
+        None,
+    )
+    .unwrap();
+    let t = s.topology();
+    assert_eq!(t.nonmanifold_facets, vec![([0, 0], 3)]);
+    assert_eq!(t.misoriented_facets, vec![[0, 0]]);
+    assert_eq!(t.n_boundary_loops, 3, "three free end points");
+}
