@@ -12,11 +12,7 @@ use fshape_mesh::{FShape, Problem, Repairs, Severity};
 use serde::Serialize;
 
 #[derive(Parser)]
-#[command(
-    name = "fshape",
-    version,
-    about = "Functional shapes: meshes carrying a signal, and their metamorphoses"
-)]
+#[command(name = "fshape", version, about = "Functional shapes: meshes carrying a signal, and their metamorphoses")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -64,27 +60,10 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Info {
-            file,
-            signal_name,
-            signal,
-            json,
-        } => info(&file, signal_name, signal.as_deref(), json),
-        Command::Convert {
-            input,
-            output,
-            signal_name,
-            signal,
-            ascii,
-            repair,
-        } => convert(
-            &input,
-            &output,
-            signal_name,
-            signal.as_deref(),
-            ascii,
-            repair,
-        ),
+        Command::Info { file, signal_name, signal, json } => info(&file, signal_name, signal.as_deref(), json),
+        Command::Convert { input, output, signal_name, signal, ascii, repair } => {
+            convert(&input, &output, signal_name, signal.as_deref(), ascii, repair)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -100,13 +79,9 @@ fn load(path: &Path, signal_name: Option<String>, signal: Option<&Path>) -> Resu
     let shape = io::read_mesh(path, &ReadOptions { signal_name })?;
     let Some(csv) = signal else { return Ok(shape) };
     let column = io::csv::read_signal(csv, false)?;
-    shape.with_signal(Some(column.values)).with_context(|| {
-        format!(
-            "attaching the signal of {} to {}",
-            csv.display(),
-            path.display()
-        )
-    })
+    shape
+        .with_signal(Some(column.values))
+        .with_context(|| format!("attaching the signal of {} to {}", csv.display(), path.display()))
 }
 
 #[derive(Serialize)]
@@ -153,11 +128,7 @@ fn group(problems: &[&Problem]) -> Vec<ProblemGroup> {
                     g.examples.push(p.to_string());
                 }
             }
-            None => out.push(ProblemGroup {
-                code: p.code(),
-                count: 1,
-                examples: vec![p.to_string()],
-            }),
+            None => out.push(ProblemGroup { code: p.code(), count: 1, examples: vec![p.to_string()] }),
         }
     }
     out
@@ -167,13 +138,7 @@ fn summary(path: &Path, s: &FShape) -> Info {
     let topo = s.topology();
     let bbox = s.bounding_box();
     let report = s.validate();
-    let by = |sev| {
-        report
-            .problems
-            .iter()
-            .filter(|p| p.severity() == sev)
-            .collect::<Vec<_>>()
-    };
+    let by = |sev| report.problems.iter().filter(|p| p.severity() == sev).collect::<Vec<_>>();
     Info {
         path: path.display().to_string(),
         dim: s.dim(),
@@ -206,28 +171,11 @@ fn info(path: &Path, signal_name: Option<String>, signal: Option<&Path>, json: b
         return Ok(());
     }
     println!("{}", i.path);
-    println!(
-        "  {} mesh in R^{}: {} vertices, {} cells",
-        i.cell_kind, i.dim, i.n_vertices, i.n_cells
-    );
-    println!(
-        "  bounding box {:?} .. {:?} (diagonal {:.6})",
-        i.bbox_min, i.bbox_max, i.bbox_diagonal
-    );
-    println!(
-        "  total {}: {:.9}",
-        if shape.kind().dim() == 1 {
-            "length"
-        } else {
-            "area"
-        },
-        i.total_volume
-    );
+    println!("  {} mesh in R^{}: {} vertices, {} cells", i.cell_kind, i.dim, i.n_vertices, i.n_cells);
+    println!("  bounding box {:?} .. {:?} (diagonal {:.6})", i.bbox_min, i.bbox_max, i.bbox_diagonal);
+    println!("  total {}: {:.9}", if shape.kind().dim() == 1 { "length" } else { "area" }, i.total_volume);
     match &i.signal {
-        Some(f) => println!(
-            "  signal: min {:.6}, max {:.6}, mean {:.6}",
-            f.min, f.max, f.mean
-        ),
+        Some(f) => println!("  signal: min {:.6}, max {:.6}, mean {:.6}", f.min, f.max, f.mean),
         None => println!("  signal: none"),
     }
     println!(
@@ -239,12 +187,7 @@ fn info(path: &Path, signal_name: Option<String>, signal: Option<&Path>, json: b
     );
     for (label, groups) in [("error", &i.errors), ("warning", &i.warnings)] {
         for g in groups {
-            println!(
-                "  {label}: {} × {}: {}",
-                g.count,
-                g.code,
-                g.examples.join("; ")
-            );
+            println!("  {label}: {} × {}: {}", g.count, g.code, g.examples.join("; "));
         }
     }
     if i.errors.is_empty() && i.warnings.is_empty() {
@@ -264,18 +207,10 @@ fn convert(
     let mut shape = load(input, signal_name, signal)?;
     if repair {
         let (fixed, log) = shape.repaired(Repairs::ALL);
-        eprintln!(
-            "repair: dropped {} cell(s) and {} vertex(es)",
-            log.dropped_cells.len(),
-            log.dropped_vertices.len()
-        );
+        eprintln!("repair: dropped {} cell(s) and {} vertex(es)", log.dropped_cells.len(), log.dropped_vertices.len());
         shape = fixed;
     }
-    let encoding = if ascii {
-        Encoding::Ascii
-    } else {
-        Encoding::Binary
-    };
+    let encoding = if ascii { Encoding::Ascii } else { Encoding::Binary };
     io::write_mesh(output, &shape, encoding)?;
     Ok(())
 }

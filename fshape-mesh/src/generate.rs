@@ -3,9 +3,7 @@
 
 use std::collections::HashMap;
 
-use spade::{
-    AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation,
-};
+use spade::{AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation};
 
 use crate::io::image::Image;
 use crate::shape::{CellKind, FShape};
@@ -107,8 +105,7 @@ pub fn icosphere(level: u32, radius: f64) -> FShape {
     }
     let points = pts.iter().flat_map(|p| p.map(|x| x * radius)).collect();
     let cells = tris.iter().flatten().copied().collect();
-    FShape::try_new(3, CellKind::Triangle, points, cells, None)
-        .expect("the icosphere is a valid shape")
+    FShape::try_new(3, CellKind::Triangle, points, cells, None).expect("the icosphere is a valid shape")
 }
 
 fn normalise(p: [f64; 3]) -> [f64; 3] {
@@ -135,12 +132,7 @@ pub fn square(target: usize, seed: u64) -> FShape {
     let mut verts = Vec::new();
     for k in 0..per_side {
         let s = -1.0 + 2.0 * k as f64 / per_side as f64;
-        verts.extend([
-            Point2::new(s, -1.0),
-            Point2::new(1.0, s),
-            Point2::new(-s, 1.0),
-            Point2::new(-1.0, -s),
-        ]);
+        verts.extend([Point2::new(s, -1.0), Point2::new(1.0, s), Point2::new(-s, 1.0), Point2::new(-1.0, -s)]);
     }
     let n_b = verts.len();
     let mut rng = SplitMix64(seed);
@@ -165,16 +157,9 @@ pub fn square(target: usize, seed: u64) -> FShape {
             .with_max_allowed_area(max_area)
             .with_max_additional_vertices(20 * target + 1000),
     );
-    let points = cdt
-        .vertices()
-        .flat_map(|v| [v.position().x, v.position().y])
-        .collect();
-    let cells = cdt
-        .inner_faces()
-        .flat_map(|f| f.vertices().map(|v| v.fix().index()))
-        .collect();
-    FShape::try_new(2, CellKind::Triangle, points, cells, None)
-        .expect("spade returns a valid triangulation")
+    let points = cdt.vertices().flat_map(|v| [v.position().x, v.position().y]).collect();
+    let cells = cdt.inner_faces().flat_map(|f| f.vertices().map(|v| v.fix().index())).collect();
+    FShape::try_new(2, CellKind::Triangle, points, cells, None).expect("spade returns a valid triangulation")
 }
 
 fn angle(p: Point2<f64>) -> f64 {
@@ -217,9 +202,7 @@ pub fn polyline(dim: usize, points: Vec<f64>, closed: bool) -> Result<FShape, cr
 /// Fails (naming the pixel as a vertex) if a value is not finite.
 pub fn image_grid(image: &Image) -> Result<FShape, crate::ShapeError> {
     let (w, h) = (image.width, image.height);
-    let points = (0..h)
-        .flat_map(|r| (0..w).flat_map(move |c| [c, r]))
-        .collect::<Vec<_>>();
+    let points = (0..h).flat_map(|r| (0..w).flat_map(move |c| [c, r])).collect::<Vec<_>>();
     let points = points
         .chunks_exact(2)
         .flat_map(|cr| {
@@ -232,23 +215,10 @@ pub fn image_grid(image: &Image) -> Result<FShape, crate::ShapeError> {
     for r in 0..h.saturating_sub(1) {
         for c in 0..w.saturating_sub(1) {
             // Rows go down in y, so (c,r) → (c,r+1) → (c+1,r+1) is counter-clockwise.
-            cells.extend([
-                id(c, r),
-                id(c, r + 1),
-                id(c + 1, r + 1),
-                id(c, r),
-                id(c + 1, r + 1),
-                id(c + 1, r),
-            ]);
+            cells.extend([id(c, r), id(c, r + 1), id(c + 1, r + 1), id(c, r), id(c + 1, r + 1), id(c + 1, r)]);
         }
     }
-    FShape::try_new(
-        2,
-        CellKind::Triangle,
-        points,
-        cells,
-        Some(image.values.clone()),
-    )
+    FShape::try_new(2, CellKind::Triangle, points, cells, Some(image.values.clone()))
 }
 
 /// The image sampled at every vertex of a planar shape by bilinear
@@ -259,9 +229,5 @@ pub fn image_grid(image: &Image) -> Result<FShape, crate::ShapeError> {
 #[track_caller]
 pub fn sample_image(image: &Image, shape: &FShape) -> Vec<f64> {
     assert_eq!(shape.dim(), 2, "images are sampled onto planar shapes");
-    shape
-        .points()
-        .chunks_exact(2)
-        .map(|p| image.sample(p[0], p[1]))
-        .collect()
+    shape.points().chunks_exact(2).map(|p| image.sample(p[0], p[1])).collect()
 }

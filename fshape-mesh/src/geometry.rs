@@ -15,12 +15,7 @@ pub struct BoundingBox {
 impl BoundingBox {
     /// Length of the diagonal, ‖max − min‖; 0 for an empty shape.
     pub fn diagonal(&self) -> f64 {
-        self.min
-            .iter()
-            .zip(&self.max)
-            .map(|(a, b)| (b - a) * (b - a))
-            .sum::<f64>()
-            .sqrt()
+        self.min.iter().zip(&self.max).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt()
     }
 }
 
@@ -33,11 +28,7 @@ fn sub(a: &[f64], b: &[f64]) -> [f64; 3] {
 }
 
 fn cross(u: [f64; 3], v: [f64; 3]) -> [f64; 3] {
-    [
-        u[1] * v[2] - u[2] * v[1],
-        u[2] * v[0] - u[0] * v[2],
-        u[0] * v[1] - u[1] * v[0],
-    ]
+    [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -117,11 +108,7 @@ impl FShape {
     pub fn cell_signal(&self) -> Option<Vec<f64>> {
         let f = self.signal()?;
         let w = 1.0 / self.kind().n_corners() as f64;
-        Some(
-            self.cell_iter()
-                .map(|c| w * c.iter().map(|&v| f[v]).sum::<f64>())
-                .collect(),
-        )
+        Some(self.cell_iter().map(|c| w * c.iter().map(|&v| f[v]).sum::<f64>()).collect())
     }
 
     /// Lumped vertex volumes (DESIGN.md, D_0 lumped): vertex k gets
@@ -149,10 +136,7 @@ impl FShape {
     pub fn bounding_box(&self) -> BoundingBox {
         let n = self.dim();
         if self.n_vertices() == 0 {
-            return BoundingBox {
-                min: vec![0.0; n],
-                max: vec![0.0; n],
-            };
+            return BoundingBox { min: vec![0.0; n], max: vec![0.0; n] };
         }
         let mut min = vec![f64::INFINITY; n];
         let mut max = vec![f64::NEG_INFINITY; n];

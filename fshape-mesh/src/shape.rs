@@ -117,30 +117,17 @@ impl FShape {
         if dim != 2 && dim != 3 {
             return Err(ShapeError::Dimension { dim });
         }
-        if points.len() % dim != 0 {
-            return Err(ShapeError::PointsLength {
-                len: points.len(),
-                dim,
-            });
+        if !points.len().is_multiple_of(dim) {
+            return Err(ShapeError::PointsLength { len: points.len(), dim });
         }
-        if cells.len() % kind.n_corners() != 0 {
-            return Err(ShapeError::CellsLength {
-                len: cells.len(),
-                kind: kind.name(),
-                corners: kind.n_corners(),
-            });
+        if !cells.len().is_multiple_of(kind.n_corners()) {
+            return Err(ShapeError::CellsLength { len: cells.len(), kind: kind.name(), corners: kind.n_corners() });
         }
         let problems = validate::blocking_problems(dim, kind, &points, &cells, signal.as_deref());
         if !problems.is_empty() {
             return Err(ShapeError::Invalid { problems });
         }
-        Ok(FShape {
-            dim,
-            kind,
-            points,
-            cells,
-            signal,
-        })
+        Ok(FShape { dim, kind, points, cells, signal })
     }
 
     /// Replaces (or removes) the signal, checking its length and values.

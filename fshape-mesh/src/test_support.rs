@@ -23,11 +23,7 @@ fn axpy(x: &[f64], t: f64, v: &[f64]) -> Vec<f64> {
 
 fn rel(a: f64, b: f64) -> f64 {
     let scale = a.abs().max(b.abs());
-    if scale == 0.0 {
-        0.0
-    } else {
-        (a - b).abs() / scale
-    }
+    if scale == 0.0 { 0.0 } else { (a - b).abs() / scale }
 }
 
 /// A random direction with entries uniform in [-1, 1].
@@ -39,35 +35,19 @@ pub fn random_direction(n: usize, rng: &mut SplitMix64) -> Vec<f64> {
 /// compares ⟨grad, v⟩ with (f(x + hv) − f(x − hv)) / 2h. The truncation
 /// error is O(h²‖f'''‖), the rounding error O(ε|f|/h): h ≈ 1e-5 × the
 /// scale of x balances them for smooth f of moderate size.
-pub fn check_gradient(
-    f: impl Fn(&[f64]) -> f64,
-    x: &[f64],
-    grad: &[f64],
-    v: &[f64],
-    h: f64,
-) -> FdCheck {
+pub fn check_gradient(f: impl Fn(&[f64]) -> f64, x: &[f64], grad: &[f64], v: &[f64], h: f64) -> FdCheck {
     assert_eq!(x.len(), grad.len(), "gradient length");
     assert_eq!(x.len(), v.len(), "direction length");
     let numeric = (f(&axpy(x, h, v)) - f(&axpy(x, -h, v))) / (2.0 * h);
     let analytic = grad.iter().zip(v).map(|(g, d)| g * d).sum();
-    FdCheck {
-        analytic,
-        numeric,
-        rel_error: rel(numeric, analytic),
-    }
+    FdCheck { analytic, numeric, rel_error: rel(numeric, analytic) }
 }
 
 /// Central finite-difference check of a Jacobian–vector product: compares
 /// `jv` with (F(x + hv) − F(x − hv)) / 2h componentwise; the relative error
 /// is ‖numeric − jv‖ / max(‖numeric‖, ‖jv‖) and `analytic`/`numeric` hold
 /// the two norms.
-pub fn check_jvp(
-    f: impl Fn(&[f64]) -> Vec<f64>,
-    x: &[f64],
-    v: &[f64],
-    jv: &[f64],
-    h: f64,
-) -> FdCheck {
+pub fn check_jvp(f: impl Fn(&[f64]) -> Vec<f64>, x: &[f64], v: &[f64], jv: &[f64], h: f64) -> FdCheck {
     let (a, b) = (f(&axpy(x, h, v)), f(&axpy(x, -h, v)));
     assert_eq!(a.len(), jv.len(), "Jacobian-vector product length");
     let fd: Vec<f64> = a.iter().zip(&b).map(|(p, m)| (p - m) / (2.0 * h)).collect();
@@ -75,15 +55,7 @@ pub fn check_jvp(
     let diff: Vec<f64> = fd.iter().zip(jv).map(|(p, q)| p - q).collect();
     let (nf, nj) = (norm(&fd), norm(jv));
     let scale = nf.max(nj);
-    FdCheck {
-        analytic: nj,
-        numeric: nf,
-        rel_error: if scale == 0.0 {
-            0.0
-        } else {
-            norm(&diff) / scale
-        },
-    }
+    FdCheck { analytic: nj, numeric: nf, rel_error: if scale == 0.0 { 0.0 } else { norm(&diff) / scale } }
 }
 
 /// The observed convergence order: the least-squares slope of log(err)
@@ -144,8 +116,7 @@ pub fn random_curve(dim: usize, n: usize, seed: u64) -> FShape {
     }
     let signal = smooth_signal(&points, dim, &mut rng);
     let cells = (0..n).flat_map(|k| [k, (k + 1) % n]).collect();
-    FShape::try_new(dim, CellKind::Segment, points, cells, Some(signal))
-        .expect("a wobbly circle is valid")
+    FShape::try_new(dim, CellKind::Segment, points, cells, Some(signal)).expect("a wobbly circle is valid")
 }
 
 fn smooth_signal(points: &[f64], dim: usize, rng: &mut SplitMix64) -> Vec<f64> {
@@ -175,8 +146,7 @@ pub mod strategies {
 
     /// Random closed curves in R^dim with 3..`max_vertices` vertices.
     pub fn curves(dim: usize, max_vertices: usize) -> impl Strategy<Value = FShape> {
-        (3..max_vertices.max(4), any::<u64>())
-            .prop_map(move |(n, s)| super::random_curve(dim, n, s))
+        (3..max_vertices.max(4), any::<u64>()).prop_map(move |(n, s)| super::random_curve(dim, n, s))
     }
 
     /// Any of the above, small: the mixed population for format round trips.

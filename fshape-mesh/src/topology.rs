@@ -42,9 +42,7 @@ impl Topology {
     /// V − E (curves), where `n_cells` is the shape's cell count.
     pub fn euler_characteristic(&self, kind: CellKind, n_cells: usize) -> i64 {
         match kind {
-            CellKind::Triangle => {
-                self.n_used_vertices as i64 - self.n_facets as i64 + n_cells as i64
-            }
+            CellKind::Triangle => self.n_used_vertices as i64 - self.n_facets as i64 + n_cells as i64,
             CellKind::Segment => self.n_used_vertices as i64 - n_cells as i64,
         }
     }
@@ -89,24 +87,12 @@ fn facet_uses(shape: &FShape) -> Vec<Use> {
         match shape.kind() {
             CellKind::Triangle => {
                 for (a, b) in [(c[0], c[1]), (c[1], c[2]), (c[2], c[0])] {
-                    uses.push(Use {
-                        key: [a.min(b), a.max(b)],
-                        forward: a < b,
-                        oriented: [a, b],
-                    });
+                    uses.push(Use { key: [a.min(b), a.max(b)], forward: a < b, oriented: [a, b] });
                 }
             }
             CellKind::Segment => {
-                uses.push(Use {
-                    key: [c[0], c[0]],
-                    forward: true,
-                    oriented: [c[0], c[0]],
-                });
-                uses.push(Use {
-                    key: [c[1], c[1]],
-                    forward: false,
-                    oriented: [c[1], c[1]],
-                });
+                uses.push(Use { key: [c[0], c[0]], forward: true, oriented: [c[0], c[0]] });
+                uses.push(Use { key: [c[1], c[1]], forward: false, oriented: [c[1], c[1]] });
             }
         }
     }

@@ -148,23 +148,13 @@ impl fmt::Display for Problem {
                 write!(f, "vertex {vertex} has a NaN or infinite coordinate")
             }
             Problem::NonFiniteSignal { vertex } => {
-                write!(
-                    f,
-                    "vertex {vertex} has a NaN or infinite (missing) signal value"
-                )
+                write!(f, "vertex {vertex} has a NaN or infinite (missing) signal value")
             }
             Problem::SignalLength { expected, found } => {
                 write!(f, "the signal has {found} values for {expected} vertices")
             }
-            Problem::IndexOutOfRange {
-                cell,
-                index,
-                n_vertices,
-            } => {
-                write!(
-                    f,
-                    "cell {cell} uses vertex {index}, but there are only {n_vertices} vertices"
-                )
+            Problem::IndexOutOfRange { cell, index, n_vertices } => {
+                write!(f, "cell {cell} uses vertex {index}, but there are only {n_vertices} vertices")
             }
             Problem::RepeatedIndex { cell, vertex } => {
                 write!(f, "cell {cell} uses vertex {vertex} twice")
@@ -172,24 +162,14 @@ impl fmt::Display for Problem {
             Problem::ZeroVolumeCell { cell, volume } => {
                 write!(f, "cell {cell} has zero volume ({volume:e})")
             }
-            Problem::DuplicateCell {
-                cell,
-                first,
-                same_orientation,
-            } => {
-                let o = if *same_orientation {
-                    "same"
-                } else {
-                    "opposite"
-                };
+            Problem::DuplicateCell { cell, first, same_orientation } => {
+                let o = if *same_orientation { "same" } else { "opposite" };
                 write!(f, "cell {cell} repeats cell {first} ({o} orientation)")
             }
             Problem::UnusedVertex { vertex } => write!(f, "vertex {vertex} is used by no cell"),
-            Problem::NonManifoldFacet { facet, cells } => write!(
-                f,
-                "{} is shared by {cells} cells",
-                facet_name(*facet, false)
-            ),
+            Problem::NonManifoldFacet { facet, cells } => {
+                write!(f, "{} is shared by {cells} cells", facet_name(*facet, false))
+            }
             Problem::InconsistentOrientation { facet } => {
                 write!(
                     f,
@@ -197,10 +177,9 @@ impl fmt::Display for Problem {
                     facet_name(*facet, true)
                 )
             }
-            Problem::Boundary { facets, loops } => write!(
-                f,
-                "{facets} boundary facets in {loops} loops (or curve end points)"
-            ),
+            Problem::Boundary { facets, loops } => {
+                write!(f, "{facets} boundary facets in {loops} loops (or curve end points)")
+            }
         }
     }
 }
@@ -229,16 +208,8 @@ pub fn summarise(problems: &[Problem]) -> String {
         let of_kind: Vec<&Problem> = problems.iter().filter(|p| p.code() == code).collect();
         let shown: Vec<String> = of_kind.iter().take(SHOWN).map(|p| p.to_string()).collect();
         let more = of_kind.len().saturating_sub(SHOWN);
-        let tail = if more > 0 {
-            format!("; and {more} more")
-        } else {
-            String::new()
-        };
-        parts.push(format!(
-            "{} × {code}: {}{tail}",
-            of_kind.len(),
-            shown.join("; ")
-        ));
+        let tail = if more > 0 { format!("; and {more} more") } else { String::new() };
+        parts.push(format!("{} × {code}: {}{tail}", of_kind.len(), shown.join("; ")));
     }
     parts.join(" | ")
 }
@@ -253,16 +224,12 @@ pub struct Validation {
 impl Validation {
     /// The problems that block computation.
     pub fn errors(&self) -> impl Iterator<Item = &Problem> {
-        self.problems
-            .iter()
-            .filter(|p| p.severity() == Severity::Error)
+        self.problems.iter().filter(|p| p.severity() == Severity::Error)
     }
 
     /// The problems that allow computation.
     pub fn warnings(&self) -> impl Iterator<Item = &Problem> {
-        self.problems
-            .iter()
-            .filter(|p| p.severity() == Severity::Warning)
+        self.problems.iter().filter(|p| p.severity() == Severity::Warning)
     }
 
     /// Number of problems with the given [`Problem::code`].
@@ -303,31 +270,18 @@ pub(crate) fn blocking_problems(
     }
     if let Some(f) = signal {
         if f.len() != n_vertices {
-            out.push(Problem::SignalLength {
-                expected: n_vertices,
-                found: f.len(),
-            });
+            out.push(Problem::SignalLength { expected: n_vertices, found: f.len() });
         }
         out.extend(
-            f.iter()
-                .enumerate()
-                .filter(|(_, x)| !x.is_finite())
-                .map(|(vertex, _)| Problem::NonFiniteSignal { vertex }),
+            f.iter().enumerate().filter(|(_, x)| !x.is_finite()).map(|(vertex, _)| Problem::NonFiniteSignal { vertex }),
         );
     }
     for (cell, c) in cells.chunks_exact(kind.n_corners()).enumerate() {
         for (i, &index) in c.iter().enumerate() {
             if index >= n_vertices {
-                out.push(Problem::IndexOutOfRange {
-                    cell,
-                    index,
-                    n_vertices,
-                });
+                out.push(Problem::IndexOutOfRange { cell, index, n_vertices });
             } else if c[..i].contains(&index) {
-                out.push(Problem::RepeatedIndex {
-                    cell,
-                    vertex: index,
-                });
+                out.push(Problem::RepeatedIndex { cell, vertex: index });
             }
         }
     }
@@ -352,13 +306,7 @@ fn cell_key(c: &[usize]) -> ([usize; 3], bool) {
 }
 
 pub(crate) fn validate(shape: &FShape) -> Validation {
-    let mut problems = blocking_problems(
-        shape.dim(),
-        shape.kind(),
-        shape.points(),
-        shape.cells(),
-        shape.signal(),
-    );
+    let mut problems = blocking_problems(shape.dim(), shape.kind(), shape.points(), shape.cells(), shape.signal());
     let d = shape.kind().dim() as i32;
     let tol = ZERO_VOLUME_REL * shape.bounding_box().diagonal().powi(d);
     for t in 0..shape.n_cells() {
@@ -381,10 +329,7 @@ pub(crate) fn validate(shape: &FShape) -> Validation {
         problems.push(Problem::InconsistentOrientation { facet });
     }
     if !topo.is_closed() {
-        problems.push(Problem::Boundary {
-            facets: topo.boundary_facets.len(),
-            loops: topo.n_boundary_loops,
-        });
+        problems.push(Problem::Boundary { facets: topo.boundary_facets.len(), loops: topo.n_boundary_loops });
     }
     Validation { problems }
 }
@@ -409,11 +354,7 @@ fn duplicate_cells(shape: &FShape) -> Vec<Problem> {
         for (i, &(_, cell, o)) in group.iter().enumerate().skip(1) {
             let same = group[..i].iter().find(|g| g.2 == o);
             let first = same.map_or(group[0].1, |g| g.1);
-            out.push(Problem::DuplicateCell {
-                cell,
-                first,
-                same_orientation: same.is_some(),
-            });
+            out.push(Problem::DuplicateCell { cell, first, same_orientation: same.is_some() });
         }
     }
     out.sort_unstable_by_key(|p| match p {
@@ -437,11 +378,8 @@ pub struct Repairs {
 
 impl Repairs {
     /// Every repair.
-    pub const ALL: Repairs = Repairs {
-        drop_unused_vertices: true,
-        drop_zero_volume_cells: true,
-        drop_duplicate_cells: true,
-    };
+    pub const ALL: Repairs =
+        Repairs { drop_unused_vertices: true, drop_zero_volume_cells: true, drop_duplicate_cells: true };
 }
 
 /// What [`FShape::repaired`] removed.
@@ -463,12 +401,8 @@ impl FShape {
         let mut drop_cell = vec![false; self.n_cells()];
         for p in validate(self).problems {
             match p {
-                Problem::ZeroVolumeCell { cell, .. } if repairs.drop_zero_volume_cells => {
-                    drop_cell[cell] = true
-                }
-                Problem::DuplicateCell { cell, .. } if repairs.drop_duplicate_cells => {
-                    drop_cell[cell] = true
-                }
+                Problem::ZeroVolumeCell { cell, .. } if repairs.drop_zero_volume_cells => drop_cell[cell] = true,
+                Problem::DuplicateCell { cell, .. } if repairs.drop_duplicate_cells => drop_cell[cell] = true,
                 _ => {}
             }
         }
@@ -495,20 +429,13 @@ impl FShape {
             .collect();
         log.dropped_vertices = (0..self.n_vertices()).filter(|&v| !used[v]).collect();
         let n = self.dim();
-        let points: Vec<f64> = (0..self.n_vertices())
-            .filter(|&v| used[v])
-            .flat_map(|v| self.point(v).to_vec())
-            .collect();
-        let cells = kept_cells
-            .iter()
-            .map(|&v| log.vertex_map[v].unwrap_or(usize::MAX))
-            .collect();
-        let signal = self
-            .signal()
-            .map(|f| (0..f.len()).filter(|&v| used[v]).map(|v| f[v]).collect());
+        let points: Vec<f64> =
+            (0..self.n_vertices()).filter(|&v| used[v]).flat_map(|v| self.point(v).to_vec()).collect();
+        let cells = kept_cells.iter().map(|&v| log.vertex_map[v].unwrap_or(usize::MAX)).collect();
+        let signal = self.signal().map(|f| (0..f.len()).filter(|&v| used[v]).map(|v| f[v]).collect());
         debug_assert_eq!(points.len() % n, 0);
-        let shape = FShape::try_new(n, self.kind(), points, cells, signal)
-            .expect("repairs of a valid shape keep it valid");
+        let shape =
+            FShape::try_new(n, self.kind(), points, cells, signal).expect("repairs of a valid shape keep it valid");
         (shape, log)
     }
 }

@@ -15,7 +15,5 @@ use std::path::PathBuf;
 
 /// A file shipped in the repository's `data/` folder.
 pub fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../data")
-        .join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data").join(rel)
 }

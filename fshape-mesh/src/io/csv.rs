@@ -23,11 +23,9 @@ pub struct SignalColumn {
 /// any non-finite value) is an error naming its line.
 pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, ParseError> {
     let mut cur = Cursor::new(data);
-    let header = cur.text_line("a header line")?.ok_or_else(|| {
-        cur.error(ParseErrorKind::Missing {
-            what: "the header line (column name)",
-        })
-    })?;
+    let header = cur
+        .text_line("a header line")?
+        .ok_or_else(|| cur.error(ParseErrorKind::Missing { what: "the header line (column name)" }))?;
     let name = header.trim().to_string();
     if name.is_empty() || parse_f64(name.as_bytes()).is_some() {
         return Err(ParseError {
@@ -41,10 +39,7 @@ pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, Pa
     if name.contains(',') {
         return Err(ParseError {
             at: super::Location::Line(1),
-            kind: ParseErrorKind::BadToken {
-                expected: "a single column (no comma)",
-                found: lossy(name.as_bytes()),
-            },
+            kind: ParseErrorKind::BadToken { expected: "a single column (no comma)", found: lossy(name.as_bytes()) },
         });
     }
     let mut values = Vec::new();
@@ -58,17 +53,11 @@ pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, Pa
             continue;
         }
         let v = parse_f64(t.as_bytes()).filter(|v| v.is_finite() || (allow_missing && v.is_nan()));
-        let expected = if allow_missing {
-            "a number or `nan`"
-        } else {
-            "a finite number (missing values are not accepted here)"
-        };
+        let expected =
+            if allow_missing { "a number or `nan`" } else { "a finite number (missing values are not accepted here)" };
         values.push(v.ok_or_else(|| ParseError {
             at,
-            kind: ParseErrorKind::BadToken {
-                expected,
-                found: lossy(t.as_bytes()),
-            },
+            kind: ParseErrorKind::BadToken { expected, found: lossy(t.as_bytes()) },
         })?);
     }
     Ok(SignalColumn { name, values })
@@ -77,10 +66,7 @@ pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, Pa
 /// Reads a signal CSV file (optionally gzipped).
 pub fn read_signal(path: &Path, allow_missing: bool) -> Result<SignalColumn, ReadError> {
     let data = read_bytes(path)?;
-    parse_signal(&data, allow_missing).map_err(|source| ReadError::Parse {
-        path: path.into(),
-        source,
-    })
+    parse_signal(&data, allow_missing).map_err(|source| ReadError::Parse { path: path.into(), source })
 }
 
 /// Writes a signal CSV atomically, values in Rust's shortest round-trip

@@ -15,20 +15,11 @@ pub(crate) struct Cursor<'a> {
 
 impl<'a> Cursor<'a> {
     pub(crate) fn new(data: &'a [u8]) -> Self {
-        Cursor {
-            data,
-            pos: 0,
-            line: 1,
-            binary: false,
-        }
+        Cursor { data, pos: 0, line: 1, binary: false }
     }
 
     pub(crate) fn at(&self) -> Location {
-        if self.binary {
-            Location::Byte(self.pos)
-        } else {
-            Location::Line(self.line)
-        }
+        if self.binary { Location::Byte(self.pos) } else { Location::Line(self.line) }
     }
 
     /// The location of the next token: in text, whitespace is skipped first
@@ -41,10 +32,7 @@ impl<'a> Cursor<'a> {
     }
 
     pub(crate) fn error(&self, kind: ParseErrorKind) -> ParseError {
-        ParseError {
-            at: self.at(),
-            kind,
-        }
+        ParseError { at: self.at(), kind }
     }
 
     pub(crate) fn remaining(&self) -> usize {
@@ -70,20 +58,13 @@ impl<'a> Cursor<'a> {
     }
 
     /// The line as text, or an error if it is not UTF-8.
-    pub(crate) fn text_line(
-        &mut self,
-        expected: &'static str,
-    ) -> Result<Option<&'a str>, ParseError> {
+    pub(crate) fn text_line(&mut self, expected: &'static str) -> Result<Option<&'a str>, ParseError> {
         let at = self.at();
         match self.line() {
             None => Ok(None),
-            Some(l) => std::str::from_utf8(l).map(Some).map_err(|_| ParseError {
-                at,
-                kind: ParseErrorKind::BadToken {
-                    expected,
-                    found: lossy(l),
-                },
-            }),
+            Some(l) => std::str::from_utf8(l)
+                .map(Some)
+                .map_err(|_| ParseError { at, kind: ParseErrorKind::BadToken { expected, found: lossy(l) } }),
         }
     }
 
@@ -103,11 +84,7 @@ impl<'a> Cursor<'a> {
     pub(crate) fn token(&mut self, expected: &'static str) -> Result<&'a [u8], ParseError> {
         self.skip_space();
         let start = self.pos;
-        while self
-            .data
-            .get(self.pos)
-            .is_some_and(|b| !b.is_ascii_whitespace())
-        {
+        while self.data.get(self.pos).is_some_and(|b| !b.is_ascii_whitespace()) {
             self.pos += 1;
         }
         if start == self.pos {
@@ -118,12 +95,7 @@ impl<'a> Cursor<'a> {
 
     pub(crate) fn f64_token(&mut self, expected: &'static str) -> Result<f64, ParseError> {
         let t = self.token(expected)?;
-        parse_f64(t).ok_or_else(|| {
-            self.error(ParseErrorKind::BadToken {
-                expected,
-                found: lossy(t),
-            })
-        })
+        parse_f64(t).ok_or_else(|| self.error(ParseErrorKind::BadToken { expected, found: lossy(t) }))
     }
 
     pub(crate) fn i64_token(&mut self, expected: &'static str) -> Result<i64, ParseError> {
@@ -131,20 +103,11 @@ impl<'a> Cursor<'a> {
         std::str::from_utf8(t)
             .ok()
             .and_then(|s| s.parse::<i64>().ok())
-            .ok_or_else(|| {
-                self.error(ParseErrorKind::BadToken {
-                    expected,
-                    found: lossy(t),
-                })
-            })
+            .ok_or_else(|| self.error(ParseErrorKind::BadToken { expected, found: lossy(t) }))
     }
 
     /// The next `n` raw bytes.
-    pub(crate) fn take(
-        &mut self,
-        n: usize,
-        expected: &'static str,
-    ) -> Result<&'a [u8], ParseError> {
+    pub(crate) fn take(&mut self, n: usize, expected: &'static str) -> Result<&'a [u8], ParseError> {
         if self.remaining() < n {
             return Err(self.error(ParseErrorKind::Eof { expected }));
         }

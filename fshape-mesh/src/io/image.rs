@@ -26,12 +26,7 @@ impl Image {
     /// If `c >= width` or `r >= height`.
     #[track_caller]
     pub fn at(&self, c: usize, r: usize) -> f64 {
-        assert!(
-            c < self.width && r < self.height,
-            "pixel ({c}, {r}) outside a {}×{} image",
-            self.width,
-            self.height
-        );
+        assert!(c < self.width && r < self.height, "pixel ({c}, {r}) outside a {}×{} image", self.width, self.height);
         self.values[r * self.width + c]
     }
 
@@ -44,10 +39,7 @@ impl Image {
     /// assert_eq!(im.pixel_centre(0, 0), (-0.5, 0.5));
     /// ```
     pub fn pixel_centre(&self, c: usize, r: usize) -> (f64, f64) {
-        (
-            -1.0 + (2 * c + 1) as f64 / self.width as f64,
-            1.0 - (2 * r + 1) as f64 / self.height as f64,
-        )
+        (-1.0 + (2 * c + 1) as f64 / self.width as f64, 1.0 - (2 * r + 1) as f64 / self.height as f64)
     }
 
     /// Bilinear interpolation of the pixel values at (x, y) ∈ [-1, 1]², with
@@ -66,8 +58,7 @@ impl Image {
         }
         // Inverse of pixel_centre, in continuous pixel coordinates.
         let fc = (((x + 1.0) * self.width as f64 - 1.0) / 2.0).clamp(0.0, (self.width - 1) as f64);
-        let fr =
-            (((1.0 - y) * self.height as f64 - 1.0) / 2.0).clamp(0.0, (self.height - 1) as f64);
+        let fr = (((1.0 - y) * self.height as f64 - 1.0) / 2.0).clamp(0.0, (self.height - 1) as f64);
         let (c0, r0) = (fc.floor() as usize, fr.floor() as usize);
         let (c1, r1) = ((c0 + 1).min(self.width - 1), (r0 + 1).min(self.height - 1));
         let (tc, tr) = (fc - c0 as f64, fr - r0 as f64);
@@ -80,11 +71,7 @@ impl Image {
 /// Parses a digit CSV: `height` lines of `width` comma-separated numbers.
 pub fn parse_image_csv(data: &[u8]) -> Result<Image, ParseError> {
     let mut cur = Cursor::new(data);
-    let mut image = Image {
-        width: 0,
-        height: 0,
-        values: Vec::new(),
-    };
+    let mut image = Image { width: 0, height: 0, values: Vec::new() };
     loop {
         let at = cur.at();
         let Some(line) = cur.text_line("a row of numbers")? else {
@@ -99,10 +86,7 @@ pub fn parse_image_csv(data: &[u8]) -> Result<Image, ParseError> {
             let found = lossy(t.trim().as_bytes());
             image.values.push(v.ok_or(ParseError {
                 at,
-                kind: ParseErrorKind::BadToken {
-                    expected: "a finite pixel value",
-                    found,
-                },
+                kind: ParseErrorKind::BadToken { expected: "a finite pixel value", found },
             })?);
             n += 1;
         }
@@ -128,19 +112,13 @@ pub fn read_image(path: &Path, channel: Option<&str>) -> Result<Image, ReadError
     let data = read_bytes(path)?;
     let name = path.to_string_lossy().to_ascii_lowercase();
     if name.ends_with(".csv") || name.ends_with(".csv.gz") {
-        return parse_image_csv(&data).map_err(|source| ReadError::Parse {
-            path: path.into(),
-            source,
-        });
+        return parse_image_csv(&data).map_err(|source| ReadError::Parse { path: path.into(), source });
     }
     if !(name.ends_with(".exr") || name.ends_with(".exr.gz")) {
         return Err(ReadError::UnknownFormat { path: path.into() });
     }
     use exr::prelude::traits::*;
-    let exr_err = |source| ReadError::Exr {
-        path: path.into(),
-        source,
-    };
+    let exr_err = |source| ReadError::Exr { path: path.into(), source };
     let img = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -150,37 +128,18 @@ pub fn read_image(path: &Path, channel: Option<&str>) -> Result<Image, ReadError
         .from_buffered(IoCursor::new(&data))
         .map_err(exr_err)?;
     let layer = img.layer_data;
-    let names: Vec<String> = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| c.name.to_string())
-        .collect();
+    let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
     let index = match channel {
         Some(want) => names.iter().position(|n| n == want),
         None if names.len() == 1 => Some(0),
         None => None,
     };
     let Some(index) = index else {
-        let name = channel
-            .unwrap_or("(the only channel: name one of several)")
-            .to_string();
-        return Err(ReadError::SignalNotFound {
-            path: path.into(),
-            name,
-            available: names,
-        });
+        let name = channel.unwrap_or("(the only channel: name one of several)").to_string();
+        return Err(ReadError::SignalNotFound { path: path.into(), name, available: names });
     };
-    let values = layer.channel_data.list[index]
-        .sample_data
-        .values_as_f32()
-        .map(f64::from)
-        .collect();
-    Ok(Image {
-        width: layer.size.0,
-        height: layer.size.1,
-        values,
-    })
+    let values = layer.channel_data.list[index].sample_data.values_as_f32().map(f64::from).collect();
+    Ok(Image { width: layer.size.0, height: layer.size.1, values })
 }
 
 /// Writes a single-channel (`Y`, 32-bit float) EXR atomically. Values are
@@ -199,9 +158,6 @@ pub fn write_exr(path: &Path, image: &Image) -> Result<(), WriteError> {
     exr::prelude::Image::from_layer(layer)
         .write()
         .to_buffered(&mut buf)
-        .map_err(|source| WriteError::Exr {
-            path: path.into(),
-            source,
-        })?;
+        .map_err(|source| WriteError::Exr { path: path.into(), source })?;
     write_atomic(path, buf.get_ref(), false)
 }

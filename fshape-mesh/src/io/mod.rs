@@ -88,9 +88,7 @@ pub enum ParseErrorKind {
         value: i64,
     },
     /// Cells of different sizes in one file.
-    #[error(
-        "cell {cell} has {found} vertices, but the first cell has {expected} (mixed cell sizes)"
-    )]
+    #[error("cell {cell} has {found} vertices, but the first cell has {expected} (mixed cell sizes)")]
     MixedCellSizes {
         /// Cell index.
         cell: usize,
@@ -187,11 +185,7 @@ pub enum ReadError {
 }
 
 fn list(names: &[String]) -> String {
-    if names.is_empty() {
-        "none".to_string()
-    } else {
-        names.join(", ")
-    }
+    if names.is_empty() { "none".to_string() } else { names.join(", ") }
 }
 
 /// Why writing a file failed. Nothing is left at the target path.
@@ -292,38 +286,21 @@ pub(crate) struct RawMesh {
 impl RawMesh {
     pub(crate) fn into_shape(self, path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
         if let (Some(name), None) = (&opts.signal_name, &self.signal) {
-            return Err(ReadError::SignalNotFound {
-                path: path.into(),
-                name: name.clone(),
-                available: self.scalars,
-            });
+            return Err(ReadError::SignalNotFound { path: path.into(), name: name.clone(), available: self.scalars });
         }
-        let kind = if self.cell_size == Some(2) {
-            CellKind::Segment
-        } else {
-            CellKind::Triangle
-        };
-        FShape::try_new(self.dim, kind, self.points, self.cells, self.signal).map_err(|source| {
-            ReadError::Shape {
-                path: path.into(),
-                source,
-            }
-        })
+        let kind = if self.cell_size == Some(2) { CellKind::Segment } else { CellKind::Triangle };
+        FShape::try_new(self.dim, kind, self.points, self.cells, self.signal)
+            .map_err(|source| ReadError::Shape { path: path.into(), source })
     }
 }
 
 /// Reads a whole file, gunzipping it when it starts with the gzip magic.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
-    let io = |source| ReadError::Io {
-        path: path.into(),
-        source,
-    };
+    let io = |source| ReadError::Io { path: path.into(), source };
     let raw = std::fs::read(path).map_err(io)?;
     if raw.starts_with(&[0x1f, 0x8b]) {
         let mut out = Vec::new();
-        flate2::read::MultiGzDecoder::new(&raw[..])
-            .read_to_end(&mut out)
-            .map_err(io)?;
+        flate2::read::MultiGzDecoder::new(&raw[..]).read_to_end(&mut out).map_err(io)?;
         Ok(out)
     } else {
         Ok(raw)
@@ -340,25 +317,16 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
 /// # Ok::<(), fshape_mesh::io::ReadError>(())
 /// ```
 pub fn read_mesh(path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
-    let (format, _) =
-        Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
+    let (format, _) = Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
     let data = read_bytes(path)?;
     parse_mesh(&data, format, opts, path)
 }
 
 /// Parses mesh data already in memory (decompressed); `path` only names the
 /// source in error messages.
-pub fn parse_mesh(
-    data: &[u8],
-    format: Format,
-    opts: &ReadOptions,
-    path: &Path,
-) -> Result<FShape, ReadError> {
+pub fn parse_mesh(data: &[u8], format: Format, opts: &ReadOptions, path: &Path) -> Result<FShape, ReadError> {
     let name = opts.signal_name.as_deref().unwrap_or(DEFAULT_SIGNAL_NAME);
-    let parse = |source| ReadError::Parse {
-        path: path.into(),
-        source,
-    };
+    let parse = |source| ReadError::Parse { path: path.into(), source };
     let raw = match format {
         Format::Ply => ply::parse(data, name).map_err(parse)?,
         Format::Vtk => vtk::parse(data, name).map_err(parse)?,
@@ -371,36 +339,28 @@ pub fn parse_mesh(
 /// `.vtk`, each optionally followed by `.gz`). OBJ carries no signal.
 /// The write is atomic: a temporary file is renamed into place.
 pub fn write_mesh(path: &Path, shape: &FShape, encoding: Encoding) -> Result<(), WriteError> {
-    let (format, gz) =
-        Format::from_path(path).ok_or_else(|| WriteError::UnknownFormat { path: path.into() })?;
+    let (format, gz) = Format::from_path(path).ok_or_else(|| WriteError::UnknownFormat { path: path.into() })?;
     let mut bytes = Vec::new();
-    match format {
-        Format::Ply => ply::write(&mut bytes, shape, encoding),
-        Format::Vtk => vtk::write(&mut bytes, shape, encoding),
-        Format::Obj => obj::write(&mut bytes, shape),
-    }
-    .map_err(|source| WriteError::Io {
-        path: path.into(),
-        source,
-    })?;
+    write_to(&mut bytes, shape, format, encoding).map_err(|source| WriteError::Io { path: path.into(), source })?;
     write_atomic(path, &bytes, gz)
+}
+
+/// Writes a mesh in the given format to any writer (uncompressed). OBJ
+/// ignores `encoding` and carries no signal.
+pub fn write_to(w: &mut impl Write, shape: &FShape, format: Format, encoding: Encoding) -> std::io::Result<()> {
+    match format {
+        Format::Ply => ply::write(w, shape, encoding),
+        Format::Vtk => vtk::write(w, shape, encoding),
+        Format::Obj => obj::write(w, shape),
+    }
 }
 
 /// Writes `bytes` (gzipped when `gz`) to a temporary file beside `path`,
 /// then renames it over `path`, so readers never see a partial file.
 pub fn write_atomic(path: &Path, bytes: &[u8], gz: bool) -> Result<(), WriteError> {
-    let io = |source| WriteError::Io {
-        path: path.into(),
-        source,
-    };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let io = |source| WriteError::Io { path: path.into(), source };
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;

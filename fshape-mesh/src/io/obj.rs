@@ -25,10 +25,7 @@ pub const PLANAR_COMMENT: &str = "# fshape planar";
 /// Parses OBJ data.
 pub(crate) fn parse(data: &[u8]) -> Result<RawMesh, ParseError> {
     let mut cur = Cursor::new(data);
-    let mut raw = RawMesh {
-        dim: 3,
-        ..RawMesh::default()
-    };
+    let mut raw = RawMesh { dim: 3, ..RawMesh::default() };
     let mut planar = false;
     let mut n_cells = 0;
     loop {
@@ -41,16 +38,11 @@ pub(crate) fn parse(data: &[u8]) -> Result<RawMesh, ParseError> {
         match words.next() {
             Some("v") => {
                 for _ in 0..3 {
-                    let w = words.next().ok_or_else(|| {
-                        err(ParseErrorKind::Eof {
-                            expected: "three vertex coordinates",
-                        })
-                    })?;
+                    let w = words
+                        .next()
+                        .ok_or_else(|| err(ParseErrorKind::Eof { expected: "three vertex coordinates" }))?;
                     let x = parse_f64(w.as_bytes()).ok_or_else(|| {
-                        err(ParseErrorKind::BadToken {
-                            expected: "a coordinate",
-                            found: lossy(w.as_bytes()),
-                        })
+                        err(ParseErrorKind::BadToken { expected: "a coordinate", found: lossy(w.as_bytes()) })
                     })?;
                     raw.points.push(x);
                 }
@@ -59,24 +51,15 @@ pub(crate) fn parse(data: &[u8]) -> Result<RawMesh, ParseError> {
                 let size = if kw == "f" { 3 } else { 2 };
                 let refs: Vec<&str> = words.collect();
                 if kw == "f" && refs.len() != 3 {
-                    return Err(err(ParseErrorKind::CellSize {
-                        cell: n_cells,
-                        found: refs.len(),
-                    }));
+                    return Err(err(ParseErrorKind::CellSize { cell: n_cells, found: refs.len() }));
                 }
                 if kw == "l" && refs.len() < 2 {
-                    return Err(err(ParseErrorKind::Eof {
-                        expected: "at least two vertices after `l`",
-                    }));
+                    return Err(err(ParseErrorKind::Eof { expected: "at least two vertices after `l`" }));
                 }
                 match raw.cell_size {
                     None => raw.cell_size = Some(size),
                     Some(s) if s != size => {
-                        return Err(err(ParseErrorKind::MixedCellSizes {
-                            cell: n_cells,
-                            found: size,
-                            expected: s,
-                        }));
+                        return Err(err(ParseErrorKind::MixedCellSizes { cell: n_cells, found: size, expected: s }));
                     }
                     _ => {}
                 }
@@ -101,11 +84,7 @@ pub(crate) fn parse(data: &[u8]) -> Result<RawMesh, ParseError> {
         }
     }
     if planar && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
-        raw.points = raw
-            .points
-            .chunks_exact(3)
-            .flat_map(|p| [p[0], p[1]])
-            .collect();
+        raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
         raw.dim = 2;
     }
     Ok(raw)
@@ -123,8 +102,7 @@ fn vertex_ref(r: &str, n_vertices: usize, cell: usize) -> Result<usize, ParseErr
         0 => Err(bad()),
         i if i > 0 => Ok(i as usize - 1),
         // -1 is the last vertex defined so far.
-        i => usize::try_from(n_vertices as i64 + i)
-            .map_err(|_| ParseErrorKind::NegativeIndex { cell, value: i }),
+        i => usize::try_from(n_vertices as i64 + i).map_err(|_| ParseErrorKind::NegativeIndex { cell, value: i }),
     }
 }
 
@@ -139,11 +117,7 @@ pub fn write(w: &mut impl Write, shape: &FShape) -> io::Result<()> {
         let z = if shape.dim() == 3 { p[2] } else { 0.0 };
         writeln!(w, "v {:e} {:e} {:e}", p[0], p[1], z)?;
     }
-    let kw = if shape.kind() == CellKind::Triangle {
-        "f"
-    } else {
-        "l"
-    };
+    let kw = if shape.kind() == CellKind::Triangle { "f" } else { "l" };
     for c in shape.cell_iter() {
         let ids: Vec<String> = c.iter().map(|v| (v + 1).to_string()).collect();
         writeln!(w, "{kw} {}", ids.join(" "))?;

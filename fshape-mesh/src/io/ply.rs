@@ -91,11 +91,7 @@ impl Element {
             (Kind::Scalar(s), false) => s.size(),
             (Kind::List(c, _), false) => c.size(),
         };
-        self.props
-            .iter()
-            .map(|p| per(&p.kind))
-            .sum::<usize>()
-            .max(1)
+        self.props.iter().map(|p| per(&p.kind)).sum::<usize>().max(1)
     }
 
     fn find(&self, name: &str) -> Option<usize> {
@@ -117,10 +113,7 @@ struct Header {
 }
 
 fn bad(cur: &Cursor, expected: &'static str, found: &str) -> ParseError {
-    cur.error(ParseErrorKind::BadToken {
-        expected,
-        found: lossy(found.as_bytes()),
-    })
+    cur.error(ParseErrorKind::BadToken { expected, found: lossy(found.as_bytes()) })
 }
 
 fn parse_header(cur: &mut Cursor) -> Result<Header, ParseError> {
@@ -129,23 +122,14 @@ fn parse_header(cur: &mut Cursor) -> Result<Header, ParseError> {
         let found = lossy(first.unwrap_or("").as_bytes());
         return Err(ParseError {
             at: super::Location::Line(1),
-            kind: ParseErrorKind::BadToken {
-                expected: "the magic line `ply`",
-                found,
-            },
+            kind: ParseErrorKind::BadToken { expected: "the magic line `ply`", found },
         });
     }
-    let mut header = Header {
-        body: Body::Ascii,
-        elements: Vec::new(),
-        planar: false,
-    };
+    let mut header = Header { body: Body::Ascii, elements: Vec::new(), planar: false };
     let mut format_seen = false;
     loop {
         let Some(line) = cur.text_line("a header line")? else {
-            return Err(cur.error(ParseErrorKind::Missing {
-                what: "`end_header`",
-            }));
+            return Err(cur.error(ParseErrorKind::Missing { what: "`end_header`" }));
         };
         let words: Vec<&str> = line.split_whitespace().collect();
         match words.as_slice() {
@@ -165,46 +149,26 @@ fn parse_header(cur: &mut Cursor) -> Result<Header, ParseError> {
                 format_seen = true;
             }
             ["element", name, count] => {
-                let count = count
-                    .parse::<u64>()
-                    .map_err(|_| bad_prev(cur, "an element count", count))?;
-                header.elements.push(Element {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                });
+                let count = count.parse::<u64>().map_err(|_| bad_prev(cur, "an element count", count))?;
+                header.elements.push(Element { name: name.to_string(), count, props: Vec::new() });
             }
             ["property", rest @ ..] => {
-                let el = header
-                    .elements
-                    .last_mut()
-                    .ok_or_else(|| bad_prev(cur, "`element` before `property`", line))?;
+                let el =
+                    header.elements.last_mut().ok_or_else(|| bad_prev(cur, "`element` before `property`", line))?;
                 let prop = match rest {
                     ["list", c, i, name] => {
                         let c = Scalar::parse(c)
                             .filter(|c| !c.is_float())
                             .ok_or_else(|| bad_prev(cur, "an integer list count type", c))?;
-                        let i = Scalar::parse(i)
-                            .ok_or_else(|| bad_prev(cur, "a PLY scalar type", i))?;
-                        Property {
-                            name: name.to_string(),
-                            kind: Kind::List(c, i),
-                        }
+                        let i = Scalar::parse(i).ok_or_else(|| bad_prev(cur, "a PLY scalar type", i))?;
+                        Property { name: name.to_string(), kind: Kind::List(c, i) }
                     }
                     [t, name] => {
-                        let t = Scalar::parse(t)
-                            .ok_or_else(|| bad_prev(cur, "a PLY scalar type", t))?;
-                        Property {
-                            name: name.to_string(),
-                            kind: Kind::Scalar(t),
-                        }
+                        let t = Scalar::parse(t).ok_or_else(|| bad_prev(cur, "a PLY scalar type", t))?;
+                        Property { name: name.to_string(), kind: Kind::Scalar(t) }
                     }
                     _ => {
-                        return Err(bad_prev(
-                            cur,
-                            "`property TYPE NAME` or `property list TYPE TYPE NAME`",
-                            line,
-                        ));
+                        return Err(bad_prev(cur, "`property TYPE NAME` or `property list TYPE TYPE NAME`", line));
                     }
                 };
                 el.props.push(prop);
@@ -213,9 +177,7 @@ fn parse_header(cur: &mut Cursor) -> Result<Header, ParseError> {
         }
     }
     if !format_seen {
-        return Err(cur.error(ParseErrorKind::Missing {
-            what: "the `format` line",
-        }));
+        return Err(cur.error(ParseErrorKind::Missing { what: "the `format` line" }));
     }
     Ok(header)
 }
@@ -231,36 +193,20 @@ fn bad_prev(cur: &Cursor, expected: &'static str, found: &str) -> ParseError {
 
 fn bad_line(cur: &Cursor, what: &'static str, found: &str) -> ParseError {
     let mut e = bad_prev(cur, "", found);
-    e.kind = ParseErrorKind::Unsupported {
-        what,
-        found: lossy(found.as_bytes()),
-    };
+    e.kind = ParseErrorKind::Unsupported { what, found: lossy(found.as_bytes()) };
     e
 }
 
 /// Reads one scalar of the body.
-fn scalar(
-    cur: &mut Cursor,
-    body: Body,
-    t: Scalar,
-    expected: &'static str,
-) -> Result<f64, ParseError> {
+fn scalar(cur: &mut Cursor, body: Body, t: Scalar, expected: &'static str) -> Result<f64, ParseError> {
     if body == Body::Ascii {
-        return if t.is_float() {
-            cur.f64_token(expected)
-        } else {
-            cur.i64_token(expected).map(|v| v as f64)
-        };
+        return if t.is_float() { cur.f64_token(expected) } else { cur.i64_token(expected).map(|v| v as f64) };
     }
     let b = cur.take(t.size(), expected)?;
     macro_rules! num {
         ($ty:ty) => {{
             let a = b.try_into().expect("take returned the requested size");
-            (if body == Body::Little {
-                <$ty>::from_le_bytes(a)
-            } else {
-                <$ty>::from_be_bytes(a)
-            }) as f64
+            (if body == Body::Little { <$ty>::from_le_bytes(a) } else { <$ty>::from_be_bytes(a) }) as f64
         }};
     }
     Ok(match t {
@@ -277,12 +223,7 @@ fn scalar(
 
 /// A list length or vertex index: an integer (a float item that is integral is
 /// accepted, as some writers use float lists).
-fn index(
-    cur: &mut Cursor,
-    body: Body,
-    t: Scalar,
-    expected: &'static str,
-) -> Result<i64, ParseError> {
+fn index(cur: &mut Cursor, body: Body, t: Scalar, expected: &'static str) -> Result<i64, ParseError> {
     let at = cur.mark();
     let v = if body == Body::Ascii && !t.is_float() {
         cur.i64_token(expected)? as f64
@@ -290,13 +231,7 @@ fn index(
         scalar(cur, body, t, expected)?
     };
     if v.fract() != 0.0 || !v.is_finite() || v.abs() > 9.0e15 {
-        return Err(ParseError {
-            at,
-            kind: ParseErrorKind::BadToken {
-                expected,
-                found: v.to_string(),
-            },
-        });
+        return Err(ParseError { at, kind: ParseErrorKind::BadToken { expected, found: v.to_string() } });
     }
     Ok(v as i64)
 }
@@ -306,11 +241,7 @@ fn check_count(cur: &Cursor, el: &Element, body: Body) -> Result<(), ParseError>
     // An ASCII last record needs no trailing separator: allow one byte slack.
     if el.count.saturating_mul(min) > cur.remaining() as u64 + 1 {
         return Err(cur.error(ParseErrorKind::Truncated {
-            what: if el.name == "vertex" {
-                "vertices"
-            } else {
-                "records"
-            },
+            what: if el.name == "vertex" { "vertices" } else { "records" },
             claimed: el.count,
             available: cur.remaining(),
         }));
@@ -324,27 +255,15 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
     let mut cur = Cursor::new(data);
     let header = parse_header(&mut cur)?;
     cur.binary = header.body != Body::Ascii;
-    let mut raw = RawMesh {
-        dim: 3,
-        ..RawMesh::default()
-    };
+    let mut raw = RawMesh { dim: 3, ..RawMesh::default() };
     let mut edges = Vec::new();
     let mut faces_seen = false;
     let vertex = header
         .elements
         .iter()
         .find(|e| e.name == "vertex")
-        .ok_or_else(|| {
-            cur.error(ParseErrorKind::Missing {
-                what: "element `vertex`",
-            })
-        })?;
-    raw.scalars = vertex
-        .props
-        .iter()
-        .filter(|p| matches!(p.kind, Kind::Scalar(_)))
-        .map(|p| p.name.clone())
-        .collect();
+        .ok_or_else(|| cur.error(ParseErrorKind::Missing { what: "element `vertex`" }))?;
+    raw.scalars = vertex.props.iter().filter(|p| matches!(p.kind, Kind::Scalar(_))).map(|p| p.name.clone()).collect();
     for el in &header.elements {
         check_count(&cur, el, header.body)?;
         match el.name.as_str() {
@@ -362,11 +281,7 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
         raw.cells = edges;
     }
     if header.planar && raw.dim == 3 && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
-        raw.points = raw
-            .points
-            .chunks_exact(3)
-            .flat_map(|p| [p[0], p[1]])
-            .collect();
+        raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
         raw.dim = 2;
     }
     Ok(raw)
@@ -383,9 +298,7 @@ fn read_vertices(
     let x = el.find("x").ok_or_else(|| missing("vertex property `x`"))?;
     let y = el.find("y").ok_or_else(|| missing("vertex property `y`"))?;
     let z = el.find("z");
-    let s = el
-        .find(signal_name)
-        .filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)));
+    let s = el.find(signal_name).filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)));
     raw.dim = if z.is_some() { 3 } else { 2 };
     let n = el.count as usize;
     raw.points = Vec::with_capacity(n * raw.dim);
@@ -416,20 +329,13 @@ fn read_vertices(
     Ok(())
 }
 
-fn read_faces(
-    cur: &mut Cursor,
-    body: Body,
-    el: &Element,
-    raw: &mut RawMesh,
-) -> Result<(), ParseError> {
+fn read_faces(cur: &mut Cursor, body: Body, el: &Element, raw: &mut RawMesh) -> Result<(), ParseError> {
     let li = el
         .find("vertex_indices")
         .or_else(|| el.find("vertex_index"))
         .filter(|&i| matches!(el.props[i].kind, Kind::List(..)))
         .ok_or_else(|| {
-            cur.error(ParseErrorKind::Missing {
-                what: "face list property `vertex_indices` or `vertex_index`",
-            })
+            cur.error(ParseErrorKind::Missing { what: "face list property `vertex_indices` or `vertex_index`" })
         })?;
     raw.cells = Vec::with_capacity(el.count as usize * 3);
     for cell in 0..el.count as usize {
@@ -442,8 +348,7 @@ fn read_faces(
                     let at = cur.mark();
                     let len = index(cur, body, c, "a face's vertex count")?;
                     if k == li {
-                        let len = check_cell_size(raw, cell, len)
-                            .map_err(|kind| ParseError { at, kind })?;
+                        let len = check_cell_size(raw, cell, len).map_err(|kind| ParseError { at, kind })?;
                         for _ in 0..len {
                             let at = cur.mark();
                             let v = index(cur, body, t, "a vertex index")?;
@@ -468,19 +373,12 @@ fn read_faces(
 fn check_cell_size(raw: &mut RawMesh, cell: usize, len: i64) -> Result<usize, ParseErrorKind> {
     let found = usize::try_from(len).unwrap_or(usize::MAX);
     if found != 2 && found != 3 {
-        return Err(ParseErrorKind::CellSize {
-            cell,
-            found: len.max(0) as usize,
-        });
+        return Err(ParseErrorKind::CellSize { cell, found: len.max(0) as usize });
     }
     match raw.cell_size {
         None => raw.cell_size = Some(found),
         Some(expected) if expected != found => {
-            return Err(ParseErrorKind::MixedCellSizes {
-                cell,
-                found,
-                expected,
-            });
+            return Err(ParseErrorKind::MixedCellSizes { cell, found, expected });
         }
         Some(_) => {}
     }
@@ -491,9 +389,7 @@ fn read_edges(cur: &mut Cursor, body: Body, el: &Element) -> Result<Vec<usize>, 
     let (a, b) = match (el.find("vertex1"), el.find("vertex2")) {
         (Some(a), Some(b)) => (a, b),
         _ => {
-            return Err(cur.error(ParseErrorKind::Missing {
-                what: "edge properties `vertex1` and `vertex2`",
-            }));
+            return Err(cur.error(ParseErrorKind::Missing { what: "edge properties `vertex1` and `vertex2`" }));
         }
     };
     let mut out = Vec::with_capacity(el.count as usize * 2);
@@ -513,10 +409,10 @@ fn read_edges(cur: &mut Cursor, body: Body, el: &Element) -> Result<Vec<usize>, 
             };
         }
         for v in [vals[a], vals[b]] {
-            out.push(usize::try_from(v).map_err(|_| ParseError {
-                at,
-                kind: ParseErrorKind::NegativeIndex { cell, value: v },
-            })?);
+            out.push(
+                usize::try_from(v)
+                    .map_err(|_| ParseError { at, kind: ParseErrorKind::NegativeIndex { cell, value: v } })?,
+            );
         }
     }
     Ok(out)
@@ -557,16 +453,10 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         writeln!(w, "property double signal")?;
     }
     match shape.kind() {
-        CellKind::Triangle => writeln!(
-            w,
-            "element face {}\nproperty list uchar int vertex_indices",
-            shape.n_cells()
-        )?,
-        CellKind::Segment => writeln!(
-            w,
-            "element edge {}\nproperty int vertex1\nproperty int vertex2",
-            shape.n_cells()
-        )?,
+        CellKind::Triangle => writeln!(w, "element face {}\nproperty list uchar int vertex_indices", shape.n_cells())?,
+        CellKind::Segment => {
+            writeln!(w, "element edge {}\nproperty int vertex1\nproperty int vertex2", shape.n_cells())?
+        }
     }
     writeln!(w, "end_header")?;
     let ascii = encoding == Encoding::Ascii;
@@ -588,9 +478,7 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         }
     }
     for c in shape.cell_iter() {
-        let idx = |v: usize| {
-            i32::try_from(v).map_err(|_| io::Error::other("vertex index exceeds the PLY int range"))
-        };
+        let idx = |v: usize| i32::try_from(v).map_err(|_| io::Error::other("vertex index exceeds the PLY int range"));
         match (ascii, shape.kind()) {
             (true, CellKind::Triangle) => writeln!(w, "3 {} {} {}", c[0], c[1], c[2])?,
             (true, CellKind::Segment) => writeln!(w, "{} {}", c[0], c[1])?,

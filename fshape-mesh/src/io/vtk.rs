@@ -42,17 +42,11 @@ struct Reader<'a> {
 impl<'a> Reader<'a> {
     /// An error about the last keyword line.
     fn bad(&self, expected: &'static str, found: &str) -> ParseError {
-        self.line_error(ParseErrorKind::BadToken {
-            expected,
-            found: lossy(found.as_bytes()),
-        })
+        self.line_error(ParseErrorKind::BadToken { expected, found: lossy(found.as_bytes()) })
     }
 
     fn line_error(&self, kind: ParseErrorKind) -> ParseError {
-        ParseError {
-            at: self.line_at,
-            kind,
-        }
+        ParseError { at: self.line_at, kind }
     }
 
     /// The next non-empty line, split into words; `None` at the end.
@@ -79,10 +73,9 @@ impl<'a> Reader<'a> {
         let w = word.copied().unwrap_or("");
         match type_size(w) {
             Some(s) => Ok((w, s)),
-            None => Err(self.line_error(ParseErrorKind::Unsupported {
-                what: "VTK data type",
-                found: lossy(w.as_bytes()),
-            })),
+            None => {
+                Err(self.line_error(ParseErrorKind::Unsupported { what: "VTK data type", found: lossy(w.as_bytes()) }))
+            }
         }
     }
 
@@ -100,12 +93,7 @@ impl<'a> Reader<'a> {
     }
 
     /// Reads `n` numbers of type `ty` as f64.
-    fn numbers(
-        &mut self,
-        n: u64,
-        ty: (&str, usize),
-        what: &'static str,
-    ) -> Result<Vec<f64>, ParseError> {
+    fn numbers(&mut self, n: u64, ty: (&str, usize), what: &'static str) -> Result<Vec<f64>, ParseError> {
         let n = self.check_room(n, ty.1)?;
         let mut out = Vec::with_capacity(n);
         if !self.binary {
@@ -125,9 +113,7 @@ impl<'a> Reader<'a> {
                 ("unsigned_short", _) => u16::from_be_bytes(b.try_into().expect("2 bytes")) as f64,
                 ("int", _) => i32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
                 ("unsigned_int", _) => u32::from_be_bytes(b.try_into().expect("4 bytes")) as f64,
-                ("vtktypeuint64" | "unsigned_long", _) => {
-                    u64::from_be_bytes(b.try_into().expect("8 bytes")) as f64
-                }
+                ("vtktypeuint64" | "unsigned_long", _) => u64::from_be_bytes(b.try_into().expect("8 bytes")) as f64,
                 _ => i64::from_be_bytes(b.try_into().expect("8 bytes")) as f64,
             });
         }
@@ -136,12 +122,7 @@ impl<'a> Reader<'a> {
     }
 
     /// Reads `n` integers (cell sizes, indices, offsets).
-    fn integers(
-        &mut self,
-        n: u64,
-        ty: (&str, usize),
-        what: &'static str,
-    ) -> Result<Vec<i64>, ParseError> {
+    fn integers(&mut self, n: u64, ty: (&str, usize), what: &'static str) -> Result<Vec<i64>, ParseError> {
         let at = self.cur.mark();
         let vals = self.numbers(n, ty, what)?;
         vals.iter()
@@ -149,13 +130,7 @@ impl<'a> Reader<'a> {
                 if v.fract() == 0.0 && v.abs() < 9.0e15 {
                     Ok(v as i64)
                 } else {
-                    Err(ParseError {
-                        at,
-                        kind: ParseErrorKind::BadToken {
-                            expected: what,
-                            found: v.to_string(),
-                        },
-                    })
+                    Err(ParseError { at, kind: ParseErrorKind::BadToken { expected: what, found: v.to_string() } })
                 }
             })
             .collect()
@@ -168,12 +143,7 @@ struct CellBlock {
     cells: Vec<Vec<i64>>,
 }
 
-fn read_cells(
-    r: &mut Reader,
-    words: &[&str],
-    version5: bool,
-    keyword: &'static str,
-) -> Result<CellBlock, ParseError> {
+fn read_cells(r: &mut Reader, words: &[&str], version5: bool, keyword: &'static str) -> Result<CellBlock, ParseError> {
     let n = r.count(words.get(1), "a cell count")?;
     let size = r.count(words.get(2), "a cell list size")?;
     let mut cells = Vec::new();
@@ -183,10 +153,7 @@ fn read_cells(
         for w in offsets.windows(2) {
             let (a, b) = (w[0], w[1]);
             if a < 0 || b < a || b as usize > conn.len() {
-                return Err(r.bad(
-                    "non-decreasing cell offsets within the connectivity",
-                    &format!("{a}..{b}"),
-                ));
+                return Err(r.bad("non-decreasing cell offsets within the connectivity", &format!("{a}..{b}")));
             }
             cells.push(conn[a as usize..b as usize].to_vec());
         }
@@ -213,18 +180,12 @@ fn read_cells(
 }
 
 fn read_array_line(r: &mut Reader, name: &'static str, n: u64) -> Result<Vec<i64>, ParseError> {
-    let words = r.keyword_line()?.ok_or_else(|| {
-        r.cur.error(ParseErrorKind::Missing {
-            what: "OFFSETS/CONNECTIVITY arrays",
-        })
-    })?;
+    let words = r
+        .keyword_line()?
+        .ok_or_else(|| r.cur.error(ParseErrorKind::Missing { what: "OFFSETS/CONNECTIVITY arrays" }))?;
     if words.first() != Some(&name) {
         return Err(r.bad(
-            if name == "OFFSETS" {
-                "`OFFSETS type`"
-            } else {
-                "`CONNECTIVITY type`"
-            },
+            if name == "OFFSETS" { "`OFFSETS type`" } else { "`CONNECTIVITY type`" },
             words.first().unwrap_or(&""),
         ));
     }
@@ -264,11 +225,7 @@ fn read_attributes<'a>(
             "LOOKUP_TABLE" => {
                 let size = r.count(words.get(2), "a lookup table size")?;
                 let cbytes = if r.binary { 1 } else { 4 };
-                r.numbers(
-                    size.saturating_mul(4),
-                    ("unsigned_char", cbytes),
-                    "a lookup table entry",
-                )?;
+                r.numbers(size.saturating_mul(4), ("unsigned_char", cbytes), "a lookup table entry")?;
             }
             "VECTORS" | "NORMALS" => {
                 let ty = r.dtype(words.get(2))?;
@@ -285,21 +242,15 @@ fn read_attributes<'a>(
             }
             "COLOR_SCALARS" => {
                 let k = r.count(words.get(2), "a colour component count")?;
-                let ty = if r.binary {
-                    ("unsigned_char", 1)
-                } else {
-                    ("float", 4)
-                };
+                let ty = if r.binary { ("unsigned_char", 1) } else { ("float", 4) };
                 r.numbers(n.saturating_mul(k), ty, "a colour component")?;
             }
             "FIELD" => {
                 let arrays = r.count(words.get(2), "a field array count")?;
                 for _ in 0..arrays {
-                    let w = r.keyword_line()?.ok_or_else(|| {
-                        r.cur.error(ParseErrorKind::Eof {
-                            expected: "a field array header",
-                        })
-                    })?;
+                    let w = r
+                        .keyword_line()?
+                        .ok_or_else(|| r.cur.error(ParseErrorKind::Eof { expected: "a field array header" }))?;
                     let ncomp = r.count(w.get(1), "a component count")?;
                     let ntup = r.count(w.get(2), "a tuple count")?;
                     let ty = r.dtype(w.get(3))?;
@@ -327,38 +278,18 @@ fn skip_metadata(r: &mut Reader) -> Result<(), ParseError> {
 /// Parses VTK legacy POLYDATA; `signal_name` selects the point-data array
 /// read as the signal (absent: no signal).
 pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseError> {
-    let mut r = Reader {
-        cur: Cursor::new(data),
-        binary: false,
-        line_at: super::Location::Line(1),
-    };
-    let first = r
-        .cur
-        .text_line("`# vtk DataFile Version x.y`")?
-        .unwrap_or("");
+    let mut r = Reader { cur: Cursor::new(data), binary: false, line_at: super::Location::Line(1) };
+    let first = r.cur.text_line("`# vtk DataFile Version x.y`")?.unwrap_or("");
     let version = first
         .strip_prefix("# vtk DataFile Version ")
         .and_then(|v| v.trim().split('.').next()?.parse::<u32>().ok())
         .ok_or_else(|| ParseError {
             at: super::Location::Line(1),
-            kind: ParseErrorKind::BadToken {
-                expected: "`# vtk DataFile Version x.y`",
-                found: lossy(first.as_bytes()),
-            },
+            kind: ParseErrorKind::BadToken { expected: "`# vtk DataFile Version x.y`", found: lossy(first.as_bytes()) },
         })?;
-    let title = r
-        .cur
-        .text_line("a title line")?
-        .unwrap_or("")
-        .trim()
-        .to_string();
+    let title = r.cur.text_line("a title line")?.unwrap_or("").trim().to_string();
     r.line_at = r.cur.at();
-    let enc = r
-        .cur
-        .text_line("ASCII or BINARY")?
-        .unwrap_or("")
-        .trim()
-        .to_ascii_uppercase();
+    let enc = r.cur.text_line("ASCII or BINARY")?.unwrap_or("").trim().to_ascii_uppercase();
     r.binary = match enc.as_str() {
         "ASCII" => false,
         "BINARY" => true,
@@ -384,9 +315,7 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
                 points = Some(r.numbers(n.saturating_mul(3), ty, "a point coordinate")?);
             }
             "POLYGONS" => blocks.push(read_cells(&mut r, &words, version >= 5, "POLYGONS")?),
-            "TRIANGLE_STRIPS" => {
-                blocks.push(read_cells(&mut r, &words, version >= 5, "TRIANGLE_STRIPS")?)
-            }
+            "TRIANGLE_STRIPS" => blocks.push(read_cells(&mut r, &words, version >= 5, "TRIANGLE_STRIPS")?),
             "LINES" => blocks.push(read_cells(&mut r, &words, version >= 5, "LINES")?),
             "VERTICES" => {
                 read_cells(&mut r, &words, version >= 5, "VERTICES")?;
@@ -418,38 +347,22 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
         pending = r.keyword_line()?;
     }
     let points = points.ok_or_else(|| r.cur.error(ParseErrorKind::Missing { what: "POINTS" }))?;
-    let mut raw = RawMesh {
-        dim: 3,
-        points,
-        ..RawMesh::default()
-    };
+    let mut raw = RawMesh { dim: 3, points, ..RawMesh::default() };
     fill_cells(&mut raw, blocks).map_err(|kind| r.cur.error(kind))?;
     raw.scalars = arrays.iter().map(|a| a.0.clone()).collect();
     raw.signal = arrays.into_iter().find(|a| a.0 == signal_name).map(|a| a.1);
     if title == PLANAR_TITLE && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
-        raw.points = raw
-            .points
-            .chunks_exact(3)
-            .flat_map(|p| [p[0], p[1]])
-            .collect();
+        raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
         raw.dim = 2;
     }
     Ok(raw)
 }
 
 fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErrorKind> {
-    let has_tri = blocks
-        .iter()
-        .any(|b| b.keyword != "LINES" && !b.cells.is_empty());
-    let has_lines = blocks
-        .iter()
-        .any(|b| b.keyword == "LINES" && !b.cells.is_empty());
+    let has_tri = blocks.iter().any(|b| b.keyword != "LINES" && !b.cells.is_empty());
+    let has_lines = blocks.iter().any(|b| b.keyword == "LINES" && !b.cells.is_empty());
     if has_tri && has_lines {
-        return Err(ParseErrorKind::MixedCellSizes {
-            cell: 0,
-            found: 2,
-            expected: 3,
-        });
+        return Err(ParseErrorKind::MixedCellSizes { cell: 0, found: 2, expected: 3 });
     }
     raw.cell_size = Some(if has_lines { 2 } else { 3 });
     let mut cell = 0;
@@ -457,27 +370,18 @@ fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErro
         for c in b.cells {
             let ids: Vec<usize> = c
                 .iter()
-                .map(|&v| {
-                    usize::try_from(v).map_err(|_| ParseErrorKind::NegativeIndex { cell, value: v })
-                })
+                .map(|&v| usize::try_from(v).map_err(|_| ParseErrorKind::NegativeIndex { cell, value: v }))
                 .collect::<Result<_, _>>()?;
             match b.keyword {
                 "POLYGONS" if ids.len() == 3 => raw.cells.extend_from_slice(&ids),
                 "POLYGONS" => {
-                    return Err(ParseErrorKind::CellSize {
-                        cell,
-                        found: ids.len(),
-                    });
+                    return Err(ParseErrorKind::CellSize { cell, found: ids.len() });
                 }
                 "TRIANGLE_STRIPS" => {
                     for (k, w) in ids.windows(3).enumerate() {
                         // Every other triangle of a strip is flipped to keep
                         // one orientation.
-                        let t = if k % 2 == 0 {
-                            [w[0], w[1], w[2]]
-                        } else {
-                            [w[1], w[0], w[2]]
-                        };
+                        let t = if k % 2 == 0 { [w[0], w[1], w[2]] } else { [w[1], w[0], w[2]] };
                         raw.cells.extend_from_slice(&t);
                     }
                 }
@@ -496,16 +400,9 @@ fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErro
 /// Writes `shape` as VTK legacy POLYDATA, version 4.2.
 pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
     let ascii = encoding == Encoding::Ascii;
-    let title = if shape.dim() == 2 {
-        PLANAR_TITLE
-    } else {
-        "fshape"
-    };
+    let title = if shape.dim() == 2 { PLANAR_TITLE } else { "fshape" };
     let enc = if ascii { "ASCII" } else { "BINARY" };
-    writeln!(
-        w,
-        "# vtk DataFile Version 4.2\n{title}\n{enc}\nDATASET POLYDATA"
-    )?;
+    writeln!(w, "# vtk DataFile Version 4.2\n{title}\n{enc}\nDATASET POLYDATA")?;
     writeln!(w, "POINTS {} double", shape.n_vertices())?;
     let put = |w: &mut dyn Write, vals: &[f64]| -> io::Result<()> {
         if ascii {
@@ -523,23 +420,14 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         writeln!(w)?;
     }
     let k = shape.kind().n_corners();
-    let keyword = if shape.kind() == CellKind::Triangle {
-        "POLYGONS"
-    } else {
-        "LINES"
-    };
-    writeln!(
-        w,
-        "{keyword} {} {}",
-        shape.n_cells(),
-        shape.n_cells() * (k + 1)
-    )?;
+    let keyword = if shape.kind() == CellKind::Triangle { "POLYGONS" } else { "LINES" };
+    writeln!(w, "{keyword} {} {}", shape.n_cells(), shape.n_cells() * (k + 1))?;
     for c in shape.cell_iter() {
         let ids: Vec<i32> = std::iter::once(Ok(k as i32))
-            .chain(c.iter().map(|&v| {
-                i32::try_from(v)
-                    .map_err(|_| io::Error::other("vertex index exceeds the VTK int range"))
-            }))
+            .chain(
+                c.iter()
+                    .map(|&v| i32::try_from(v).map_err(|_| io::Error::other("vertex index exceeds the VTK int range"))),
+            )
             .collect::<io::Result<_>>()?;
         if ascii {
             let line: Vec<String> = ids.iter().map(i32::to_string).collect();
@@ -552,11 +440,7 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         writeln!(w)?;
     }
     if let Some(f) = shape.signal() {
-        writeln!(
-            w,
-            "POINT_DATA {}\nSCALARS signal double 1\nLOOKUP_TABLE default",
-            shape.n_vertices()
-        )?;
+        writeln!(w, "POINT_DATA {}\nSCALARS signal double 1\nLOOKUP_TABLE default", shape.n_vertices())?;
         for &x in f {
             put(w, &[x])?;
         }

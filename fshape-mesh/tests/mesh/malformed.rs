@@ -7,120 +7,49 @@ use std::path::PathBuf;
 use fshape_mesh::io::{ReadOptions, csv, read_mesh};
 
 fn corpus(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/malformed")
-        .join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/malformed").join(name)
 }
 
 /// (file, substrings the error message must contain).
 const MESH_CASES: &[(&str, &[&str])] = &[
-    (
-        "ply_truncated_vertices.ply",
-        &["unexpected end of data", "expected a vertex property value"],
-    ),
-    (
-        "ply_bad_count.ply",
-        &["line 3", "expected an element count, found `four`"],
-    ),
+    ("ply_truncated_vertices.ply", &["unexpected end of data", "expected a vertex property value"]),
+    ("ply_bad_count.ply", &["line 3", "expected an element count, found `four`"]),
     ("ply_huge_count.ply", &["claims 1000000000000 vertices"]),
     ("ply_non_numeric.ply", &["line 12", "found `1x`"]),
-    (
-        "ply_negative_index.ply",
-        &["line 15", "cell 1 has the negative vertex index -2"],
-    ),
-    (
-        "ply_index_out_of_range.ply",
-        &["cell 1 uses vertex 7, but there are only 4 vertices"],
-    ),
-    (
-        "ply_mixed_cell_sizes.ply",
-        &["line 15", "cell 1 has 2 vertices, but the first cell has 3"],
-    ),
-    (
-        "ply_quad.ply",
-        &["line 14", "cell 0 has 4 vertices", "triangulate"],
-    ),
-    (
-        "ply_nan_coordinate.ply",
-        &["vertex 2 has a NaN or infinite coordinate"],
-    ),
-    (
-        "ply_no_magic.ply",
-        &["line 1", "magic line `ply`", "found `PLY`"],
-    ),
+    ("ply_negative_index.ply", &["line 15", "cell 1 has the negative vertex index -2"]),
+    ("ply_index_out_of_range.ply", &["cell 1 uses vertex 7, but there are only 4 vertices"]),
+    ("ply_mixed_cell_sizes.ply", &["line 15", "cell 1 has 2 vertices, but the first cell has 3"]),
+    ("ply_quad.ply", &["line 14", "cell 0 has 4 vertices", "triangulate"]),
+    ("ply_nan_coordinate.ply", &["vertex 2 has a NaN or infinite coordinate"]),
+    ("ply_no_magic.ply", &["line 1", "magic line `ply`", "found `PLY`"]),
     ("ply_no_end_header.ply", &["missing `end_header`"]),
-    (
-        "ply_unknown_format.ply",
-        &["line 2", "unsupported PLY format: `binary_middle_endian`"],
-    ),
-    (
-        "ply_unknown_type.ply",
-        &["line 4", "expected a PLY scalar type, found `float128`"],
-    ),
+    ("ply_unknown_format.ply", &["line 2", "unsupported PLY format: `binary_middle_endian`"]),
+    ("ply_unknown_type.ply", &["line 4", "expected a PLY scalar type, found `float128`"]),
     ("ply_missing_x.ply", &["missing vertex property `x`"]),
     // Header of 172 bytes, two 24-byte vertices, x and y of the third and 3
     // stray bytes: 67 bytes cannot hold 3 vertices of 24 bytes, refused
     // before anything is allocated.
-    (
-        "ply_binary_cut.ply",
-        &[
-            "byte 172",
-            "the header claims 3 vertices, but only 67 bytes follow",
-        ],
-    ),
+    ("ply_binary_cut.ply", &["byte 172", "the header claims 3 vertices, but only 67 bytes follow"]),
     // Big-endian header of 169 bytes, three vertices (72 bytes), the list
     // count (1 byte) and two indices (8 bytes): the third index is missing.
-    (
-        "ply_binary_be_cut_face.ply",
-        &["byte 250", "expected a vertex index"],
-    ),
+    ("ply_binary_be_cut_face.ply", &["byte 250", "expected a vertex index"]),
     // The POINTS line starts at byte 27 + 2 + 7 + 17 = 53; 9 doubles need 72
     // bytes and 7 (56 bytes) follow.
-    (
-        "vtk_binary_cut.vtk",
-        &[
-            "byte 53",
-            "the header claims 9 values, but only 56 bytes follow",
-        ],
-    ),
-    (
-        "vtk_truncated_points.vtk",
-        &["unexpected end of data: expected a point coordinate"],
-    ),
-    (
-        "vtk_huge_count.vtk",
-        &["line 5", "claims 300000000000 values"],
-    ),
-    (
-        "vtk_unstructured.vtk",
-        &["unsupported VTK dataset", "UNSTRUCTURED_GRID"],
-    ),
+    ("vtk_binary_cut.vtk", &["byte 53", "the header claims 9 values, but only 56 bytes follow"]),
+    ("vtk_truncated_points.vtk", &["unexpected end of data: expected a point coordinate"]),
+    ("vtk_huge_count.vtk", &["line 5", "claims 300000000000 values"]),
+    ("vtk_unstructured.vtk", &["unsupported VTK dataset", "UNSTRUCTURED_GRID"]),
     ("vtk_quad.vtk", &["cell 0 has 4 vertices"]),
-    (
-        "vtk_point_data_count.vtk",
-        &["POINT_DATA tuples (one per point): expected 3, found 2"],
-    ),
-    (
-        "vtk_cells_cut.vtk",
-        &["unexpected end of data: expected a cell list entry"],
-    ),
-    (
-        "vtk_missing_lookup_table.vtk",
-        &["line 11", "expected `LOOKUP_TABLE name` after SCALARS"],
-    ),
+    ("vtk_point_data_count.vtk", &["POINT_DATA tuples (one per point): expected 3, found 2"]),
+    ("vtk_cells_cut.vtk", &["unexpected end of data: expected a cell list entry"]),
+    ("vtk_missing_lookup_table.vtk", &["line 11", "expected `LOOKUP_TABLE name` after SCALARS"]),
     ("vtk_no_header.vtk", &["line 1", "# vtk DataFile Version"]),
-    (
-        "vtk_bad_encoding.vtk",
-        &["line 3", "expected ASCII or BINARY, found `TEXT`"],
-    ),
+    ("vtk_bad_encoding.vtk", &["line 3", "expected ASCII or BINARY, found `TEXT`"]),
     ("obj_bad_reference.obj", &["line 4", "found `x`"]),
     ("obj_zero_index.obj", &["line 4", "found `0`"]),
     ("obj_quad.obj", &["line 5", "cell 0 has 4 vertices"]),
     ("obj_mixed.obj", &["line 5", "mixed cell sizes"]),
-    (
-        "obj_short_vertex.obj",
-        &["line 1", "three vertex coordinates"],
-    ),
+    ("obj_short_vertex.obj", &["line 1", "three vertex coordinates"]),
 ];
 
 #[test]
@@ -128,10 +57,7 @@ fn malformed_meshes_give_located_errors() {
     for (file, needles) in MESH_CASES {
         let err = read_mesh(&corpus(file), &ReadOptions::default()).expect_err(file);
         let msg = err.to_string();
-        assert!(
-            msg.contains(file),
-            "{file}: the message names the file: {msg}"
-        );
+        assert!(msg.contains(file), "{file}: the message names the file: {msg}");
         for n in *needles {
             assert!(msg.contains(n), "{file}: expected `{n}` in: {msg}");
         }
@@ -142,34 +68,18 @@ fn malformed_meshes_give_located_errors() {
 fn every_corpus_file_is_covered_and_the_reference_reads() {
     let ok = read_mesh(&corpus("ok_reference.ply"), &ReadOptions::default()).unwrap();
     assert_eq!((ok.n_vertices(), ok.n_cells()), (4, 2));
-    let mut listed: Vec<&str> = MESH_CASES
-        .iter()
-        .map(|c| c.0)
-        .chain(CSV_CASES.iter().map(|c| c.0))
-        .collect();
+    let mut listed: Vec<&str> = MESH_CASES.iter().map(|c| c.0).chain(CSV_CASES.iter().map(|c| c.0)).collect();
     listed.push("ok_reference.ply");
     listed.sort_unstable();
-    let mut present: Vec<String> = std::fs::read_dir(corpus(""))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let mut present: Vec<String> =
+        std::fs::read_dir(corpus("")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     present.sort_unstable();
     assert_eq!(present, listed, "every corpus file has an expectation");
 }
 
 const CSV_CASES: &[(&str, &[&str])] = &[
-    (
-        "csv_missing_value.csv",
-        &[
-            "line 3",
-            "missing values are not accepted here",
-            "found `nan`",
-        ],
-    ),
-    (
-        "csv_no_header.csv",
-        &["line 1", "header line naming the column", "found `1.5`"],
-    ),
+    ("csv_missing_value.csv", &["line 3", "missing values are not accepted here", "found `nan`"]),
+    ("csv_no_header.csv", &["line 1", "header line naming the column", "found `1.5`"]),
     ("csv_two_columns.csv", &["line 1", "single column"]),
     ("csv_non_numeric.csv", &["line 3", "found `2.0q`"]),
 ];
@@ -177,9 +87,7 @@ const CSV_CASES: &[(&str, &[&str])] = &[
 #[test]
 fn malformed_signal_csv_gives_located_errors() {
     for (file, needles) in CSV_CASES {
-        let msg = csv::read_signal(&corpus(file), false)
-            .expect_err(file)
-            .to_string();
+        let msg = csv::read_signal(&corpus(file), false).expect_err(file).to_string();
         assert!(msg.contains(file), "{msg}");
         for n in *needles {
             assert!(msg.contains(n), "{file}: expected `{n}` in: {msg}");
@@ -204,8 +112,7 @@ fn truncating_a_valid_binary_file_anywhere_never_panics() {
         let bytes = std::fs::read(&path).unwrap();
         let format = fshape_mesh::io::Format::from_path(&path).unwrap().0;
         for cut in 0..bytes.len() {
-            let r =
-                fshape_mesh::io::parse_mesh(&bytes[..cut], format, &ReadOptions::default(), &path);
+            let r = fshape_mesh::io::parse_mesh(&bytes[..cut], format, &ReadOptions::default(), &path);
             // A VTK file may legitimately end after a whole section (cells
             // and point data are optional): then it is the shape's points,
             // with no cells or all of them, and no signal or all of it (only
@@ -213,20 +120,11 @@ fn truncating_a_valid_binary_file_anywhere_never_panics() {
             if let Ok(s) = r {
                 assert_eq!(ext, "vtk", "a cut PLY at {cut} parsed");
                 assert_eq!(s.points(), shape.points(), "cut at {cut}");
-                assert!(
-                    s.cells().is_empty() || s.cells() == shape.cells(),
-                    "cut at {cut}"
-                );
-                assert!(
-                    s.signal().is_none() || s.signal() == shape.signal(),
-                    "cut at {cut}"
-                );
+                assert!(s.cells().is_empty() || s.cells() == shape.cells(), "cut at {cut}");
+                assert!(s.signal().is_none() || s.signal() == shape.signal(), "cut at {cut}");
             }
         }
-        assert_eq!(
-            fshape_mesh::io::parse_mesh(&bytes, format, &ReadOptions::default(), &path).unwrap(),
-            shape
-        );
+        assert_eq!(fshape_mesh::io::parse_mesh(&bytes, format, &ReadOptions::default(), &path).unwrap(), shape);
         std::fs::remove_file(&path).unwrap();
     }
 }

@@ -17,12 +17,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn config() -> Config {
-    Config {
-        cases: 24,
-        rng_seed: RngSeed::Fixed(0x5eed_f5ba),
-        failure_persistence: None,
-        ..Config::default()
-    }
+    Config { cases: 24, rng_seed: RngSeed::Fixed(0x5eed_f5ba), failure_persistence: None, ..Config::default() }
 }
 
 fn geometry_only(s: &FShape) -> FShape {
@@ -82,23 +77,15 @@ fn read_with_ply_rs(path: &Path) -> (Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
     use ply_rs_bw::parser::Parser;
     use ply_rs_bw::ply::{DefaultElement, Property};
     let file = std::fs::File::open(path).unwrap();
-    let ply = Parser::<DefaultElement>::new()
-        .read_ply(&mut std::io::BufReader::new(file))
-        .unwrap();
+    let ply = Parser::<DefaultElement>::new().read_ply(&mut std::io::BufReader::new(file)).unwrap();
     let num = |p: &Property| match p {
         Property::Double(x) => *x,
         Property::Int(i) => *i as f64,
         other => panic!("unexpected property {other:?}"),
     };
     let verts = &ply.payload["vertex"];
-    let pts = verts
-        .iter()
-        .flat_map(|v| ["x", "y", "z"].map(|k| num(&v[k])))
-        .collect();
-    let signal = verts
-        .first()
-        .and_then(|v| v.get("signal"))
-        .map(|_| verts.iter().map(|v| num(&v["signal"])).collect());
+    let pts = verts.iter().flat_map(|v| ["x", "y", "z"].map(|k| num(&v[k]))).collect();
+    let signal = verts.first().and_then(|v| v.get("signal")).map(|_| verts.iter().map(|v| num(&v["signal"])).collect());
     let cells = if let Some(faces) = ply.payload.get("face") {
         faces
             .iter()
@@ -109,9 +96,7 @@ fn read_with_ply_rs(path: &Path) -> (Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
             .collect()
     } else {
         ply.payload.get("edge").map_or(vec![], |e| {
-            e.iter()
-                .flat_map(|e| [num(&e["vertex1"]) as usize, num(&e["vertex2"]) as usize])
-                .collect()
+            e.iter().flat_map(|e| [num(&e["vertex1"]) as usize, num(&e["vertex2"]) as usize]).collect()
         })
     };
     (pts, cells, signal)
@@ -121,18 +106,10 @@ fn read_with_ply_rs(path: &Path) -> (Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
 fn read_with_vtkio(path: &Path, kind: CellKind) -> (Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
     use vtkio::model::{Attribute, DataSet, Piece};
     let vtk = vtkio::Vtk::import(path).unwrap();
-    let DataSet::PolyData { pieces, .. } = vtk.data else {
-        panic!("not polydata")
-    };
-    let Piece::Inline(piece) = pieces.into_iter().next().unwrap() else {
-        panic!("not inline")
-    };
+    let DataSet::PolyData { pieces, .. } = vtk.data else { panic!("not polydata") };
+    let Piece::Inline(piece) = pieces.into_iter().next().unwrap() else { panic!("not inline") };
     let pts = piece.points.cast_into::<f64>().unwrap();
-    let topo = if kind == CellKind::Triangle {
-        piece.polys
-    } else {
-        piece.lines
-    };
+    let topo = if kind == CellKind::Triangle { piece.polys } else { piece.lines };
     let (_, flat) = topo.map(|t| t.into_legacy()).unwrap_or((0, vec![]));
     let mut cells = Vec::new();
     let mut i = 0;
@@ -157,18 +134,14 @@ fn tobj_reads_our_obj() {
     std::fs::remove_file(&path).unwrap();
     let m = &models[0].mesh;
     for (k, &i) in m.indices.iter().enumerate() {
-        assert_eq!(
-            &m.positions[3 * i as usize..3 * i as usize + 3],
-            shape.point(shape.cells()[k])
-        );
+        assert_eq!(&m.positions[3 * i as usize..3 * i as usize + 3], shape.point(shape.cells()[k]));
     }
 }
 
 #[test]
 fn we_read_files_written_by_ply_rs_big_endian_with_extra_properties() {
     use ply_rs_bw::ply::{
-        Addable, DefaultElement, ElementDef, Encoding as PEnc, Ply, Property, PropertyDef,
-        PropertyType, ScalarType,
+        Addable, DefaultElement, ElementDef, Encoding as PEnc, Ply, Property, PropertyDef, PropertyType, ScalarType,
     };
     use ply_rs_bw::writer::Writer;
     let shape = fshape_mesh::test_support::perturbed_icosphere(1, 0.1, 9);
@@ -177,16 +150,11 @@ fn we_read_files_written_by_ply_rs_big_endian_with_extra_properties() {
         ply.header.encoding = enc;
         let mut vdef = ElementDef::new("vertex".to_string());
         for name in ["x", "y", "z", "confidence", "signal"] {
-            vdef.properties.add(PropertyDef::new(
-                name.to_string(),
-                PropertyType::Scalar(ScalarType::Double),
-            ));
+            vdef.properties.add(PropertyDef::new(name.to_string(), PropertyType::Scalar(ScalarType::Double)));
         }
         let mut fdef = ElementDef::new("face".to_string());
-        fdef.properties.add(PropertyDef::new(
-            "vertex_index".to_string(),
-            PropertyType::List(ScalarType::UChar, ScalarType::UInt),
-        ));
+        fdef.properties
+            .add(PropertyDef::new("vertex_index".to_string(), PropertyType::List(ScalarType::UChar, ScalarType::UInt)));
         ply.header.elements.add(vdef);
         ply.header.elements.add(fdef);
         let f = shape.signal().unwrap();
@@ -206,10 +174,7 @@ fn we_read_files_written_by_ply_rs_big_endian_with_extra_properties() {
             .cell_iter()
             .map(|c| {
                 let mut e = DefaultElement::new();
-                e.insert(
-                    "vertex_index".to_string(),
-                    Property::ListUInt(c.iter().map(|&v| v as u32).collect()),
-                );
+                e.insert("vertex_index".to_string(), Property::ListUInt(c.iter().map(|&v| v as u32).collect()));
                 e
             })
             .collect();
@@ -230,31 +195,19 @@ fn we_read_files_written_by_ply_rs_big_endian_with_extra_properties() {
 /// checked on a hand-written file below.
 #[test]
 fn we_read_files_written_by_vtkio_legacy_4() {
-    use vtkio::model::{
-        Attributes, ByteOrder, DataSet, PolyDataPiece, Version, VertexNumbers, Vtk,
-    };
-    let shape = fshape_mesh::test_support::perturbed_icosphere(1, 0.1, 4)
-        .with_signal(None)
-        .unwrap();
+    use vtkio::model::{Attributes, ByteOrder, DataSet, PolyDataPiece, Version, VertexNumbers, Vtk};
+    let shape = fshape_mesh::test_support::perturbed_icosphere(1, 0.1, 4).with_signal(None).unwrap();
     let pts = shape.points().to_vec();
-    let legacy: Vec<u32> = shape
-        .cell_iter()
-        .flat_map(|c| std::iter::once(3).chain(c.iter().map(|&v| v as u32)))
-        .collect();
+    let legacy: Vec<u32> =
+        shape.cell_iter().flat_map(|c| std::iter::once(3).chain(c.iter().map(|&v| v as u32))).collect();
     for (version, polys) in [
         (
             Version::new_legacy(4, 2),
-            VertexNumbers::Legacy {
-                num_cells: shape.n_cells() as u32,
-                vertices: legacy.clone(),
-            },
+            VertexNumbers::Legacy { num_cells: shape.n_cells() as u32, vertices: legacy.clone() },
         ),
         (
             Version::new_legacy(3, 0),
-            VertexNumbers::Legacy {
-                num_cells: shape.n_cells() as u32,
-                vertices: legacy.clone(),
-            },
+            VertexNumbers::Legacy { num_cells: shape.n_cells() as u32, vertices: legacy.clone() },
         ),
     ] {
         for binary in [false, true] {

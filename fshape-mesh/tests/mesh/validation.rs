@@ -19,36 +19,21 @@ fn every_blocking_problem_is_reported_at_once() {
         Some(vec![0.0, f64::INFINITY, 0.0]),
     )
     .unwrap_err();
-    let ShapeError::Invalid { problems } = &err else {
-        panic!("{err}")
-    };
+    let ShapeError::Invalid { problems } = &err else { panic!("{err}") };
     assert_eq!(
         problems,
         &vec![
             Problem::NonFiniteCoordinate { vertex: 1 },
-            Problem::SignalLength {
-                expected: 4,
-                found: 3
-            },
+            Problem::SignalLength { expected: 4, found: 3 },
             Problem::NonFiniteSignal { vertex: 1 },
-            Problem::IndexOutOfRange {
-                cell: 1,
-                index: 9,
-                n_vertices: 4
-            },
+            Problem::IndexOutOfRange { cell: 1, index: 9, n_vertices: 4 },
             Problem::RepeatedIndex { cell: 2, vertex: 3 },
         ]
     );
     assert!(problems.iter().all(|p| p.severity() == Severity::Error));
     let msg = err.to_string();
-    assert!(
-        msg.contains("cell 1 uses vertex 9, but there are only 4 vertices"),
-        "{msg}"
-    );
-    assert!(
-        msg.contains("vertex 1 has a NaN or infinite coordinate"),
-        "{msg}"
-    );
+    assert!(msg.contains("cell 1 uses vertex 9, but there are only 4 vertices"), "{msg}");
+    assert!(msg.contains("vertex 1 has a NaN or infinite coordinate"), "{msg}");
 }
 
 #[test]
@@ -77,64 +62,29 @@ fn warnings_name_their_cells_and_vertices() {
     let r = s.validate();
     assert_eq!(r.errors().count(), 0);
     assert!(r.problems.contains(&Problem::UnusedVertex { vertex: 4 }));
-    assert!(r.problems.contains(&Problem::DuplicateCell {
-        cell: 2,
-        first: 0,
-        same_orientation: false
-    }));
-    assert!(r.problems.contains(&Problem::DuplicateCell {
-        cell: 4,
-        first: 1,
-        same_orientation: true
-    }));
-    assert!(r.problems.contains(&Problem::ZeroVolumeCell {
-        cell: 3,
-        volume: 0.0
-    }));
+    assert!(r.problems.contains(&Problem::DuplicateCell { cell: 2, first: 0, same_orientation: false }));
+    assert!(r.problems.contains(&Problem::DuplicateCell { cell: 4, first: 1, same_orientation: true }));
+    assert!(r.problems.contains(&Problem::ZeroVolumeCell { cell: 3, volume: 0.0 }));
     // Edge (0, 1) is in cells 0, 2 and 3: non-manifold.
-    assert!(r.problems.contains(&Problem::NonManifoldFacet {
-        facet: [0, 1],
-        cells: 3
-    }));
+    assert!(r.problems.contains(&Problem::NonManifoldFacet { facet: [0, 1], cells: 3 }));
     // Cells 1 and 4 both traverse 2→3.
-    assert!(
-        r.problems
-            .contains(&Problem::InconsistentOrientation { facet: [2, 3] })
-    );
+    assert!(r.problems.contains(&Problem::InconsistentOrientation { facet: [2, 3] }));
     assert!(r.warnings().all(|p| p.severity() == Severity::Warning));
 
     let (fixed, log) = s.repaired(Repairs::ALL);
     assert_eq!(log.dropped_cells, vec![2, 3, 4]);
     assert_eq!(log.dropped_vertices, vec![4, 5]);
-    assert_eq!(
-        log.vertex_map,
-        vec![Some(0), Some(1), Some(2), Some(3), None, None]
-    );
+    assert_eq!(log.vertex_map, vec![Some(0), Some(1), Some(2), Some(3), None, None]);
     assert_eq!(fixed.cells(), &[0, 1, 2, 0, 2, 3]);
-    let left: Vec<&str> = fixed
-        .validate()
-        .problems
-        .iter()
-        .map(Problem::code)
-        .collect();
-    assert_eq!(
-        left,
-        vec!["boundary"],
-        "only the boundary of the unit square remains"
-    );
+    let left: Vec<&str> = fixed.validate().problems.iter().map(Problem::code).collect();
+    assert_eq!(left, vec!["boundary"], "only the boundary of the unit square remains");
 }
 
 #[test]
 fn curve_topology() {
     // A "Y": vertex 0 has three segments; segments 0 and 1 both start at 0.
-    let s = FShape::try_new(
-        2,
-        CellKind::Segment,
-        vec![0., 0., 1., 0., 0., 1., -1., -1.],
-        vec![0, 1, 0, 2, 3, 0],
-        None,
-    )
-    .unwrap();
+    let s = FShape::try_new(2, CellKind::Segment, vec![0., 0., 1., 0., 0., 1., -1., -1.], vec![0, 1, 0, 2, 3, 0], None)
+        .unwrap();
     let t = s.topology();
     assert_eq!(t.nonmanifold_facets, vec![([0, 0], 3)]);
     assert_eq!(t.misoriented_facets, vec![[0, 0]]);

@@ -1,0 +1,114 @@
+//! The `fshape` program end to end: exit codes, JSON, conversions.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn fshape(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fshape")).args(args).output().expect("the binary runs")
+}
+
+fn repo(rel: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join(rel).display().to_string()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fshape-cli-tests-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("valid JSON")
+}
+
+#[test]
+fn info_json_on_the_shipped_cortex() {
+    let v = json(&fshape(&["info", &repo("data/fsaverage5/lh.pial.thick.ply.gz"), "--json"]));
+    assert_eq!(v["n_vertices"], 10242);
+    assert_eq!(v["n_cells"], 20480);
+    assert_eq!(v["closed"], true);
+    assert_eq!(v["errors"].as_array().unwrap().len(), 0);
+    assert_eq!(v["warnings"].as_array().unwrap().len(), 0);
+    // data/README.md: thickness from −0.0028 to 4.66 mm.
+    let (lo, hi) = (v["signal"]["min"].as_f64().unwrap(), v["signal"]["max"].as_f64().unwrap());
+    assert!((-0.0029..-0.0027).contains(&lo) && (4.65..4.66).contains(&hi), "{lo} {hi}");
+}
+
+#[test]
+fn info_reports_the_full_bunny_warnings() {
+    let v = json(&fshape(&["info", &repo("data/stanford_bunny/bun_zipper.ply.gz"), "--json"]));
+    let warnings = v["warnings"].as_array().unwrap();
+    let unused = warnings.iter().find(|w| w["code"] == "unused_vertex").unwrap();
+    assert_eq!(unused["count"], 1113);
+    assert_eq!(v["boundary_loops"], 5);
+    assert_eq!(v["signal"], serde_json::Value::Null, "confidence/intensity are not a signal");
+}
+
+#[test]
+fn bad_input_exits_1_naming_file_and_line() {
+    let bad = repo("fshape-mesh/tests/malformed/ply_non_numeric.ply");
+    let out = fshape(&["info", &bad]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("ply_non_numeric.ply") && err.contains("line 12"), "{err}");
+    let missing = fshape(&["info", "no/such/file.ply"]);
+    assert_eq!(missing.status.code(), Some(1));
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    assert_eq!(fshape(&["info"]).status.code(), Some(2));
+    assert_eq!(fshape(&["frobnicate"]).status.code(), Some(2));
+    assert_eq!(fshape(&["info", "x.ply", "--bogus"]).status.code(), Some(2));
+}
+
+#[test]
+fn convert_attaches_a_csv_signal_and_round_trips() {
+    let out = tmp("rh.vtk");
+    let r = fshape(&[
+        "convert",
+        &repo("data/fsaverage5/rh.pial.ply.gz"),
+        out.to_str().unwrap(),
+        "--signal",
+        &repo("data/fsaverage5/rh.thick.csv.gz"),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let v = json(&fshape(&["info", out.to_str().unwrap(), "--json"]));
+    assert_eq!(v["n_vertices"], 10242);
+    assert!(v["signal"]["max"].as_f64().unwrap() > 4.0, "thickness in mm");
+    // A signal of the wrong length is refused and nothing is written.
+    let bad_out = tmp("bunny.ply");
+    let r = fshape(&[
+        "convert",
+        &repo("data/stanford_bunny/bunny_qslim_2581v.ply.gz"),
+        bad_out.to_str().unwrap(),
+        "--signal",
+        &repo("data/fsaverage5/rh.thick.csv.gz"),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("the signal has 10242 values for 2581 vertices"));
+    assert!(!bad_out.exists());
+}
+
+#[test]
+fn convert_repairs_the_dirty_bunny() {
+    let out = tmp("res4.ply");
+    let r =
+        fshape(&["convert", &repo("data/stanford_bunny/bun_zipper_res4.ply.gz"), out.to_str().unwrap(), "--repair"]);
+    assert!(r.status.success());
+    let v = json(&fshape(&["info", out.to_str().unwrap(), "--json"]));
+    // data/README.md: 948 faces, 40 of them duplicates.
+    assert_eq!(v["n_cells"], 948 - 40);
+    let codes: Vec<&str> = v["warnings"].as_array().unwrap().iter().map(|w| w["code"].as_str().unwrap()).collect();
+    assert!(!codes.contains(&"duplicate_cell"), "{codes:?}");
+}
+
+#[test]
+fn unwritable_output_exits_1_and_leaves_nothing() {
+    let dir = tmp("no-such-dir").join("sub");
+    let out = dir.join("x.ply");
+    let r = fshape(&["convert", &repo("data/stanford_bunny/bun_zipper_res4.ply.gz"), out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(!dir.exists());
+}
