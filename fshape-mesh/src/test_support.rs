@@ -128,6 +128,13 @@ fn smooth_signal(points: &[f64], dim: usize, rng: &mut SplitMix64) -> Vec<f64> {
         .collect()
 }
 
+/// A random vector field (momenta, velocities): `n` vectors of `dim`
+/// components uniform in [-scale, scale], flat.
+pub fn random_vector_field(n: usize, dim: usize, scale: f64, seed: u64) -> Vec<f64> {
+    let mut rng = SplitMix64(seed);
+    (0..n * dim).map(|_| rng.range(-scale, scale)).collect()
+}
+
 /// proptest strategies over random fshapes, driven by a random seed.
 pub mod strategies {
     use proptest::prelude::*;
@@ -147,6 +154,18 @@ pub mod strategies {
     /// Random closed curves in R^dim with 3..`max_vertices` vertices.
     pub fn curves(dim: usize, max_vertices: usize) -> impl Strategy<Value = FShape> {
         (3..max_vertices.max(4), any::<u64>()).prop_map(move |(n, s)| super::random_curve(dim, n, s))
+    }
+
+    /// A shape from `shapes` with random momenta (one vector per vertex, of
+    /// the shape's dimension, entries in [-scale, scale]).
+    pub fn with_momenta(
+        shapes: impl Strategy<Value = FShape>,
+        scale: f64,
+    ) -> impl Strategy<Value = (FShape, Vec<f64>)> {
+        (shapes, any::<u64>()).prop_map(move |(s, seed)| {
+            let p = super::random_vector_field(s.n_vertices(), s.dim(), scale, seed);
+            (s, p)
+        })
     }
 
     /// Any of the above, small: the mixed population for format round trips.

@@ -138,3 +138,34 @@ fn image_grid_and_bilinear_sampling() {
     let r = ((1.0 - y) * 4.0 - 1.0) / 2.0;
     assert!((lin.sample(x, y) - (c + 10.0 * r)).abs() < 1e-12);
 }
+
+#[test]
+fn finite_difference_helpers_accept_right_and_reject_wrong_derivatives() {
+    use fshape_mesh::generate::SplitMix64;
+    use fshape_mesh::test_support::{check_gradient, check_jvp, random_direction};
+    // f(x) = Σ sin(x_i) x_{i+1}: gradient by hand.
+    let f = |x: &[f64]| x.windows(2).map(|w| w[0].sin() * w[1]).sum::<f64>();
+    let grad = |x: &[f64]| {
+        let mut g = vec![0.0; x.len()];
+        for i in 0..x.len() - 1 {
+            g[i] += x[i].cos() * x[i + 1];
+            g[i + 1] += x[i].sin();
+        }
+        g
+    };
+    let mut rng = SplitMix64(11);
+    let x = random_direction(6, &mut rng);
+    let v = random_direction(6, &mut rng);
+    let good = check_gradient(f, &x, &grad(&x), &v, 1e-5);
+    assert!(good.rel_error < 1e-8, "{good:?}");
+    let mut wrong = grad(&x);
+    wrong[2] *= 1.01;
+    let bad = check_gradient(f, &x, &wrong, &v, 1e-5);
+    assert!(bad.rel_error > 1e-4, "a 1% error in one entry is seen: {bad:?}");
+    // F(x) = (x0 x1, x1²): J v = (v0 x1 + x0 v1, 2 x1 v1).
+    let big_f = |x: &[f64]| vec![x[0] * x[1], x[1] * x[1]];
+    let (x, v) = ([0.3, -1.2], [0.7, 0.4]);
+    let jv = [v[0] * x[1] + x[0] * v[1], 2.0 * x[1] * v[1]];
+    assert!(check_jvp(big_f, &x, &v, &jv, 1e-5).rel_error < 1e-9);
+    assert!(check_jvp(big_f, &x, &v, &[jv[0], 0.0], 1e-5).rel_error > 0.1);
+}

@@ -250,3 +250,40 @@ fn we_read_the_vtk_5_1_offsets_layout() {
     assert_eq!(s.points()[9..12], [1.0, 1.0, 0.0]);
     assert_eq!(s.signal().unwrap(), &[0.5, 1.5, 2.5, 3.5]);
 }
+
+#[test]
+fn exr_images_round_trip_and_become_grids() {
+    use fshape_mesh::io::image::{Image, read_image, write_exr};
+    // f32-representable values: the EXR channel is 32-bit float.
+    let im = Image { width: 5, height: 3, values: (0..15).map(|k| (k as f64) * 0.25 - 1.0).collect() };
+    let path = tmp("im.exr");
+    write_exr(&path, &im).unwrap();
+    let back = read_image(&path, None).unwrap();
+    assert_eq!(back, im);
+    assert_eq!(read_image(&path, Some("Y")).unwrap(), im);
+    let err = read_image(&path, Some("R")).unwrap_err().to_string();
+    assert!(err.contains("`R`") && err.contains("available: Y"), "{err}");
+    let grid = fshape_mesh::generate::image_grid(&back).unwrap();
+    assert_eq!(grid.n_vertices(), 15);
+    assert_eq!(grid.signal().unwrap(), im.values.as_slice());
+    // A NaN pixel is refused with its vertex (= pixel) index.
+    let mut bad = im.clone();
+    bad.values[7] = f64::NAN;
+    let e = fshape_mesh::generate::image_grid(&bad).unwrap_err().to_string();
+    assert!(e.contains("vertex 7"), "{e}");
+}
+
+#[test]
+fn signal_csv_round_trips_exactly() {
+    use fshape_mesh::io::csv::{read_signal, write_signal};
+    let values = vec![0.1, -2.5e-300, 1.0 / 3.0, f64::NAN, 7.0];
+    for name in ["s.csv", "s.csv.gz"] {
+        let path = tmp(name);
+        write_signal(&path, "thickness", &values).unwrap();
+        let col = read_signal(&path, true).unwrap();
+        assert_eq!(col.name, "thickness");
+        assert_eq!(col.values.len(), 5);
+        assert!(col.values.iter().zip(&values).all(|(a, b)| a == b || (a.is_nan() && b.is_nan())));
+        assert!(read_signal(&path, false).is_err(), "NaN refused when missing values are not accepted");
+    }
+}
