@@ -1,0 +1,405 @@
+//! The signal norm of a fixed connectivity, evaluated at any vertex
+//! positions x.
+
+use faer::Side;
+use faer::sparse::SymbolicSparseColMat;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+};
+use fshape_mesh::{CellKind, FShape, ZERO_VOLUME_REL};
+use num_dual::{Dual, Dual64, DualNum, DualSVec64};
+use rayon::prelude::*;
+
+use crate::local::{Local, MAX_LOCAL, local_matrix, volume};
+use crate::{FemError, Norm};
+
+/// A signal norm D_s(x) for one connectivity: the sparsity pattern, the
+/// Cholesky analysis and the incidence tables are built once, here; every
+/// method takes the current vertex positions x (flat, `dim` per vertex).
+#[derive(Debug)]
+pub struct SignalNorm {
+    norm: Norm,
+    kind: CellKind,
+    dim: usize,
+    n_vertices: usize,
+    cells: Vec<usize>,
+    /// Lower-triangular CSC pattern of D (diagonal only for lumped).
+    pub(crate) pattern: SymbolicSparseColMat<usize>,
+    /// For each stored entry e, the local slots (cell·9 + 3i + j) that sum
+    /// into it, in increasing order: `slots[slot_ptr[e]..slot_ptr[e + 1]]`.
+    slot_ptr: Vec<usize>,
+    slots: Vec<usize>,
+    /// For each vertex, its (cell·3 + corner) incidences in increasing order.
+    inc_ptr: Vec<usize>,
+    inc: Vec<usize>,
+    /// Cholesky analysis (AMD ordering, elimination tree), `None` for the
+    /// diagonal lumped norm.
+    pub(crate) symbolic: Option<SymbolicCholesky<usize>>,
+    parallel: bool,
+}
+
+impl SignalNorm {
+    /// Builds the norm for the shape's connectivity (its positions are not
+    /// kept: pass x to every method).
+    pub fn try_new(shape: &FShape, norm: Norm) -> Result<Self, FemError> {
+        if let Norm::H1 { length } = norm
+            && !(length > 0.0 && length.is_finite())
+        {
+            return Err(FemError::Length { length });
+        }
+        let (kind, dim, n_vertices) = (shape.kind(), shape.dim(), shape.n_vertices());
+        let cells = shape.cells().to_vec();
+        let corners = kind.n_corners();
+        // Local slot (t, i, j) → (row, col) of the lower triangle.
+        let mut entries: Vec<(usize, usize, usize)> = Vec::new();
+        for (t, c) in cells.chunks_exact(corners).enumerate() {
+            for i in 0..corners {
+                for j in 0..corners {
+                    let (r, col) = (c[i].max(c[j]), c[i].min(c[j]));
+                    let keep = if norm == Norm::L2Lumped { i == j } else { c[i] >= c[j] };
+                    if keep {
+                        entries.push((col, r, t * MAX_LOCAL + 3 * i + j));
+                    }
+                }
+            }
+        }
+        // Every vertex gets a diagonal entry, so an unused vertex shows up as
+        // a zero pivot (reported as `Singular`) rather than a missing column.
+        entries.extend((0..n_vertices).map(|v| (v, v, usize::MAX)));
+        entries.sort_unstable();
+        let mut col_ptr = vec![0usize; n_vertices + 1];
+        let (mut row_idx, mut slot_ptr, mut slots) = (Vec::new(), vec![0usize], Vec::new());
+        for group in entries.chunk_by(|a, b| (a.0, a.1) == (b.0, b.1)) {
+            let (col, row) = (group[0].0, group[0].1);
+            row_idx.push(row);
+            col_ptr[col + 1] += 1;
+            slots.extend(group.iter().map(|g| g.2).filter(|&s| s != usize::MAX));
+            slot_ptr.push(slots.len());
+        }
+        for v in 0..n_vertices {
+            col_ptr[v + 1] += col_ptr[v];
+        }
+        let pattern = SymbolicSparseColMat::new_checked(n_vertices, n_vertices, col_ptr, None, row_idx);
+        let mut inc_ptr = vec![0usize; n_vertices + 1];
+        for &v in &cells {
+            inc_ptr[v + 1] += 1;
+        }
+        for v in 0..n_vertices {
+            inc_ptr[v + 1] += inc_ptr[v];
+        }
+        let mut fill = inc_ptr.clone();
+        let mut inc = vec![0usize; cells.len()];
+        for (t, c) in cells.chunks_exact(corners).enumerate() {
+            for (i, &v) in c.iter().enumerate() {
+                inc[fill[v]] = t * 3 + i;
+                fill[v] += 1;
+            }
+        }
+        let symbolic = if norm == Norm::L2Lumped {
+            None
+        } else {
+            let s = factorize_symbolic_cholesky(
+                pattern.as_ref(),
+                Side::Lower,
+                SymmetricOrdering::Amd,
+                CholeskySymbolicParams::default(),
+            )
+            .map_err(|e| FemError::Factorisation { message: format!("{e:?}") })?;
+            Some(s)
+        };
+        Ok(SignalNorm {
+            norm,
+            kind,
+            dim,
+            n_vertices,
+            cells,
+            pattern,
+            slot_ptr,
+            slots,
+            inc_ptr,
+            inc,
+            symbolic,
+            parallel: true,
+        })
+    }
+
+    /// Chooses parallel (default) or serial evaluation. Both give the same
+    /// results bit for bit.
+    pub fn with_parallel(mut self, parallel: bool) -> Self {
+        self.parallel = parallel;
+        self
+    }
+
+    /// The norm.
+    pub fn norm(&self) -> Norm {
+        self.norm
+    }
+
+    /// Number of vertices P (the size of D).
+    pub fn n_vertices(&self) -> usize {
+        self.n_vertices
+    }
+
+    /// Number of stored entries of the lower triangle of D.
+    pub fn nnz_lower(&self) -> usize {
+        self.pattern.row_idx().len()
+    }
+
+    /// The lower-triangular pattern: column pointers and row indices (CSC).
+    pub fn pattern(&self) -> (&[usize], &[usize]) {
+        (self.pattern.col_ptr(), self.pattern.row_idx())
+    }
+
+    fn corners(&self) -> usize {
+        self.kind.n_corners()
+    }
+
+    fn check_len(&self, what: &'static str, v: &[f64], expected: usize) -> Result<(), FemError> {
+        if v.len() == expected { Ok(()) } else { Err(FemError::Dimension { what, expected, found: v.len() }) }
+    }
+
+    fn check_x(&self, x: &[f64]) -> Result<(), FemError> {
+        self.check_len("x", x, self.n_vertices * self.dim)
+    }
+
+    /// Refuses zero-volume cells where `what` needs a positive volume.
+    fn check_volumes(&self, x: &[f64], what: &'static str) -> Result<(), FemError> {
+        let n = self.dim;
+        let mut lo = vec![f64::INFINITY; n];
+        let mut hi = vec![f64::NEG_INFINITY; n];
+        for p in x.chunks_exact(n) {
+            for k in 0..n {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let diag = lo.iter().zip(&hi).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt();
+        let tol = ZERO_VOLUME_REL * diag.powi(self.kind.dim() as i32);
+        let mut buf = [0.0; MAX_LOCAL];
+        for (cell, c) in self.cells.chunks_exact(self.corners()).enumerate() {
+            let local = self.gather_coords(x, c, &mut buf);
+            let volume = volume(self.kind, n, local);
+            if !(volume > tol) {
+                return Err(FemError::ZeroVolumeCell { cell, volume, what });
+            }
+        }
+        Ok(())
+    }
+
+    fn gather_coords<'b>(&self, x: &[f64], c: &[usize], buf: &'b mut [f64; MAX_LOCAL]) -> &'b [f64] {
+        let n = self.dim;
+        for (i, &v) in c.iter().enumerate() {
+            buf[i * n..(i + 1) * n].copy_from_slice(&x[v * n..(v + 1) * n]);
+        }
+        &buf[..c.len() * n]
+    }
+
+    /// Runs `f` on every cell (in parallel if enabled), collecting results
+    /// in cell order.
+    fn map_cells<T: Send>(&self, f: impl Fn(usize, &[usize]) -> T + Sync + Send) -> Vec<T> {
+        let k = self.corners();
+        if self.parallel {
+            self.cells.par_chunks_exact(k).enumerate().map(|(t, c)| f(t, c)).collect()
+        } else {
+            self.cells.chunks_exact(k).enumerate().map(|(t, c)| f(t, c)).collect()
+        }
+    }
+
+    /// out[v·w + k] = Σ over v's incidences (t, i) of per_cell[t][i·w + k],
+    /// summed in incidence order (deterministic, serial = parallel).
+    fn gather_vertices(&self, per_cell: &[[f64; MAX_LOCAL]], w: usize) -> Vec<f64> {
+        let one = |v: usize, out: &mut [f64]| {
+            for &ti in &self.inc[self.inc_ptr[v]..self.inc_ptr[v + 1]] {
+                let (t, i) = (ti / 3, ti % 3);
+                for k in 0..w {
+                    out[k] += per_cell[t][i * w + k];
+                }
+            }
+        };
+        let mut out = vec![0.0; self.n_vertices * w];
+        if self.parallel {
+            out.par_chunks_mut(w.max(1)).enumerate().for_each(|(v, o)| one(v, o));
+        } else {
+            out.chunks_mut(w.max(1)).enumerate().for_each(|(v, o)| one(v, o));
+        }
+        out
+    }
+
+    /// The local matrices of every cell at x.
+    fn locals(&self, x: &[f64]) -> Vec<Local<f64>> {
+        self.map_cells(|_, c| {
+            let mut buf = [0.0; MAX_LOCAL];
+            local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm).0
+        })
+    }
+
+    /// The values of the lower triangle of D_s(x), in the order of
+    /// [`SignalNorm::pattern`].
+    ///
+    /// ```
+    /// use fshape_fem::{Norm, SignalNorm};
+    /// // A single segment of length 2: lumped mass diag(1, 1).
+    /// let s = fshape_mesh::FShape::try_new(2, fshape_mesh::CellKind::Segment, vec![0., 0., 2., 0.], vec![0, 1], None)?;
+    /// let d = SignalNorm::try_new(&s, Norm::L2Lumped)?;
+    /// assert_eq!(d.assemble(s.points())?, vec![1.0, 1.0]);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn assemble(&self, x: &[f64]) -> Result<Vec<f64>, FemError> {
+        self.check_x(x)?;
+        if matches!(self.norm, Norm::H1 { .. }) {
+            self.check_volumes(x, "stiffness matrix")?;
+        }
+        let locals = self.locals(x);
+        let entry = |e: usize| {
+            self.slots[self.slot_ptr[e]..self.slot_ptr[e + 1]]
+                .iter()
+                .fold(0.0, |acc, &s| acc + locals[s / MAX_LOCAL][(s % MAX_LOCAL) / 3][s % 3])
+        };
+        let n = self.nnz_lower();
+        Ok(if self.parallel { (0..n).into_par_iter().map(entry).collect() } else { (0..n).map(entry).collect() })
+    }
+
+    /// D_s(x) h, computed cell by cell.
+    pub fn matvec(&self, x: &[f64], h: &[f64]) -> Result<Vec<f64>, FemError> {
+        self.check_x(x)?;
+        self.check_len("h", h, self.n_vertices)?;
+        if matches!(self.norm, Norm::H1 { .. }) {
+            self.check_volumes(x, "stiffness matrix")?;
+        }
+        let per_cell = self.map_cells(|_, c| {
+            let mut buf = [0.0; MAX_LOCAL];
+            let (m, _) = local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
+            let mut out = [0.0; MAX_LOCAL];
+            for i in 0..c.len() {
+                out[i] = (0..c.len()).map(|j| m[i][j] * h[c[j]]).sum();
+            }
+            out
+        });
+        Ok(self.gather_vertices(&per_cell, 1))
+    }
+
+    /// The quadratic form fᵀ D_s(x) f = ‖f‖²_{H^s(x)}.
+    pub fn quadratic(&self, x: &[f64], f: &[f64]) -> Result<f64, FemError> {
+        self.check_x(x)?;
+        self.check_len("f", f, self.n_vertices)?;
+        if matches!(self.norm, Norm::H1 { .. }) {
+            self.check_volumes(x, "stiffness matrix")?;
+        }
+        let per_cell = self.map_cells(|_, c| {
+            let mut buf = [0.0; MAX_LOCAL];
+            let (m, _) = local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
+            bilinear(&m, c, f, f)
+        });
+        Ok(per_cell.iter().sum())
+    }
+
+    /// ∂_x (aᵀ D_s(x) b): the gradient with respect to every vertex
+    /// position (flat, `dim` per vertex). With a = b = h this is
+    /// ∂_x(hᵀ D_s(x) h), the signal term of the metamorphosis momentum
+    /// equation.
+    pub fn grad(&self, x: &[f64], a: &[f64], b: &[f64]) -> Result<Vec<f64>, FemError> {
+        self.check_x(x)?;
+        self.check_len("a", a, self.n_vertices)?;
+        self.check_len("b", b, self.n_vertices)?;
+        self.check_volumes(x, "x-derivative of the norm")?;
+        let n = self.dim;
+        let per_cell = self.map_cells(|_, c| {
+            let m = c.len() * n;
+            let mut xd = [DualSVec64::<MAX_LOCAL>::from(0.0); MAX_LOCAL];
+            for (i, &v) in c.iter().enumerate() {
+                for k in 0..n {
+                    xd[i * n + k] = DualSVec64::from_re(x[v * n + k]).derivative(i * n + k);
+                }
+            }
+            let (mat, _) = local_matrix(self.kind, n, &xd[..m], self.norm);
+            let q = bilinear(&mat, c, a, b);
+            let mut out = [0.0; MAX_LOCAL];
+            if let Some(g) = q.eps.0 {
+                out[..m].copy_from_slice(&g.as_slice()[..m]);
+            }
+            out
+        });
+        Ok(self.gather_vertices(&per_cell, n))
+    }
+
+    /// The directional derivative of [`SignalNorm::grad`] in the direction
+    /// `dx`: (∂²_x (aᵀ D_s(x) b)) dx, a Hessian–vector product (forward mode
+    /// over forward mode).
+    pub fn hvp(&self, x: &[f64], a: &[f64], b: &[f64], dx: &[f64]) -> Result<Vec<f64>, FemError> {
+        self.check_x(x)?;
+        self.check_len("a", a, self.n_vertices)?;
+        self.check_len("b", b, self.n_vertices)?;
+        self.check_len("dx", dx, x.len())?;
+        self.check_volumes(x, "x-derivative of the norm")?;
+        let n = self.dim;
+        let per_cell = self.map_cells(|_, c| {
+            let m = c.len() * n;
+            let zero = Dual::new(DualSVec64::<MAX_LOCAL>::from(0.0), DualSVec64::from(0.0));
+            let mut xd = [zero; MAX_LOCAL];
+            for (i, &v) in c.iter().enumerate() {
+                for k in 0..n {
+                    let re = DualSVec64::from_re(x[v * n + k]).derivative(i * n + k);
+                    xd[i * n + k] = Dual::new(re, DualSVec64::from(dx[v * n + k]));
+                }
+            }
+            let (mat, _) = local_matrix(self.kind, n, &xd[..m], self.norm);
+            let q = bilinear(&mat, c, a, b);
+            let mut out = [0.0; MAX_LOCAL];
+            if let Some(g) = q.eps.eps.0 {
+                out[..m].copy_from_slice(&g.as_slice()[..m]);
+            }
+            out
+        });
+        Ok(self.gather_vertices(&per_cell, n))
+    }
+
+    /// (∂_x D_s · dx) h = d/dε D_s(x + ε dx) h at ε = 0.
+    pub fn dmatvec(&self, x: &[f64], dx: &[f64], h: &[f64]) -> Result<Vec<f64>, FemError> {
+        self.check_x(x)?;
+        self.check_len("dx", dx, x.len())?;
+        self.check_len("h", h, self.n_vertices)?;
+        self.check_volumes(x, "x-derivative of the norm")?;
+        let n = self.dim;
+        let per_cell = self.map_cells(|_, c| {
+            let mut xd = [Dual64::from(0.0); MAX_LOCAL];
+            for (i, &v) in c.iter().enumerate() {
+                for k in 0..n {
+                    xd[i * n + k] = Dual64::new(x[v * n + k], dx[v * n + k]);
+                }
+            }
+            let (mat, _) = local_matrix(self.kind, n, &xd[..c.len() * n], self.norm);
+            let mut out = [0.0; MAX_LOCAL];
+            for i in 0..c.len() {
+                out[i] = (0..c.len()).map(|j| mat[i][j].eps * h[c[j]]).sum();
+            }
+            out
+        });
+        Ok(self.gather_vertices(&per_cell, 1))
+    }
+
+    /// Lumped vertex masses of x: the row sums of the mass part. A vertex
+    /// with zero mass makes D_s(x) singular.
+    pub(crate) fn check_mass(&self, x: &[f64]) -> Result<(), FemError> {
+        let mut mass = vec![0.0; self.n_vertices];
+        let mut buf = [0.0; MAX_LOCAL];
+        for c in self.cells.chunks_exact(self.corners()) {
+            let r = volume(self.kind, self.dim, self.gather_coords(x, c, &mut buf));
+            c.iter().for_each(|&v| mass[v] += r);
+        }
+        match mass.iter().position(|&m| !(m > 0.0)) {
+            Some(vertex) => Err(FemError::Singular { vertex }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// aᵀ M b over one cell's corners.
+fn bilinear<D: DualNum<Primitive = f64> + Copy>(m: &Local<D>, c: &[usize], a: &[f64], b: &[f64]) -> D {
+    let mut q = D::from(0.0);
+    for i in 0..c.len() {
+        for j in 0..c.len() {
+            q += m[i][j] * (a[c[i]] * b[c[j]]);
+        }
+    }
+    q
+}

@@ -1,0 +1,1 @@
+//! Reference values from libigl: see tests/reference/README.md.
