@@ -36,75 +36,90 @@ pub(crate) fn local_matrix<D: DualNum<Primitive = f64> + Copy>(
     x: &[D],
     norm: Norm,
 ) -> (Local<D>, D) {
+    let want_stiffness = matches!(norm, Norm::H1 { .. });
+    let (mut m, k, vol) = local_parts(kind, n, x, norm == Norm::L2Lumped, want_stiffness);
+    if let Norm::H1 { length } = norm {
+        let l2 = length * length;
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += k[i][j] * l2;
+            }
+        }
+    }
+    (m, vol)
+}
+
+/// The mass part (lumped or P1) and, when asked, the stiffness part of a
+/// cell's local matrix, and its volume (see [`local_matrix`]).
+pub(crate) fn local_parts<D: DualNum<Primitive = f64> + Copy>(
+    kind: CellKind,
+    n: usize,
+    x: &[D],
+    lumped: bool,
+    stiffness: bool,
+) -> (Local<D>, Local<D>, D) {
     let zero = D::from(0.0);
-    let mut m = [[zero; 3]; 3];
-    let p = |c: usize, k: usize| x[c * n + k];
+    let (mut m, mut k) = ([[zero; 3]; 3], [[zero; 3]; 3]);
+    let p = |c: usize, j: usize| x[c * n + j];
     match kind {
         CellKind::Segment => {
-            let len2 = (0..n).fold(zero, |acc, k| acc + (p(1, k) - p(0, k)) * (p(1, k) - p(0, k)));
-            let len = len2.sqrt();
-            match norm {
-                Norm::L2Lumped => {
-                    m[0][0] = len * 0.5;
-                    m[1][1] = len * 0.5;
-                }
-                Norm::L2 | Norm::H1 { .. } => {
-                    for (i, row) in m.iter_mut().enumerate().take(2) {
-                        for (j, v) in row.iter_mut().enumerate().take(2) {
-                            *v = len * (if i == j { 2.0 } else { 1.0 } / 6.0);
-                        }
-                    }
+            let len = (0..n).fold(zero, |acc, j| acc + (p(1, j) - p(0, j)) * (p(1, j) - p(0, j))).sqrt();
+            for (i, row) in m.iter_mut().enumerate().take(2) {
+                for (j, v) in row.iter_mut().enumerate().take(2) {
+                    *v = match (lumped, i == j) {
+                        (true, true) => len * 0.5,
+                        (true, false) => zero,
+                        (false, diag) => len * (if diag { 2.0 } else { 1.0 } / 6.0),
+                    };
                 }
             }
-            if let Norm::H1 { length } = norm {
-                let k = D::from(length * length) / len;
-                m[0][0] += k;
-                m[1][1] += k;
-                m[0][1] -= k;
-                m[1][0] -= k;
+            if stiffness {
+                let w = len.recip();
+                k[0][0] = w;
+                k[1][1] = w;
+                k[0][1] = -w;
+                k[1][0] = -w;
             }
-            (m, len)
+            (m, k, len)
         }
         CellKind::Triangle => {
             // Edge vectors opposite each corner.
-            let e = |i: usize, k: usize| match i {
-                0 => p(2, k) - p(1, k),
-                1 => p(0, k) - p(2, k),
-                _ => p(1, k) - p(0, k),
-            };
-            let dot = |i: usize, j: usize| (0..n).fold(zero, |acc, k| acc + e(i, k) * e(j, k));
+            let mut e = [[zero; 3]; 3];
+            for j in 0..n {
+                e[0][j] = p(2, j) - p(1, j);
+                e[1][j] = p(0, j) - p(2, j);
+                e[2][j] = p(1, j) - p(0, j);
+            }
+            let dot = |a: usize, b: usize| (0..n).fold(zero, |acc, j| acc + e[a][j] * e[b][j]);
             // Lagrange's identity |u × v|² = |u|²|v|² − (u·v)², with u = e_2,
             // v = −e_1 = c − a: works in R² and R³ alike.
             let (uu, vv, uv) = (dot(2, 2), dot(1, 1), -dot(2, 1));
             let area = (uu * vv - uv * uv).sqrt() * 0.5;
-            match norm {
-                Norm::L2Lumped => {
-                    for (i, row) in m.iter_mut().enumerate() {
-                        row[i] = area / 3.0;
-                    }
+            for (i, row) in m.iter_mut().enumerate() {
+                for (j, v) in row.iter_mut().enumerate() {
+                    *v = match (lumped, i == j) {
+                        (true, true) => area / 3.0,
+                        (true, false) => zero,
+                        (false, diag) => area * (if diag { 2.0 } else { 1.0 } / 12.0),
+                    };
                 }
-                Norm::L2 | Norm::H1 { .. } => {
-                    for (i, row) in m.iter_mut().enumerate() {
-                        for (j, v) in row.iter_mut().enumerate() {
-                            *v = area * (if i == j { 2.0 } else { 1.0 } / 12.0);
-                        }
+            }
+            if stiffness {
+                let w = (area * 4.0).recip();
+                for i in 0..3 {
+                    for j in i..3 {
+                        let v = w * dot(i, j);
+                        k[i][j] = v;
+                        k[j][i] = v;
                     }
                 }
             }
-            if let Norm::H1 { length } = norm {
-                let w = D::from(length * length) / (area * 4.0);
-                for (i, row) in m.iter_mut().enumerate() {
-                    for (j, v) in row.iter_mut().enumerate() {
-                        *v += w * dot(i, j);
-                    }
-                }
-            }
-            (m, area)
+            (m, k, area)
         }
     }
 }
 
 /// The volume of a cell from its corner coordinates (f64).
 pub(crate) fn volume(kind: CellKind, n: usize, x: &[f64]) -> f64 {
-    local_matrix(kind, n, x, Norm::L2Lumped).1
+    local_parts(kind, n, x, true, false).2
 }

@@ -1,6 +1,8 @@
 //! The signal norm of a fixed connectivity, evaluated at any vertex
 //! positions x.
 
+use std::sync::OnceLock;
+
 use faer::Side;
 use faer::sparse::SymbolicSparseColMat;
 use faer::sparse::linalg::cholesky::{
@@ -10,7 +12,7 @@ use fshape_mesh::{CellKind, FShape, ZERO_VOLUME_REL};
 use num_dual::{Dual, Dual64, DualNum, DualSVec64};
 use rayon::prelude::*;
 
-use crate::local::{Local, MAX_LOCAL, local_matrix, volume};
+use crate::local::{Local, MAX_LOCAL, local_matrix, local_parts, volume};
 use crate::{FemError, Norm};
 
 /// A signal norm D_s(x) for one connectivity: the sparsity pattern, the
@@ -32,9 +34,9 @@ pub struct SignalNorm {
     /// For each vertex, its (cell·3 + corner) incidences in increasing order.
     inc_ptr: Vec<usize>,
     inc: Vec<usize>,
-    /// Cholesky analysis (AMD ordering, elimination tree), `None` for the
-    /// diagonal lumped norm.
-    pub(crate) symbolic: Option<SymbolicCholesky<usize>>,
+    /// Cholesky analysis (AMD ordering, elimination tree), done on the first
+    /// [`SignalNorm::solver`] call; never for the diagonal lumped norm.
+    symbolic: OnceLock<Result<SymbolicCholesky<usize>, FemError>>,
     parallel: bool,
 }
 
@@ -50,63 +52,11 @@ impl SignalNorm {
         let (kind, dim, n_vertices) = (shape.kind(), shape.dim(), shape.n_vertices());
         let cells = shape.cells().to_vec();
         let corners = kind.n_corners();
-        // Local slot (t, i, j) → (row, col) of the lower triangle.
-        let mut entries: Vec<(usize, usize, usize)> = Vec::new();
-        for (t, c) in cells.chunks_exact(corners).enumerate() {
-            for i in 0..corners {
-                for j in 0..corners {
-                    let (r, col) = (c[i].max(c[j]), c[i].min(c[j]));
-                    let keep = if norm == Norm::L2Lumped { i == j } else { c[i] >= c[j] };
-                    if keep {
-                        entries.push((col, r, t * MAX_LOCAL + 3 * i + j));
-                    }
-                }
-            }
-        }
-        // Every vertex gets a diagonal entry, so an unused vertex shows up as
-        // a zero pivot (reported as `Singular`) rather than a missing column.
-        entries.extend((0..n_vertices).map(|v| (v, v, usize::MAX)));
-        entries.sort_unstable();
-        let mut col_ptr = vec![0usize; n_vertices + 1];
-        let (mut row_idx, mut slot_ptr, mut slots) = (Vec::new(), vec![0usize], Vec::new());
-        for group in entries.chunk_by(|a, b| (a.0, a.1) == (b.0, b.1)) {
-            let (col, row) = (group[0].0, group[0].1);
-            row_idx.push(row);
-            col_ptr[col + 1] += 1;
-            slots.extend(group.iter().map(|g| g.2).filter(|&s| s != usize::MAX));
-            slot_ptr.push(slots.len());
-        }
-        for v in 0..n_vertices {
-            col_ptr[v + 1] += col_ptr[v];
-        }
+        let (inc_ptr, inc) = incidence(&cells, corners, n_vertices);
+        let lumped = norm == Norm::L2Lumped;
+        let Pattern { col_ptr, row_idx, slot_ptr, slots } = lower_pattern(&cells, corners, &inc_ptr, &inc, lumped);
         let pattern = SymbolicSparseColMat::new_checked(n_vertices, n_vertices, col_ptr, None, row_idx);
-        let mut inc_ptr = vec![0usize; n_vertices + 1];
-        for &v in &cells {
-            inc_ptr[v + 1] += 1;
-        }
-        for v in 0..n_vertices {
-            inc_ptr[v + 1] += inc_ptr[v];
-        }
-        let mut fill = inc_ptr.clone();
-        let mut inc = vec![0usize; cells.len()];
-        for (t, c) in cells.chunks_exact(corners).enumerate() {
-            for (i, &v) in c.iter().enumerate() {
-                inc[fill[v]] = t * 3 + i;
-                fill[v] += 1;
-            }
-        }
-        let symbolic = if norm == Norm::L2Lumped {
-            None
-        } else {
-            let s = factorize_symbolic_cholesky(
-                pattern.as_ref(),
-                Side::Lower,
-                SymmetricOrdering::Amd,
-                CholeskySymbolicParams::default(),
-            )
-            .map_err(|e| FemError::Factorisation { message: format!("{e:?}") })?;
-            Some(s)
-        };
+        let symbolic = OnceLock::new();
         Ok(SignalNorm {
             norm,
             kind,
@@ -121,6 +71,24 @@ impl SignalNorm {
             symbolic,
             parallel: true,
         })
+    }
+
+    /// The Cholesky analysis of the pattern (computed once), or `None` for
+    /// the diagonal lumped norm.
+    pub(crate) fn symbolic(&self) -> Result<Option<&SymbolicCholesky<usize>>, FemError> {
+        if self.norm == Norm::L2Lumped {
+            return Ok(None);
+        }
+        let s = self.symbolic.get_or_init(|| {
+            factorize_symbolic_cholesky(
+                self.pattern.as_ref(),
+                Side::Lower,
+                SymmetricOrdering::Amd,
+                CholeskySymbolicParams::default(),
+            )
+            .map_err(|e| FemError::Factorisation { message: format!("{e:?}") })
+        });
+        s.as_ref().map(Some).map_err(Clone::clone)
     }
 
     /// Chooses parallel (default) or serial evaluation. Both give the same
@@ -162,8 +130,9 @@ impl SignalNorm {
         self.check_len("x", x, self.n_vertices * self.dim)
     }
 
-    /// Refuses zero-volume cells where `what` needs a positive volume.
-    fn check_volumes(&self, x: &[f64], what: &'static str) -> Result<(), FemError> {
+    /// The volume at or below which a cell counts as degenerate: the
+    /// validator's rule, ZERO_VOLUME_REL × diag^d of x's bounding box.
+    fn zero_volume_tolerance(&self, x: &[f64]) -> f64 {
         let n = self.dim;
         let mut lo = vec![f64::INFINITY; n];
         let mut hi = vec![f64::NEG_INFINITY; n];
@@ -174,16 +143,20 @@ impl SignalNorm {
             }
         }
         let diag = lo.iter().zip(&hi).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt();
-        let tol = ZERO_VOLUME_REL * diag.powi(self.kind.dim() as i32);
-        let mut buf = [0.0; MAX_LOCAL];
-        for (cell, c) in self.cells.chunks_exact(self.corners()).enumerate() {
-            let local = self.gather_coords(x, c, &mut buf);
-            let volume = volume(self.kind, n, local);
-            if !(volume > tol) {
-                return Err(FemError::ZeroVolumeCell { cell, volume, what });
-            }
+        ZERO_VOLUME_REL * diag.powi(self.kind.dim() as i32)
+    }
+
+    /// Refuses zero-volume cells where `what` needs a positive volume.
+    fn check_volumes(&self, x: &[f64], what: &'static str) -> Result<(), FemError> {
+        let tol = self.zero_volume_tolerance(x);
+        let volumes = self.map_cells(|_, c| {
+            let mut buf = [0.0; MAX_LOCAL];
+            volume(self.kind, self.dim, self.gather_coords(x, c, &mut buf))
+        });
+        match volumes.iter().position(|v| !(*v > tol)) {
+            Some(cell) => Err(FemError::ZeroVolumeCell { cell, volume: volumes[cell], what }),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     fn gather_coords<'b>(&self, x: &[f64], c: &[usize], buf: &'b mut [f64; MAX_LOCAL]) -> &'b [f64] {
@@ -226,10 +199,10 @@ impl SignalNorm {
     }
 
     /// The local matrices of every cell at x.
-    fn locals(&self, x: &[f64]) -> Vec<Local<f64>> {
+    fn locals(&self, x: &[f64], norm: Norm) -> Vec<Local<f64>> {
         self.map_cells(|_, c| {
             let mut buf = [0.0; MAX_LOCAL];
-            local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm).0
+            local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), norm).0
         })
     }
 
@@ -249,14 +222,46 @@ impl SignalNorm {
         if matches!(self.norm, Norm::H1 { .. }) {
             self.check_volumes(x, "stiffness matrix")?;
         }
-        let locals = self.locals(x);
+        Ok(self.gather_entries(&self.locals(x, self.norm)))
+    }
+
+    /// The P1 mass and P1 stiffness values separately, on this norm's
+    /// pattern (for the L2 and H1 norms, which share it), in one pass over
+    /// the cells: what libigl's `massmatrix(FULL)` and `−cotmatrix` compute.
+    pub fn assemble_mass_and_stiffness(&self, x: &[f64]) -> Result<(Vec<f64>, Vec<f64>), FemError> {
+        self.check_x(x)?;
+        if self.norm == Norm::L2Lumped {
+            return Err(FemError::UnknownNorm { name: "stiffness on the lumped (diagonal) pattern".into() });
+        }
+        let tol = self.zero_volume_tolerance(x);
+        let parts = self.map_cells(|_, c| {
+            let mut buf = [0.0; MAX_LOCAL];
+            local_parts(self.kind, self.dim, self.gather_coords(x, c, &mut buf), false, true)
+        });
+        if let Some(cell) = parts.iter().position(|p| !(p.2 > tol)) {
+            return Err(FemError::ZeroVolumeCell { cell, volume: parts[cell].2, what: "stiffness matrix" });
+        }
+        let entry = |e: usize| {
+            self.slots[self.slot_ptr[e]..self.slot_ptr[e + 1]].iter().fold((0.0, 0.0), |(m, k), &s| {
+                let (t, i, j) = (s / MAX_LOCAL, (s % MAX_LOCAL) / 3, s % 3);
+                (m + parts[t].0[i][j], k + parts[t].1[i][j])
+            })
+        };
+        let n = self.nnz_lower();
+        let both: Vec<(f64, f64)> =
+            if self.parallel { (0..n).into_par_iter().map(entry).collect() } else { (0..n).map(entry).collect() };
+        Ok(both.into_iter().unzip())
+    }
+
+    /// values[e] = Σ of the local slots of entry e, in slot order.
+    fn gather_entries(&self, locals: &[Local<f64>]) -> Vec<f64> {
         let entry = |e: usize| {
             self.slots[self.slot_ptr[e]..self.slot_ptr[e + 1]]
                 .iter()
                 .fold(0.0, |acc, &s| acc + locals[s / MAX_LOCAL][(s % MAX_LOCAL) / 3][s % 3])
         };
         let n = self.nnz_lower();
-        Ok(if self.parallel { (0..n).into_par_iter().map(entry).collect() } else { (0..n).map(entry).collect() })
+        if self.parallel { (0..n).into_par_iter().map(entry).collect() } else { (0..n).map(entry).collect() }
     }
 
     /// D_s(x) h, computed cell by cell.
@@ -391,6 +396,118 @@ impl SignalNorm {
             None => Ok(()),
         }
     }
+}
+
+/// For each vertex, its (cell·3 + corner) incidences in increasing order
+/// (a counting sort: O(T)).
+fn incidence(cells: &[usize], corners: usize, n_vertices: usize) -> (Vec<usize>, Vec<usize>) {
+    let mut ptr = vec![0usize; n_vertices + 1];
+    for &v in cells {
+        ptr[v + 1] += 1;
+    }
+    for v in 0..n_vertices {
+        ptr[v + 1] += ptr[v];
+    }
+    let mut fill = ptr.clone();
+    let mut inc = vec![0usize; cells.len()];
+    for (t, c) in cells.chunks_exact(corners).enumerate() {
+        for (i, &v) in c.iter().enumerate() {
+            inc[fill[v]] = t * 3 + i;
+            fill[v] += 1;
+        }
+    }
+    (ptr, inc)
+}
+
+/// The lower-triangular CSC pattern, and for each stored entry the local
+/// slots (cell·9 + 3i + j) that sum into it.
+struct Pattern {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    slot_ptr: Vec<usize>,
+    slots: Vec<usize>,
+}
+
+/// Builds the [`Pattern`]. Column j holds j itself (so an unused vertex
+/// shows up as a zero pivot, reported as `Singular`, rather than as a
+/// missing column) and, unless `lumped`, every neighbour i > j sharing a
+/// cell with it. The slots of entry (i, j) are the local entries (t, a, b)
+/// with corner b of cell t at j and corner a at i (one of each symmetric
+/// pair), listed in increasing slot order so that every entry is summed in
+/// the same order whatever the threads.
+///
+/// Everything is built column by column from the vertex→cell incidence
+/// lists, a handful of entries each, in fixed chunks of columns run in
+/// parallel and concatenated in order: no global sort, and a result that
+/// does not depend on the number of threads.
+fn lower_pattern(cells: &[usize], corners: usize, inc_ptr: &[usize], inc: &[usize], lumped: bool) -> Pattern {
+    let n = inc_ptr.len() - 1;
+    const CHUNK: usize = 4096;
+    struct Chunk {
+        row_lens: Vec<usize>,
+        rows: Vec<usize>,
+        slot_lens: Vec<usize>,
+        slots: Vec<usize>,
+    }
+    let chunks: Vec<Chunk> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let mut out = Chunk { row_lens: vec![], rows: vec![], slot_lens: vec![], slots: vec![] };
+            let (mut rows, mut pairs) = (Vec::new(), Vec::new());
+            for j in k * CHUNK..((k + 1) * CHUNK).min(n) {
+                rows.clear();
+                pairs.clear();
+                rows.push(j);
+                for &ti in &inc[inc_ptr[j]..inc_ptr[j + 1]] {
+                    let (t, b) = (ti / 3, ti % 3);
+                    let c = &cells[t * corners..(t + 1) * corners];
+                    for (a, &i) in c.iter().enumerate() {
+                        if if lumped { a == b } else { i >= j } {
+                            pairs.push((i, t * MAX_LOCAL + 3 * a + b));
+                            rows.push(i);
+                        }
+                    }
+                }
+                rows.sort_unstable();
+                rows.dedup();
+                // Sorting (row, slot) groups the slots by entry, each group
+                // in increasing slot order.
+                pairs.sort_unstable();
+                let mut p = 0;
+                for &r in &rows {
+                    let start = p;
+                    while p < pairs.len() && pairs[p].0 == r {
+                        out.slots.push(pairs[p].1);
+                        p += 1;
+                    }
+                    out.slot_lens.push(p - start);
+                }
+                out.rows.extend_from_slice(&rows);
+                out.row_lens.push(rows.len());
+            }
+            out
+        })
+        .collect();
+    let nnz: usize = chunks.iter().map(|c| c.rows.len()).sum();
+    let mut pat = Pattern {
+        col_ptr: Vec::with_capacity(n + 1),
+        row_idx: Vec::with_capacity(nnz),
+        slot_ptr: Vec::with_capacity(nnz + 1),
+        slots: Vec::with_capacity(chunks.iter().map(|c| c.slots.len()).sum()),
+    };
+    pat.col_ptr.push(0);
+    pat.slot_ptr.push(0);
+    for c in chunks {
+        for l in c.row_lens {
+            pat.col_ptr.push(pat.col_ptr[pat.col_ptr.len() - 1] + l);
+        }
+        for l in c.slot_lens {
+            pat.slot_ptr.push(pat.slot_ptr[pat.slot_ptr.len() - 1] + l);
+        }
+        pat.row_idx.extend_from_slice(&c.rows);
+        pat.slots.extend_from_slice(&c.slots);
+    }
+    pat
 }
 
 /// aᵀ M b over one cell's corners.

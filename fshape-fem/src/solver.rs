@@ -3,7 +3,7 @@
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::SparseColMatRef;
-use faer::sparse::linalg::cholesky::LltRef;
+use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky};
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::norm::SignalNorm;
@@ -18,7 +18,7 @@ use crate::{FemError, Norm};
 /// use fshape_fem::{Norm, SignalNorm};
 /// let s = fshape_mesh::generate::icosphere(2, 1.0);
 /// let d = SignalNorm::try_new(&s, Norm::H1 { length: 1.0 })?;
-/// let mut solver = d.solver();
+/// let mut solver = d.solver()?;
 /// solver.factor(s.points())?;
 /// let b = d.matvec(s.points(), &vec![1.0; s.n_vertices()])?;
 /// let h = solver.solve(&b)?; // D h = D·1
@@ -27,6 +27,7 @@ use crate::{FemError, Norm};
 /// ```
 pub struct Solver<'a> {
     norm: &'a SignalNorm,
+    symbolic: Option<&'a SymbolicCholesky<usize>>,
     values: Vec<f64>,
     l_values: Vec<f64>,
     mem: MemBuffer,
@@ -34,9 +35,12 @@ pub struct Solver<'a> {
 }
 
 impl SignalNorm {
-    /// A solver workspace for this norm.
-    pub fn solver(&self) -> Solver<'_> {
-        let (l_len, req) = match &self.symbolic {
+    /// A solver workspace for this norm. The first call runs the Cholesky
+    /// analysis of the pattern (AMD ordering, elimination tree); later
+    /// calls reuse it.
+    pub fn solver(&self) -> Result<Solver<'_>, FemError> {
+        let symbolic = self.symbolic()?;
+        let (l_len, req) = match symbolic {
             Some(s) => (
                 s.len_val(),
                 StackReq::any_of(&[
@@ -46,7 +50,14 @@ impl SignalNorm {
             ),
             None => (0, StackReq::EMPTY),
         };
-        Solver { norm: self, values: Vec::new(), l_values: vec![0.0; l_len], mem: MemBuffer::new(req), factored: false }
+        Ok(Solver {
+            norm: self,
+            symbolic,
+            values: Vec::new(),
+            l_values: vec![0.0; l_len],
+            mem: MemBuffer::new(req),
+            factored: false,
+        })
     }
 }
 
@@ -57,7 +68,7 @@ impl Solver<'_> {
         self.factored = false;
         self.values = self.norm.assemble(x)?;
         self.norm.check_mass(x)?;
-        if let Some(symbolic) = &self.norm.symbolic {
+        if let Some(symbolic) = self.symbolic {
             let a = SparseColMatRef::new(self.norm.pattern.as_ref(), &self.values);
             symbolic
                 .factorize_numeric_llt::<f64>(
@@ -85,7 +96,7 @@ impl Solver<'_> {
         if b.len() != n {
             return Err(FemError::Dimension { what: "right-hand side", expected: n, found: b.len() });
         }
-        match (&self.norm.symbolic, self.norm.norm()) {
+        match (self.symbolic, self.norm.norm()) {
             (None, Norm::L2Lumped) => b.iter_mut().zip(&self.values).for_each(|(v, d)| *v /= d),
             (Some(symbolic), _) => {
                 let llt = LltRef::<usize, f64>::new(symbolic, &self.l_values);

@@ -41,6 +41,17 @@ fn bunny_matrices_match_libigl_entry_by_entry() {
     let mass = entries(&s, Norm::L2);
     let lumped = entries(&s, Norm::L2Lumped);
     let h1 = entries(&s, Norm::H1 { length: 1.0 });
+    // The separate mass and stiffness values, on the shared pattern.
+    let d = SignalNorm::try_new(&s, Norm::L2).unwrap();
+    let (m_vals, k_vals) = d.assemble_mass_and_stiffness(s.points()).unwrap();
+    let (col_ptr, row_idx) = d.pattern();
+    let mut stiff = HashMap::new();
+    for c in 0..d.n_vertices() {
+        for e in col_ptr[c]..col_ptr[c + 1] {
+            stiff.insert((row_idx[e], c), k_vals[e]);
+            assert_eq!(m_vals[e], mass[&(row_idx[e], c)], "same mass values as assemble()");
+        }
+    }
     let (mut seen, mut worst) = (0, [0.0f64; 3]);
     let scale = [1e-5, 1e-5, 10.0]; // entry magnitudes in the file: areas ~1e-5 m², cotangents ~1–10
     for line in text.lines().skip(1) {
@@ -48,7 +59,10 @@ fn bunny_matrices_match_libigl_entry_by_entry() {
         let key = (v[0] as usize, v[1] as usize);
         let ours_mass = mass.get(&key).copied().unwrap_or(0.0);
         let ours_lumped = lumped.get(&key).copied().unwrap_or(0.0);
-        let ours_stiff = h1.get(&key).copied().unwrap_or(0.0) - ours_mass;
+        let ours_stiff = stiff.get(&key).copied().unwrap_or(0.0);
+        // H1 with ℓ = 1 is mass + stiffness.
+        let ours_h1 = h1.get(&key).copied().unwrap_or(0.0);
+        assert!((ours_h1 - ours_mass - ours_stiff).abs() <= 1e-12 * scale[2]);
         for (k, (a, b)) in [(ours_mass, v[2]), (ours_lumped, v[3]), (ours_stiff, v[4])].into_iter().enumerate() {
             worst[k] = worst[k].max((a - b).abs() / scale[k]);
         }
