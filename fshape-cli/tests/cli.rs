@@ -112,3 +112,32 @@ fn unwritable_output_exits_1_and_leaves_nothing() {
     assert_eq!(r.status.code(), Some(1));
     assert!(!dir.exists());
 }
+
+#[test]
+fn fem_summary_and_matrix_market_export() {
+    let mesh = repo("data/stanford_bunny/bun_zipper_res4.ply.gz");
+    let out = tmp("d.mtx");
+    // The lumped L2 matrix: diagonal, trace = total area.
+    let v = json(&fshape(&["fem", &mesh, "--norm", "l2-lumped", "--json", "--out", out.to_str().unwrap()]));
+    assert_eq!(v["n"], 453);
+    assert_eq!(v["nnz"], 453);
+    let (trace, area) = (v["trace"].as_f64().unwrap(), v["total_area"].as_f64().unwrap());
+    assert!((trace - area).abs() <= 1e-12 * area);
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("%%MatrixMarket matrix coordinate real symmetric"));
+    let size = lines.find(|l| !l.starts_with('%')).unwrap();
+    assert_eq!(size, "453 453 453");
+    let sum: f64 = lines.map(|l| l.split(' ').nth(2).unwrap().parse::<f64>().unwrap()).sum();
+    assert!((sum - area).abs() <= 1e-12 * area);
+    // P1 mass: trace = half the area for triangles (diagonal A/6 per corner).
+    let v = json(&fshape(&["fem", &mesh, "--norm", "l2", "--json"]));
+    assert!((v["trace"].as_f64().unwrap() - area / 2.0).abs() <= 1e-12 * area);
+    // A bad norm name or length is a clear error.
+    let r = fshape(&["fem", &mesh, "--norm", "h2"]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("unknown signal norm `h2`"));
+    let r = fshape(&["fem", &mesh, "--norm", "h1", "--length=-1"]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("length scale must be positive"));
+}

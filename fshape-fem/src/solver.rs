@@ -115,6 +115,11 @@ impl Solver<'_> {
         Ok(h)
     }
 
+    /// Number of stored values of the Cholesky factor (a measure of fill).
+    pub fn l_len(&self) -> usize {
+        self.l_values.len()
+    }
+
     /// The assembled lower-triangle values of the last factored D_s(x).
     pub fn values(&self) -> &[f64] {
         &self.values
