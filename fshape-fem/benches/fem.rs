@@ -17,7 +17,7 @@ use fshape_mesh::io::{ReadOptions, read_mesh};
 fn meshes() -> Vec<(String, FShape)> {
     let cortex = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/pycortex_S1/lh.pia.ply.gz");
     let mut out: Vec<(String, FShape)> =
-        [5u32, 7, 8].iter().map(|&l| (format!("icosphere{l}"), icosphere(l, 1.0))).collect();
+        [5u32, 6, 8].iter().map(|&l| (format!("icosphere{l}"), icosphere(l, 1.0))).collect();
     out.push(("cortex_S1".into(), read_mesh(&cortex, &ReadOptions::default()).expect("shipped cortex")));
     out
 }
