@@ -51,6 +51,7 @@ pub(crate) fn local_matrix<D: DualNum<Primitive = f64> + Copy>(
 
 /// The mass part (lumped or P1) and, when asked, the stiffness part of a
 /// cell's local matrix, and its volume (see [`local_matrix`]).
+#[expect(clippy::needless_range_loop, reason = "index notation follows the formulas (e_i, K_ij)")]
 pub(crate) fn local_parts<D: DualNum<Primitive = f64> + Copy>(
     kind: CellKind,
     n: usize,

@@ -153,7 +153,7 @@ impl SignalNorm {
             let mut buf = [0.0; MAX_LOCAL];
             volume(self.kind, self.dim, self.gather_coords(x, c, &mut buf))
         });
-        match volumes.iter().position(|v| !(*v > tol)) {
+        match volumes.iter().position(|v| !exceeds(*v, tol)) {
             Some(cell) => Err(FemError::ZeroVolumeCell { cell, volume: volumes[cell], what }),
             None => Ok(()),
         }
@@ -238,7 +238,7 @@ impl SignalNorm {
             let mut buf = [0.0; MAX_LOCAL];
             local_parts(self.kind, self.dim, self.gather_coords(x, c, &mut buf), false, true)
         });
-        if let Some(cell) = parts.iter().position(|p| !(p.2 > tol)) {
+        if let Some(cell) = parts.iter().position(|p| !exceeds(p.2, tol)) {
             return Err(FemError::ZeroVolumeCell { cell, volume: parts[cell].2, what: "stiffness matrix" });
         }
         let entry = |e: usize| {
@@ -391,7 +391,7 @@ impl SignalNorm {
             let r = volume(self.kind, self.dim, self.gather_coords(x, c, &mut buf));
             c.iter().for_each(|&v| mass[v] += r);
         }
-        match mass.iter().position(|&m| !(m > 0.0)) {
+        match mass.iter().position(|&m| !exceeds(m, 0.0)) {
             Some(vertex) => Err(FemError::Singular { vertex }),
             None => Ok(()),
         }
@@ -508,6 +508,11 @@ fn lower_pattern(cells: &[usize], corners: usize, inc_ptr: &[usize], inc: &[usiz
         pat.slots.extend_from_slice(&c.slots);
     }
     pat
+}
+
+/// `v > tol`, false for NaN: a NaN volume or mass is as bad as a zero one.
+fn exceeds(v: f64, tol: f64) -> bool {
+    v.partial_cmp(&tol) == Some(std::cmp::Ordering::Greater)
 }
 
 /// aᵀ M b over one cell's corners.
