@@ -1,0 +1,282 @@
+//! Kernel sums over point sets, exact or truncated, and their derivatives.
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+
+use crate::{Kernel, KernelError};
+
+/// A spatial index over the source points y, for truncated kernels.
+enum Tree {
+    D2(ImmutableKdTree<f64, 2>),
+    D3(ImmutableKdTree<f64, 3>),
+}
+
+/// Kernel sums against fixed source points y (M × dim, flat): evaluation
+/// and derivatives at any target points x.
+///
+/// With an untapered kernel every pair is summed, in increasing j for each
+/// output. With a truncated kernel ([`Kernel::truncated`]) a k-d tree over y
+/// (kiddo) visits only the j within the support radius; the tree is built
+/// here, once, so **build a new `KernelSums` when y moves** (in shooting:
+/// once per evaluation of the vector field). Outputs are computed in
+/// parallel over i, each summed in an order that depends only on the data:
+/// serial and parallel results are equal bit for bit.
+pub struct KernelSums<'a> {
+    kernel: &'a Kernel,
+    y: &'a [f64],
+    dim: usize,
+    tree: Option<Tree>,
+    radius2: f64,
+    parallel: bool,
+}
+
+/// A pair's geometry handed to per-pair closures.
+pub struct Pair<'p> {
+    /// Source index j.
+    pub j: usize,
+    /// u = |x_i − y_j|².
+    pub u: f64,
+    /// x_i − y_j (`dim` components).
+    pub diff: &'p [f64],
+}
+
+impl<'a> KernelSums<'a> {
+    /// Prepares sums against `y` (`dim` = 2 or 3 coordinates per point).
+    pub fn try_new(kernel: &'a Kernel, y: &'a [f64], dim: usize) -> Result<Self, KernelError> {
+        if dim != 2 && dim != 3 {
+            return Err(KernelError::Dimension { what: "point dimension", expected: 3, found: dim });
+        }
+        if !y.len().is_multiple_of(dim) {
+            return Err(KernelError::Dimension {
+                what: "source coordinates",
+                expected: y.len() / dim * dim,
+                found: y.len(),
+            });
+        }
+        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+            return Err(KernelError::NonFinite { what: "source point", index: i / dim });
+        }
+        let (tree, radius2) = match kernel.support_radius() {
+            None => (None, f64::INFINITY),
+            Some(r) => {
+                let tree = if dim == 2 {
+                    let pts: Vec<[f64; 2]> = y.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
+                    Tree::D2(
+                        ImmutableKdTree::new_from_slice(&pts)
+                            .map_err(|_| KernelError::TooManyPoints { n: pts.len() })?,
+                    )
+                } else {
+                    let pts: Vec<[f64; 3]> = y.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+                    Tree::D3(
+                        ImmutableKdTree::new_from_slice(&pts)
+                            .map_err(|_| KernelError::TooManyPoints { n: pts.len() })?,
+                    )
+                };
+                (Some(tree), r * r)
+            }
+        };
+        Ok(KernelSums { kernel, y, dim, tree, radius2, parallel: true })
+    }
+
+    /// Parallel (default) or serial evaluation; the results are identical.
+    pub fn with_parallel(mut self, parallel: bool) -> Self {
+        self.parallel = parallel;
+        self
+    }
+
+    /// Number of source points M.
+    pub fn n_sources(&self) -> usize {
+        self.y.len() / self.dim
+    }
+
+    /// The kernel.
+    pub fn kernel(&self) -> &Kernel {
+        self.kernel
+    }
+
+    /// Calls `f` for every source j that can interact with the target `xi`
+    /// (all of them for an untapered kernel, those within the support
+    /// radius otherwise), in an order fixed by the data.
+    pub fn for_each_pair(&self, xi: &[f64], mut f: impl FnMut(Pair<'_>)) {
+        let n = self.dim;
+        let mut diff = [0.0; 3];
+        let mut visit = |j: usize| {
+            let yj = &self.y[j * n..(j + 1) * n];
+            let mut u = 0.0;
+            for k in 0..n {
+                diff[k] = xi[k] - yj[k];
+                u += diff[k] * diff[k];
+            }
+            if u < self.radius2 {
+                f(Pair { j, u, diff: &diff[..n] });
+            }
+        };
+        match &self.tree {
+            None => (0..self.n_sources()).for_each(&mut visit),
+            Some(Tree::D2(t)) => t
+                .query(&[xi[0], xi[1]])
+                .within::<SquaredEuclidean<f64>>(self.radius2)
+                .unsorted()
+                .visit(|h| visit(h.item as usize)),
+            Some(Tree::D3(t)) => t
+                .query(&[xi[0], xi[1], xi[2]])
+                .within::<SquaredEuclidean<f64>>(self.radius2)
+                .unsorted()
+                .visit(|h| visit(h.item as usize)),
+        }
+    }
+
+    /// The general engine: out[i·w .. (i+1)·w] = Σ_j f(i, pair), for every
+    /// target x_i, in parallel over i. fshape-varifold uses it for its
+    /// products of kernels.
+    pub fn map_targets(
+        &self,
+        x: &[f64],
+        w: usize,
+        f: impl Fn(usize, &Pair<'_>, &mut [f64]) + Sync,
+    ) -> Result<Vec<f64>, KernelError> {
+        self.check_targets(x)?;
+        let n = self.dim;
+        let mut out = vec![0.0; x.len() / n * w];
+        let one = |(i, o): (usize, &mut [f64])| self.for_each_pair(&x[i * n..(i + 1) * n], |p| f(i, &p, o));
+        if self.parallel {
+            out.par_chunks_mut(w.max(1)).enumerate().for_each(one);
+        } else {
+            out.chunks_mut(w.max(1)).enumerate().for_each(one);
+        }
+        Ok(out)
+    }
+
+    fn check_targets(&self, x: &[f64]) -> Result<(), KernelError> {
+        if !x.len().is_multiple_of(self.dim) {
+            return Err(KernelError::Dimension {
+                what: "target coordinates",
+                expected: x.len() / self.dim * self.dim,
+                found: x.len(),
+            });
+        }
+        match x.iter().position(|v| !v.is_finite()) {
+            Some(i) => Err(KernelError::NonFinite { what: "target point", index: i / self.dim }),
+            None => Ok(()),
+        }
+    }
+
+    fn check_len(&self, what: &'static str, v: &[f64], expected: usize) -> Result<(), KernelError> {
+        if v.len() == expected { Ok(()) } else { Err(KernelError::Dimension { what, expected, found: v.len() }) }
+    }
+
+    /// out_i = Σ_j k(|x_i − y_j|²) b_j, with b_j of `bdim` components
+    /// (b: M × bdim). With b = momenta this is the LDDMM velocity K_{x,y} b.
+    ///
+    /// ```
+    /// use fshape_kernels::{Kernel, KernelSums};
+    /// let k = Kernel::gaussian(1.0)?;
+    /// let y = [0.0, 0.0, 0.0];
+    /// let sums = KernelSums::try_new(&k, &y, 3)?;
+    /// // One source at the origin with weight 2, one target at distance 1:
+    /// let out = sums.conv(&[1.0, 0.0, 0.0], &[2.0], 1)?;
+    /// assert!((out[0] - 2.0 * (-0.5f64).exp()).abs() < 1e-15);
+    /// # Ok::<(), fshape_kernels::KernelError>(())
+    /// ```
+    pub fn conv(&self, x: &[f64], b: &[f64], bdim: usize) -> Result<Vec<f64>, KernelError> {
+        self.check_len("b", b, self.n_sources() * bdim)?;
+        if let Some((a, wt)) = self.kernel.single_gaussian() {
+            self.check_targets(x)?;
+            return Ok(crate::fast::gaussian_conv(a, wt, x, self.y, self.dim, b, bdim, self.parallel));
+        }
+        self.map_targets(x, bdim, |_, p, o| {
+            let k = self.kernel.value(p.u);
+            for c in 0..bdim {
+                o[c] += k * b[p.j * bdim + c];
+            }
+        })
+    }
+
+    /// ∂_x Σ_{i,j} k(|x_i − y_j|²) a_i·b_j = Σ_j 2 k'(u_ij) (a_i·b_j)(x_i − y_j)
+    /// for each x_i (a: N × bdim, b: M × bdim). For the self term with y = x
+    /// and a = b = p, the gradient of pᵀ K_{x,x} p is twice this.
+    pub fn grad_cross(&self, x: &[f64], a: &[f64], b: &[f64], bdim: usize) -> Result<Vec<f64>, KernelError> {
+        let n = self.dim;
+        self.check_len("a", a, x.len() / n * bdim)?;
+        self.check_len("b", b, self.n_sources() * bdim)?;
+        self.map_targets(x, n, |i, p, o| {
+            let ab: f64 = (0..bdim).map(|c| a[i * bdim + c] * b[p.j * bdim + c]).sum();
+            let s = 2.0 * self.kernel.derivatives(p.u)[1] * ab;
+            for k in 0..n {
+                o[k] += s * p.diff[k];
+            }
+        })
+    }
+
+    /// Directional derivative of [`KernelSums::conv`] when x moves by dx,
+    /// y by dy (pass zeros if y is fixed; dy = dx when y is x) and b by db:
+    /// Σ_j [2 k'(u)((x_i − y_j)·(dx_i − dy_j)) b_j + k(u) db_j].
+    #[allow(clippy::too_many_arguments)]
+    pub fn conv_jvp(
+        &self,
+        x: &[f64],
+        dx: &[f64],
+        dy: &[f64],
+        b: &[f64],
+        db: &[f64],
+        bdim: usize,
+    ) -> Result<Vec<f64>, KernelError> {
+        let n = self.dim;
+        self.check_len("dx", dx, x.len())?;
+        self.check_len("dy", dy, self.y.len())?;
+        self.check_len("b", b, self.n_sources() * bdim)?;
+        self.check_len("db", db, self.n_sources() * bdim)?;
+        self.map_targets(x, bdim, |i, p, o| {
+            let [k, dk, _] = self.kernel.derivatives(p.u);
+            let du: f64 = (0..n).map(|c| 2.0 * p.diff[c] * (dx[i * n + c] - dy[p.j * n + c])).sum();
+            for c in 0..bdim {
+                o[c] += dk * du * b[p.j * bdim + c] + k * db[p.j * bdim + c];
+            }
+        })
+    }
+
+    /// Directional derivative of [`KernelSums::grad_cross`] when x, y, a, b
+    /// move by dx, dy, da, db:
+    /// Σ_j [2k''(u) du (a_i·b_j)(x_i − y_j) + 2k'(u)(da_i·b_j + a_i·db_j)(x_i − y_j)
+    /// + 2k'(u)(a_i·b_j)(dx_i − dy_j)], du = 2(x_i − y_j)·(dx_i − dy_j).
+    #[allow(clippy::too_many_arguments)]
+    pub fn grad_cross_jvp(
+        &self,
+        x: &[f64],
+        dx: &[f64],
+        dy: &[f64],
+        a: &[f64],
+        da: &[f64],
+        b: &[f64],
+        db: &[f64],
+        bdim: usize,
+    ) -> Result<Vec<f64>, KernelError> {
+        let n = self.dim;
+        let nx = x.len() / n;
+        self.check_len("dx", dx, x.len())?;
+        self.check_len("dy", dy, self.y.len())?;
+        for (what, v, len) in [
+            ("a", a, nx * bdim),
+            ("da", da, nx * bdim),
+            ("b", b, self.n_sources() * bdim),
+            ("db", db, self.n_sources() * bdim),
+        ] {
+            self.check_len(what, v, len)?;
+        }
+        self.map_targets(x, n, |i, p, o| {
+            let [_, dk, ddk] = self.kernel.derivatives(p.u);
+            let (ai, bj) = (&a[i * bdim..(i + 1) * bdim], &b[p.j * bdim..(p.j + 1) * bdim]);
+            let (dai, dbj) = (&da[i * bdim..(i + 1) * bdim], &db[p.j * bdim..(p.j + 1) * bdim]);
+            let ab: f64 = ai.iter().zip(bj).map(|(u, v)| u * v).sum();
+            let dab: f64 = (0..bdim).map(|c| dai[c] * bj[c] + ai[c] * dbj[c]).sum();
+            let mut du = 0.0;
+            for c in 0..n {
+                du += 2.0 * p.diff[c] * (dx[i * n + c] - dy[p.j * n + c]);
+            }
+            for c in 0..n {
+                let ddiff = dx[i * n + c] - dy[p.j * n + c];
+                o[c] += 2.0 * ddk * du * ab * p.diff[c] + 2.0 * dk * dab * p.diff[c] + 2.0 * dk * ab * ddiff;
+            }
+        })
+    }
+}

@@ -1,0 +1,153 @@
+//! Every fast path against a brute-force double loop, on uniform, clustered
+//! and degenerate inputs; the truncation bound; symmetry; PSD; serial =
+//! parallel.
+
+use fshape_kernels::{Kernel, KernelSums};
+use fshape_mesh::generate::SplitMix64;
+use proptest::prelude::*;
+use proptest::test_runner::{Config, RngSeed};
+
+use crate::{clustered, kernels, uniform};
+
+/// The obvious double loop, with the kernel's scalar value.
+fn brute(k: &Kernel, x: &[f64], y: &[f64], dim: usize, b: &[f64], bdim: usize) -> Vec<f64> {
+    let (nx, ny) = (x.len() / dim, y.len() / dim);
+    let mut out = vec![0.0; nx * bdim];
+    for i in 0..nx {
+        for j in 0..ny {
+            let u: f64 = (0..dim).map(|c| (x[i * dim + c] - y[j * dim + c]).powi(2)).sum();
+            for c in 0..bdim {
+                out[i * bdim + c] += k.value(u) * b[j * bdim + c];
+            }
+        }
+    }
+    out
+}
+
+/// k(0) Σ_j |b_j|: a bound on Σ_j |k(u_ij) b_j| (every profile here is
+/// maximal at 0), the scale rounding errors are relative to.
+fn magnitude(k: &Kernel, b: &[f64]) -> f64 {
+    k.value(0.0) * b.iter().map(|v| v.abs()).sum::<f64>()
+}
+
+fn cases(seed: u64) -> Vec<(usize, Vec<f64>, Vec<f64>)> {
+    let mut rng = SplitMix64(seed);
+    let mut out = Vec::new();
+    for dim in [2, 3] {
+        out.push((dim, uniform(37, dim, &mut rng), uniform(53, dim, &mut rng)));
+        out.push((dim, clustered(41, dim, &mut rng), clustered(29, dim, &mut rng)));
+        out.push((dim, uniform(1, dim, &mut rng), uniform(17, dim, &mut rng))); // N = 1
+        out.push((dim, uniform(5, dim, &mut rng), Vec::new())); // M = 0
+        let same = uniform(1, dim, &mut rng);
+        out.push((dim, same.repeat(6), same.repeat(9))); // all points equal
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(Config { cases: 12, rng_seed: RngSeed::Fixed(1234), failure_persistence: None, ..Config::default() })]
+
+    #[test]
+    fn conv_matches_the_brute_force_oracle(seed in any::<u64>(), bdim in 1usize..4) {
+        for (name, k) in kernels() {
+            for (dim, x, y) in cases(seed) {
+                let mut rng = SplitMix64(seed ^ 7);
+                let b: Vec<f64> = (0..y.len() / dim * bdim).map(|_| rng.range(-1.0, 1.0)).collect();
+                let sums = KernelSums::try_new(&k, &y, dim).unwrap();
+                let fast = sums.conv(&x, &b, bdim).unwrap();
+                let slow = brute(&k, &x, &y, dim, &b, bdim);
+                let scale = magnitude(&k, &b);
+                for i in 0..fast.len() {
+                    // Different summation order (and wide's exp on the
+                    // vectorised path): a few ulps per term.
+                    prop_assert!((fast[i] - slow[i]).abs() <= 1e-14 * scale, "{} dim {}: {} vs {}", name, dim, fast[i], slow[i]);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn truncation_error_is_within_the_stated_bound() {
+    let mut rng = SplitMix64(99);
+    for dim in [2, 3] {
+        let x = uniform(300, dim, &mut rng);
+        let b: Vec<f64> = (0..300).map(|_| rng.range(-1.0, 1.0)).collect();
+        for tol in [1e-3, 1e-6, 1e-9] {
+            for (name, base) in kernels().into_iter().filter(|(_, k)| k.taper().is_none()) {
+                let trunc = base.truncated(tol).unwrap();
+                let exact = KernelSums::try_new(&base, &x, dim).unwrap().conv(&x, &b, 1).unwrap();
+                let approx = KernelSums::try_new(&trunc, &x, dim).unwrap().conv(&x, &b, 1).unwrap();
+                let u_in = trunc.taper().unwrap().u_in;
+                for i in 0..300 {
+                    // Σ |b_j| over the j the truncation changes (u ≥ u_in).
+                    let changed: f64 = (0..300)
+                        .filter(|&j| (0..dim).map(|c| (x[i * dim + c] - x[j * dim + c]).powi(2)).sum::<f64>() >= u_in)
+                        .map(|j| b[j].abs())
+                        .sum();
+                    let bound = tol * base.value(0.0) * changed;
+                    // Plus rounding: the two paths sum 300 terms in different
+                    // orders, a few ulps of Σ |k b_j| ≤ k(0) Σ |b_j|.
+                    let rounding = 1e-14 * base.value(0.0) * b.iter().map(|v| v.abs()).sum::<f64>();
+                    prop_assert_bound((approx[i] - exact[i]).abs(), bound * (1.0 + 1e-9) + rounding, &name);
+                }
+            }
+        }
+    }
+}
+
+fn prop_assert_bound(err: f64, bound: f64, name: &str) {
+    assert!(err <= bound, "{name}: error {err:e} above the bound {bound:e}");
+}
+
+#[test]
+fn cross_sums_are_symmetric_and_gram_matrices_psd() {
+    let mut rng = SplitMix64(5);
+    for (name, k) in kernels() {
+        let (x, y) = (uniform(40, 3, &mut rng), uniform(30, 3, &mut rng));
+        let a: Vec<f64> = (0..40).map(|_| rng.range(-1.0, 1.0)).collect();
+        let b: Vec<f64> = (0..30).map(|_| rng.range(-1.0, 1.0)).collect();
+        // aᵀ (K_xy b) = bᵀ (K_yx a).
+        let kb = KernelSums::try_new(&k, &y, 3).unwrap().conv(&x, &b, 1).unwrap();
+        let ka = KernelSums::try_new(&k, &x, 3).unwrap().conv(&y, &a, 1).unwrap();
+        let (l, r): (f64, f64) =
+            (a.iter().zip(&kb).map(|(u, v)| u * v).sum(), b.iter().zip(&ka).map(|(u, v)| u * v).sum());
+        assert!((l - r).abs() <= 1e-13 * (l.abs() + 1.0), "{name}");
+        // vᵀ K_xx v ≥ 0 for the (positive definite) untruncated kernels; the
+        // taper is not a positive definite function, so a truncated Gram
+        // matrix may dip below zero by up to τ k(0) Σ|v|².
+        if k.taper().is_none() {
+            for _ in 0..20 {
+                let v: Vec<f64> = (0..40).map(|_| rng.range(-1.0, 1.0)).collect();
+                let kv = KernelSums::try_new(&k, &x, 3).unwrap().conv(&x, &v, 1).unwrap();
+                let q: f64 = v.iter().zip(&kv).map(|(u, w)| u * w).sum();
+                assert!(q >= -1e-12, "{name}: vᵀKv = {q}");
+            }
+        }
+    }
+}
+
+#[test]
+fn serial_and_parallel_are_bitwise_equal() {
+    let mut rng = SplitMix64(8);
+    let x = uniform(500, 3, &mut rng);
+    let p: Vec<f64> = (0..1500).map(|_| rng.range(-1.0, 1.0)).collect();
+    for (_, k) in kernels() {
+        let par = KernelSums::try_new(&k, &x, 3).unwrap();
+        let ser = KernelSums::try_new(&k, &x, 3).unwrap().with_parallel(false);
+        assert_eq!(par.conv(&x, &p, 3).unwrap(), ser.conv(&x, &p, 3).unwrap());
+        assert_eq!(par.grad_cross(&x, &p, &p, 3).unwrap(), ser.grad_cross(&x, &p, &p, 3).unwrap());
+    }
+}
+
+#[test]
+fn bad_points_are_refused() {
+    let k = Kernel::gaussian(1.0).unwrap();
+    assert!(KernelSums::try_new(&k, &[0.0, f64::NAN, 0.0], 3).is_err());
+    assert!(KernelSums::try_new(&k, &[0.0; 4], 3).is_err());
+    assert!(KernelSums::try_new(&k, &[0.0; 4], 4).is_err());
+    let s = KernelSums::try_new(&k, &[0.0; 6], 3).unwrap();
+    let e = s.conv(&[0.0, 0.0, f64::INFINITY], &[1.0, 1.0], 1).unwrap_err();
+    assert!(e.to_string().contains("target point 0"), "{e}");
+    assert!(s.conv(&[0.0; 3], &[1.0], 1).is_err(), "b of the wrong length");
+}
