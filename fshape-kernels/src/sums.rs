@@ -182,7 +182,9 @@ impl<'a> KernelSums<'a> {
         self.check_len("b", b, self.n_sources() * bdim)?;
         if let Some((a, wt)) = self.kernel.single_gaussian() {
             self.check_targets(x)?;
-            return Ok(crate::fast::gaussian_conv(a, wt, x, self.y, self.dim, b, bdim, self.parallel));
+            if let Some(out) = crate::fast::gaussian_conv(a, wt, x, self.y, self.dim, b, bdim, self.parallel) {
+                return Ok(out);
+            }
         }
         self.map_targets(x, bdim, |_, p, o| {
             let k = self.kernel.value(p.u);
