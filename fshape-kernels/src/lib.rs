@@ -31,6 +31,7 @@
 //! # Ok::<(), fshape_kernels::KernelError>(())
 //! ```
 
+mod blocks;
 mod fast;
 mod profile;
 mod sums;

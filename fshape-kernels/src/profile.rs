@@ -184,11 +184,11 @@ impl Kernel {
         }
     }
 
-    /// Whether the kernel is one plain (untapered) Gaussian, and its
-    /// coefficient a = 1/(2σ²) and weight: the case with a vectorised path.
-    pub(crate) fn single_gaussian(&self) -> Option<(f64, f64)> {
-        match (self.terms.as_slice(), self.taper) {
-            ([Term::Gauss { a, w }], None) => Some((*a, *w)),
+    /// For a single Gaussian (the case with vectorised paths): its
+    /// coefficient a = 1/(2σ²), weight, and taper if truncated.
+    pub(crate) fn single_gaussian(&self) -> Option<(f64, f64, Option<Taper>)> {
+        match self.terms.as_slice() {
+            [Term::Gauss { a, w }] => Some((*a, *w, self.taper)),
             _ => None,
         }
     }

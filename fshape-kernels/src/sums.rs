@@ -1,5 +1,7 @@
 //! Kernel sums over point sets, exact or truncated, and their derivatives.
 
+use std::sync::OnceLock;
+
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
@@ -17,15 +19,19 @@ enum Tree {
 /// With an untapered kernel every pair is summed, in increasing j for each
 /// output. With a truncated kernel ([`Kernel::truncated`]) a k-d tree over y
 /// (kiddo) visits only the j within the support radius; the tree is built
-/// here, once, so **build a new `KernelSums` when y moves** (in shooting:
-/// once per evaluation of the vector field). Outputs are computed in
+/// on first use, once, so **build a new `KernelSums` when y moves** (in
+/// shooting: once per evaluation of the vector field). Sums with one
+/// truncated Gaussian (`conv`) use a faster block-sparse path instead: the
+/// points are sorted into blocks and whole blocks beyond the support radius
+/// are skipped. Outputs are computed in
 /// parallel over i, each summed in an order that depends only on the data:
 /// serial and parallel results are equal bit for bit.
 pub struct KernelSums<'a> {
     kernel: &'a Kernel,
     y: &'a [f64],
     dim: usize,
-    tree: Option<Tree>,
+    /// Built on first use by the per-pair engine (truncated kernels only).
+    tree: OnceLock<Result<Tree, KernelError>>,
     radius2: f64,
     parallel: bool,
 }
@@ -56,26 +62,12 @@ impl<'a> KernelSums<'a> {
         if let Some(i) = y.iter().position(|v| !v.is_finite()) {
             return Err(KernelError::NonFinite { what: "source point", index: i / dim });
         }
-        let (tree, radius2) = match kernel.support_radius() {
-            None => (None, f64::INFINITY),
-            Some(r) => {
-                let tree = if dim == 2 {
-                    let pts: Vec<[f64; 2]> = y.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
-                    Tree::D2(
-                        ImmutableKdTree::new_from_slice(&pts)
-                            .map_err(|_| KernelError::TooManyPoints { n: pts.len() })?,
-                    )
-                } else {
-                    let pts: Vec<[f64; 3]> = y.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
-                    Tree::D3(
-                        ImmutableKdTree::new_from_slice(&pts)
-                            .map_err(|_| KernelError::TooManyPoints { n: pts.len() })?,
-                    )
-                };
-                (Some(tree), r * r)
-            }
-        };
-        Ok(KernelSums { kernel, y, dim, tree, radius2, parallel: true })
+        let n = y.len() / dim;
+        if kernel.support_radius().is_some() && u32::try_from(n).is_err() {
+            return Err(KernelError::TooManyPoints { n });
+        }
+        let radius2 = kernel.support_radius().map_or(f64::INFINITY, |r| r * r);
+        Ok(KernelSums { kernel, y, dim, tree: OnceLock::new(), radius2, parallel: true })
     }
 
     /// Parallel (default) or serial evaluation; the results are identical.
@@ -92,6 +84,24 @@ impl<'a> KernelSums<'a> {
     /// The kernel.
     pub fn kernel(&self) -> &Kernel {
         self.kernel
+    }
+
+    /// The k-d tree over y for a truncated kernel (built once), or `None`.
+    fn tree(&self) -> Option<&Tree> {
+        self.kernel.support_radius()?;
+        let t = self.tree.get_or_init(|| {
+            let n = self.n_sources();
+            let err = |_| KernelError::TooManyPoints { n };
+            Ok(if self.dim == 2 {
+                let pts: Vec<[f64; 2]> = self.y.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
+                Tree::D2(ImmutableKdTree::new_from_slice(&pts).map_err(err)?)
+            } else {
+                let pts: Vec<[f64; 3]> = self.y.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+                Tree::D3(ImmutableKdTree::new_from_slice(&pts).map_err(err)?)
+            })
+        });
+        // The only construction error (too many points) is refused in try_new.
+        t.as_ref().ok()
     }
 
     /// Calls `f` for every source j that can interact with the target `xi`
@@ -111,7 +121,7 @@ impl<'a> KernelSums<'a> {
                 f(Pair { j, u, diff: &diff[..n] });
             }
         };
-        match &self.tree {
+        match self.tree() {
             None => (0..self.n_sources()).for_each(&mut visit),
             Some(Tree::D2(t)) => t
                 .query(&[xi[0], xi[1]])
@@ -180,9 +190,16 @@ impl<'a> KernelSums<'a> {
     /// ```
     pub fn conv(&self, x: &[f64], b: &[f64], bdim: usize) -> Result<Vec<f64>, KernelError> {
         self.check_len("b", b, self.n_sources() * bdim)?;
-        if let Some((a, wt)) = self.kernel.single_gaussian() {
+        if let Some((a, wt, taper)) = self.kernel.single_gaussian() {
             self.check_targets(x)?;
-            if let Some(out) = crate::fast::gaussian_conv(a, wt, x, self.y, self.dim, b, bdim, self.parallel) {
+            let fast = match taper {
+                None => crate::fast::gaussian_conv(a, wt, x, self.y, self.dim, b, bdim, self.parallel),
+                Some(t) => {
+                    let t = crate::blocks::TaperLanes { u_in: t.u_in, u_out: t.u_out };
+                    crate::blocks::truncated_conv(a, wt, t, x, self.y, self.dim, b, bdim, self.parallel)
+                }
+            };
+            if let Some(out) = fast {
                 return Ok(out);
             }
         }

@@ -24,6 +24,7 @@ const COUNTS: &[(&str, Counts)] = &[
     ("stanford_bunny/bunny_qslim_2581v.ply.gz", (2581, 5138, 4, 0, 0, 0, 0)),
     ("stanford_bunny/stanford-bunny.obj.gz", (35947, 69451, 5, 1113, 0, 0, 0)),
     ("pycortex_S1/lh.pia.ply.gz", (152893, 305782, 0, 0, 0, 0, 0)),
+    ("conte69_32k/lh.midthickness.ply.gz", (32492, 64980, 0, 0, 0, 0, 0)),
 ];
 
 #[test]
