@@ -13,8 +13,10 @@
 //!   and each output obeys |out_i − exact_i| ≤ τ·k(0)·Σ_{j changed} |b_j|.
 //! - [`KernelSums`]: sums against source points y, in parallel over targets
 //!   and deterministic (serial = parallel, bitwise); exact sums visit every
-//!   j (a vectorised path for one Gaussian), truncated ones only the j a
-//!   k-d tree (kiddo) finds within the support radius. Derivatives:
+//!   j (a vectorised path for one Gaussian), truncated ones skip blocks of
+//!   sources beyond the support radius (one Gaussian) or visit only the j a
+//!   spatial index (obvhs BVH or kiddo k-d tree) finds within it (the
+//!   general engine). Derivatives:
 //!   [`KernelSums::grad_cross`] (∂_x of aᵀK b), [`KernelSums::conv_jvp`] and
 //!   [`KernelSums::grad_cross_jvp`] (directional derivatives for the exact
 //!   adjoint of shooting), and [`KernelSums::map_targets`], the general
@@ -37,7 +39,7 @@ mod profile;
 mod sums;
 
 pub use profile::{Kernel, Profile, TAPER_WIDTH, Taper};
-pub use sums::{KernelSums, Pair};
+pub use sums::{KernelSums, Pair, SpatialIndex};
 
 /// Why a kernel or a kernel sum could not be set up.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
