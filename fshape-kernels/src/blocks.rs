@@ -10,6 +10,8 @@
 //! Each target's sum runs over source blocks in increasing order, so the
 //! results do not depend on the number of threads.
 
+#![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
+
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
 

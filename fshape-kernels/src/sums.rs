@@ -283,8 +283,8 @@ impl<'a> KernelSums<'a> {
         self.map_targets(x, n, |i, p, o| {
             let ab: f64 = (0..bdim).map(|c| a[i * bdim + c] * b[p.j * bdim + c]).sum();
             let s = 2.0 * self.kernel.derivatives(p.u)[1] * ab;
-            for k in 0..n {
-                o[k] += s * p.diff[k];
+            for (ok, dk) in o.iter_mut().zip(p.diff) {
+                *ok += s * dk;
             }
         })
     }
