@@ -1,5 +1,6 @@
-//! The vectorised path for the most common case: an exact sum with one
-//! Gaussian, out_i = Σ_j w exp(−a |x_i − y_j|²) b_j.
+//! The vectorised paths for the most common case: exact sums with a
+//! Gaussian or a sum of a few Gaussians (the multi-scale deformation
+//! kernels), out_i = Σ_j k(|x_i − y_j|²) b_j and the x-gradient of aᵀK b.
 //!
 //! Eight targets are processed together as the lanes of `[f64; 8]` arrays,
 //! so each target's sum still runs over j in increasing order and each y_j
@@ -21,6 +22,8 @@
 
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
+
+use crate::profile::GaussTerms;
 
 /// Lanes per block.
 pub(crate) const L: usize = 32;
@@ -93,19 +96,26 @@ pub(crate) fn exp_lanes(x: [f64; L]) -> [f64; L] {
     out
 }
 
-struct Block<'a, const D: usize, const BD: usize> {
-    a: f64,
+/// One block of L targets against every source: Σ_j k(u) b_j (`GRAD` =
+/// false) or Σ_j 2 k'(u) (a_i·b_j)(x_i − y_j) (`GRAD` = true), for
+/// k = Σ_t w_t exp(−a_t u).
+struct Block<'a, const D: usize, const BD: usize, const GRAD: bool> {
+    terms: &'a GaussTerms,
     x: &'a [[f64; L]; D],
+    /// The targets' own weights a_i by component (gradient only).
+    ai: &'a [[f64; L]; BD],
     y: &'a [f64],
     b: &'a [f64],
 }
 
-impl<const D: usize, const BD: usize> WithSimd for Block<'_, D, BD> {
-    type Output = [[f64; L]; BD];
+impl<const D: usize, const BD: usize, const GRAD: bool> WithSimd for Block<'_, D, BD, GRAD> {
+    /// Conv: BD sums per lane; gradient: D components per lane (the first D
+    /// rows; BD rows are allocated for simplicity, D ≤ 3 = max BD).
+    type Output = [[f64; L]; 3];
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) -> Self::Output {
-        let mut acc = [[0.0; L]; BD];
+        let mut acc = [[0.0; L]; 3];
         for (yj, bj) in self.y.chunks_exact(D).zip(self.b.chunks_exact(BD)) {
             let mut u = [0.0; L];
             for k in 0..D {
@@ -114,14 +124,37 @@ impl<const D: usize, const BD: usize> WithSimd for Block<'_, D, BD> {
                     u[l] += d * d;
                 }
             }
-            let mut arg = [0.0; L];
-            for l in 0..L {
-                arg[l] = -self.a * u[l];
-            }
-            let e = exp_lanes(arg);
-            for c in 0..BD {
+            // k(u), or k'(u) for the gradient, summed over the terms.
+            let mut kv = [0.0; L];
+            for t in 0..self.terms.n {
+                let (a, w) = (self.terms.a[t], self.terms.w[t]);
+                let mut arg = [0.0; L];
                 for l in 0..L {
-                    acc[c][l] += e[l] * bj[c];
+                    arg[l] = -a * u[l];
+                }
+                let e = exp_lanes(arg);
+                let coef = if GRAD { -a * w } else { w };
+                for l in 0..L {
+                    kv[l] += coef * e[l];
+                }
+            }
+            if GRAD {
+                let mut s = [0.0; L];
+                for c in 0..BD {
+                    for l in 0..L {
+                        s[l] += self.ai[c][l] * bj[c];
+                    }
+                }
+                for k in 0..D {
+                    for l in 0..L {
+                        acc[k][l] += 2.0 * kv[l] * s[l] * (self.x[k][l] - yj[k]);
+                    }
+                }
+            } else {
+                for c in 0..BD {
+                    for l in 0..L {
+                        acc[c][l] += kv[l] * bj[c];
+                    }
                 }
             }
         }
@@ -129,13 +162,11 @@ impl<const D: usize, const BD: usize> WithSimd for Block<'_, D, BD> {
     }
 }
 
-/// Σ_j w exp(−a |x_i − y_j|²) b_j for every target i, for points in 2-D or
-/// 3-D and b of 1 to 3 components (`None` otherwise: the caller uses the
-/// general path).
-#[allow(clippy::too_many_arguments)]
+/// Σ_j k(|x_i − y_j|²) b_j for every target i, for an untapered sum of
+/// Gaussians, points in 2-D or 3-D and b of 1 to 3 components (`None`
+/// otherwise: the caller uses the general path).
 pub(crate) fn gaussian_conv(
-    a: f64,
-    w: f64,
+    terms: &GaussTerms,
     x: &[f64],
     y: &[f64],
     dim: usize,
@@ -143,50 +174,77 @@ pub(crate) fn gaussian_conv(
     bdim: usize,
     parallel: bool,
 ) -> Option<Vec<f64>> {
-    match (dim, bdim) {
-        (2, 1) => Some(conv_bd::<2, 1>(a, w, x, y, b, parallel)),
-        (2, 2) => Some(conv_bd::<2, 2>(a, w, x, y, b, parallel)),
-        (2, 3) => Some(conv_bd::<2, 3>(a, w, x, y, b, parallel)),
-        (3, 1) => Some(conv_bd::<3, 1>(a, w, x, y, b, parallel)),
-        (3, 2) => Some(conv_bd::<3, 2>(a, w, x, y, b, parallel)),
-        (3, 3) => Some(conv_bd::<3, 3>(a, w, x, y, b, parallel)),
-        _ => None,
-    }
+    dispatch::<false>(terms, x, y, dim, &[], b, bdim, parallel)
 }
 
-fn conv_bd<const D: usize, const BD: usize>(
-    a: f64,
-    w: f64,
+/// Σ_j 2 k'(|x_i − y_j|²) (a_i·b_j)(x_i − y_j) for every target i (the
+/// gradient of aᵀK b in x), same cases as [`gaussian_conv`].
+pub(crate) fn gaussian_grad(
+    terms: &GaussTerms,
     x: &[f64],
     y: &[f64],
+    dim: usize,
+    a: &[f64],
+    b: &[f64],
+    bdim: usize,
+    parallel: bool,
+) -> Option<Vec<f64>> {
+    dispatch::<true>(terms, x, y, dim, a, b, bdim, parallel)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn dispatch<const GRAD: bool>(
+    terms: &GaussTerms,
+    x: &[f64],
+    y: &[f64],
+    dim: usize,
+    a: &[f64],
+    b: &[f64],
+    bdim: usize,
+    parallel: bool,
+) -> Option<Vec<f64>> {
+    Some(match (dim, bdim) {
+        (2, 1) => run::<2, 1, GRAD>(terms, x, y, a, b, parallel),
+        (2, 2) => run::<2, 2, GRAD>(terms, x, y, a, b, parallel),
+        (2, 3) => run::<2, 3, GRAD>(terms, x, y, a, b, parallel),
+        (3, 1) => run::<3, 1, GRAD>(terms, x, y, a, b, parallel),
+        (3, 2) => run::<3, 2, GRAD>(terms, x, y, a, b, parallel),
+        (3, 3) => run::<3, 3, GRAD>(terms, x, y, a, b, parallel),
+        _ => return None,
+    })
+}
+
+fn run<const D: usize, const BD: usize, const GRAD: bool>(
+    terms: &GaussTerms,
+    x: &[f64],
+    y: &[f64],
+    a: &[f64],
     b: &[f64],
     parallel: bool,
 ) -> Vec<f64> {
-    let dim = D;
-    let nx = x.len() / dim;
-    let mut out = vec![0.0; nx * BD];
+    let nx = x.len() / D;
+    let w_out = if GRAD { D } else { BD };
+    let mut out = vec![0.0; nx * w_out];
     let arch = Arch::new();
     let block = |(blk, o): (usize, &mut [f64])| {
         let i0 = blk * L;
-        let lanes = o.len() / BD;
-        // Target coordinates by axis; unused lanes repeat the last target.
-        let mut xs = [[0.0; L]; D];
-        for (k, xk) in xs.iter_mut().enumerate() {
-            for (l, v) in xk.iter_mut().enumerate() {
-                *v = x[(i0 + l.min(lanes - 1)) * dim + k];
-            }
-        }
-        let acc = arch.dispatch(Block::<D, BD> { a, x: &xs, y, b });
-        for (c, acc_c) in acc.iter().enumerate() {
+        let lanes = o.len() / w_out;
+        // Targets by axis (and their weights); unused lanes repeat the last.
+        let lane = |l: usize| i0 + l.min(lanes - 1);
+        let xs: [[f64; L]; D] = std::array::from_fn(|k| std::array::from_fn(|l| x[lane(l) * D + k]));
+        let ai: [[f64; L]; BD] =
+            std::array::from_fn(|c| std::array::from_fn(|l| if GRAD { a[lane(l) * BD + c] } else { 0.0 }));
+        let acc = arch.dispatch(Block::<D, BD, GRAD> { terms, x: &xs, ai: &ai, y, b });
+        for (c, acc_c) in acc.iter().enumerate().take(w_out) {
             for l in 0..lanes {
-                o[l * BD + c] = w * acc_c[l];
+                o[l * w_out + c] = acc_c[l];
             }
         }
     };
     if parallel {
-        out.par_chunks_mut(L * BD).enumerate().for_each(block);
+        out.par_chunks_mut(L * w_out).enumerate().for_each(block);
     } else {
-        out.chunks_mut(L * BD).enumerate().for_each(block);
+        out.chunks_mut(L * w_out).enumerate().for_each(block);
     }
     out
 }

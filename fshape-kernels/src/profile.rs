@@ -47,6 +47,17 @@ pub struct Taper {
     pub u_out: f64,
 }
 
+/// The most Gaussian terms the vectorised exact paths take.
+pub(crate) const MAX_TERMS: usize = 4;
+
+/// The terms of an untapered sum of Gaussians, Σ_t w_t exp(−a_t u).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GaussTerms {
+    pub(crate) a: [f64; MAX_TERMS],
+    pub(crate) w: [f64; MAX_TERMS],
+    pub(crate) n: usize,
+}
+
 /// How much wider the outer taper radius is than the inner one.
 pub const TAPER_WIDTH: f64 = 0.25;
 
@@ -182,6 +193,27 @@ impl Kernel {
             }
             _ => k,
         }
+    }
+
+    /// For an untapered sum of at most [`MAX_TERMS`] Gaussians (the case
+    /// with vectorised exact paths): the coefficients a_t = 1/(2σ_t²) and
+    /// weights w_t.
+    pub(crate) fn gaussian_terms(&self) -> Option<GaussTerms> {
+        if self.taper.is_some() || self.terms.len() > MAX_TERMS {
+            return None;
+        }
+        let mut g = GaussTerms { a: [0.0; MAX_TERMS], w: [0.0; MAX_TERMS], n: 0 };
+        for term in &self.terms {
+            match *term {
+                Term::Gauss { a, w } => {
+                    g.a[g.n] = a;
+                    g.w[g.n] = w;
+                    g.n += 1;
+                }
+                Term::Cauchy { .. } => return None,
+            }
+        }
+        Some(g)
     }
 
     /// For a single Gaussian (the case with vectorised paths): its

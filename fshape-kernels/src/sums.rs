@@ -252,16 +252,16 @@ impl<'a> KernelSums<'a> {
     /// ```
     pub fn conv(&self, x: &[f64], b: &[f64], bdim: usize) -> Result<Vec<f64>, KernelError> {
         self.check_len("b", b, self.n_sources() * bdim)?;
-        if let Some((a, wt, taper)) = self.kernel.single_gaussian() {
+        if let Some(terms) = self.kernel.gaussian_terms() {
             self.check_targets(x)?;
-            let fast = match taper {
-                None => crate::fast::gaussian_conv(a, wt, x, self.y, self.dim, b, bdim, self.parallel),
-                Some(t) => {
-                    let t = crate::blocks::TaperLanes { u_in: t.u_in, u_out: t.u_out };
-                    crate::blocks::truncated_conv(a, wt, t, x, self.y, self.dim, b, bdim, self.parallel)
-                }
-            };
-            if let Some(out) = fast {
+            if let Some(out) = crate::fast::gaussian_conv(&terms, x, self.y, self.dim, b, bdim, self.parallel) {
+                return Ok(out);
+            }
+        }
+        if let Some((a, wt, Some(t))) = self.kernel.single_gaussian() {
+            self.check_targets(x)?;
+            let t = crate::blocks::TaperLanes { u_in: t.u_in, u_out: t.u_out };
+            if let Some(out) = crate::blocks::truncated_conv(a, wt, t, x, self.y, self.dim, b, bdim, self.parallel) {
                 return Ok(out);
             }
         }
@@ -280,6 +280,12 @@ impl<'a> KernelSums<'a> {
         let n = self.dim;
         self.check_len("a", a, x.len() / n * bdim)?;
         self.check_len("b", b, self.n_sources() * bdim)?;
+        if let Some(terms) = self.kernel.gaussian_terms() {
+            self.check_targets(x)?;
+            if let Some(out) = crate::fast::gaussian_grad(&terms, x, self.y, self.dim, a, b, bdim, self.parallel) {
+                return Ok(out);
+            }
+        }
         self.map_targets(x, n, |i, p, o| {
             let ab: f64 = (0..bdim).map(|c| a[i * bdim + c] * b[p.j * bdim + c]).sum();
             let s = 2.0 * self.kernel.derivatives(p.u)[1] * ab;

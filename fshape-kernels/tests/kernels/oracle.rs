@@ -185,3 +185,35 @@ fn both_spatial_indexes_match_the_oracle() {
         assert!(gk.iter().zip(&gb).all(|(p, q)| (p - q).abs() <= 1e-13 * scale), "dim {dim}");
     }
 }
+
+#[test]
+fn cross_gradient_matches_the_brute_force_oracle() {
+    let mut rng = SplitMix64(77);
+    for (name, k) in kernels() {
+        for (dim, x, y) in cases(3) {
+            let bdim = dim;
+            let (nx, ny) = (x.len() / dim, y.len() / dim);
+            let a: Vec<f64> = (0..nx * bdim).map(|_| rng.range(-1.0, 1.0)).collect();
+            let b: Vec<f64> = (0..ny * bdim).map(|_| rng.range(-1.0, 1.0)).collect();
+            let fast = KernelSums::try_new(&k, &y, dim).unwrap().grad_cross(&x, &a, &b, bdim).unwrap();
+            // Σ_j 2 k'(u)(a_i·b_j)(x_i − y_j), the obvious double loop.
+            let mut slow = vec![0.0; nx * dim];
+            let mut scale: f64 = 0.0;
+            for i in 0..nx {
+                for j in 0..ny {
+                    let d: Vec<f64> = (0..dim).map(|c| x[i * dim + c] - y[j * dim + c]).collect();
+                    let u: f64 = d.iter().map(|v| v * v).sum();
+                    let ab: f64 = (0..bdim).map(|c| a[i * bdim + c] * b[j * bdim + c]).sum();
+                    let s = 2.0 * k.derivatives(u)[1] * ab;
+                    for c in 0..dim {
+                        slow[i * dim + c] += s * d[c];
+                        scale = scale.max((s * d[c]).abs());
+                    }
+                }
+            }
+            for (p, q) in fast.iter().zip(&slow) {
+                assert!((p - q).abs() <= 1e-13 * scale * ny.max(1) as f64, "{name} dim {dim}: {p} vs {q}");
+            }
+        }
+    }
+}
