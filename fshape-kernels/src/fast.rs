@@ -179,6 +179,7 @@ pub(crate) fn gaussian_conv(
 
 /// Σ_j 2 k'(|x_i − y_j|²) (a_i·b_j)(x_i − y_j) for every target i (the
 /// gradient of aᵀK b in x), same cases as [`gaussian_conv`].
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn gaussian_grad(
     terms: &GaussTerms,
     x: &[f64],
