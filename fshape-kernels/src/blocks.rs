@@ -15,7 +15,7 @@
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
 
-use crate::fast::{L, exp_lanes};
+use crate::fast::{L, exp_lanes, sq_dist_lanes};
 
 /// Sources per block.
 const LEAF: usize = 64;
@@ -117,13 +117,7 @@ impl<const D: usize, const BD: usize> WithSimd for Tile<'_, D, BD> {
     #[inline(always)]
     fn with_simd<S: Simd>(mut self, _simd: S) -> Self::Output {
         for (yj, bj) in self.y.iter().zip(self.b) {
-            let mut u = [0.0; L];
-            for k in 0..D {
-                for l in 0..L {
-                    let d = self.x[k][l] - yj[k];
-                    u[l] += d * d;
-                }
-            }
+            let u = sq_dist_lanes(self.x, yj);
             let mut arg = [0.0; L];
             for l in 0..L {
                 arg[l] = -self.a * u[l];

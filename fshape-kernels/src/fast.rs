@@ -96,6 +96,19 @@ pub(crate) fn exp_lanes(x: [f64; L]) -> [f64; L] {
     out
 }
 
+/// |x_l − y|² for the L targets held by axis in `x`.
+#[inline(always)]
+pub(crate) fn sq_dist_lanes<const D: usize>(x: &[[f64; L]; D], y: &[f64]) -> [f64; L] {
+    let mut u = [0.0; L];
+    for k in 0..D {
+        for l in 0..L {
+            let d = x[k][l] - y[k];
+            u[l] += d * d;
+        }
+    }
+    u
+}
+
 /// One block of L targets against every source: Σ_j k(u) b_j (`GRAD` =
 /// false) or Σ_j 2 k'(u) (a_i·b_j)(x_i − y_j) (`GRAD` = true), for
 /// k = Σ_t w_t exp(−a_t u).
@@ -117,13 +130,7 @@ impl<const D: usize, const BD: usize, const GRAD: bool> WithSimd for Block<'_, D
     fn with_simd<S: Simd>(self, _simd: S) -> Self::Output {
         let mut acc = [[0.0; L]; 3];
         for (yj, bj) in self.y.chunks_exact(D).zip(self.b.chunks_exact(BD)) {
-            let mut u = [0.0; L];
-            for k in 0..D {
-                for l in 0..L {
-                    let d = self.x[k][l] - yj[k];
-                    u[l] += d * d;
-                }
-            }
+            let u = sq_dist_lanes(self.x, yj);
             // k(u), or k'(u) for the gradient, summed over the terms.
             let mut kv = [0.0; L];
             for t in 0..self.terms.n {

@@ -51,8 +51,7 @@ proptest! {
         write_mesh(&path, &shape, if ascii { Encoding::Ascii } else { Encoding::Binary }).unwrap();
         let (pts, cells, signal) = read_with_ply_rs(&path);
         std::fs::remove_file(&path).unwrap();
-        let n = shape.dim();
-        let ours: Vec<f64> = shape.points().chunks_exact(n).flat_map(|p| [p[0], p[1], if n == 3 { p[2] } else { 0.0 }]).collect();
+        let ours = points_3d(&shape);
         prop_assert_eq!(pts, ours);
         prop_assert_eq!(cells, shape.cells().to_vec());
         prop_assert_eq!(signal.as_deref(), shape.signal());
@@ -64,12 +63,17 @@ proptest! {
         write_mesh(&path, &shape, if ascii { Encoding::Ascii } else { Encoding::Binary }).unwrap();
         let (pts, cells, signal) = read_with_vtkio(&path, shape.kind());
         std::fs::remove_file(&path).unwrap();
-        let n = shape.dim();
-        let ours: Vec<f64> = shape.points().chunks_exact(n).flat_map(|p| [p[0], p[1], if n == 3 { p[2] } else { 0.0 }]).collect();
+        let ours = points_3d(&shape);
         prop_assert_eq!(pts, ours);
         prop_assert_eq!(cells, shape.cells().to_vec());
         prop_assert_eq!(signal.as_deref(), shape.signal());
     }
+}
+
+/// The shape's points with z = 0 added in the plane, as both writers store them.
+fn points_3d(shape: &FShape) -> Vec<f64> {
+    let n = shape.dim();
+    shape.points().chunks_exact(n).flat_map(|p| [p[0], p[1], if n == 3 { p[2] } else { 0.0 }]).collect()
 }
 
 /// Points (x, y, z), cell indices and `signal` as ply-rs-bw sees them.
