@@ -16,9 +16,10 @@
 //! numeric factorisation per x), the gradient ∂_x(aᵀ D_s(x) b)
 //! ([`SignalNorm::grad`]), its directional derivative (a Hessian–vector
 //! product, [`SignalNorm::hvp`]) and (∂_x D_s · δx) h
-//! ([`SignalNorm::dmatvec`]). All derivatives come from one generic local
-//! formula evaluated with forward-mode dual numbers (num-dual), so they are
-//! exact, and are checked against central finite differences in the tests.
+//! ([`SignalNorm::dmatvec`]). The gradient is analytic per cell; the
+//! second derivatives come from the generic local formula evaluated with
+//! forward-mode dual numbers (num-dual). All are exact and checked against
+//! central finite differences in the tests.
 //!
 //! Every operation runs cell by cell in parallel (rayon) and gathers per
 //! output index in a fixed order, so serial and parallel results are equal

@@ -12,7 +12,7 @@ use fshape_mesh::{CellKind, FShape, ZERO_VOLUME_REL};
 use num_dual::{Dual, Dual64, DualNum, DualSVec64};
 use rayon::prelude::*;
 
-use crate::local::{Local, MAX_LOCAL, local_matrix, local_parts, volume};
+use crate::local::{Local, MAX_LOCAL, local_grad, local_matrix, local_parts, volume};
 use crate::{FemError, Norm};
 
 /// A signal norm D_s(x) for one connectivity: the sparsity pattern, the
@@ -309,19 +309,15 @@ impl SignalNorm {
         self.check_volumes(x, "x-derivative of the norm")?;
         let n = self.dim;
         let per_cell = self.map_cells(|_, c| {
-            let m = c.len() * n;
-            let mut xd = [DualSVec64::<MAX_LOCAL>::from(0.0); MAX_LOCAL];
+            let mut buf = [0.0; MAX_LOCAL];
+            let coords = self.gather_coords(x, c, &mut buf);
+            let (mut al, mut bl) = ([0.0; 3], [0.0; 3]);
             for (i, &v) in c.iter().enumerate() {
-                for k in 0..n {
-                    xd[i * n + k] = DualSVec64::from_re(x[v * n + k]).derivative(i * n + k);
-                }
+                al[i] = a[v];
+                bl[i] = b[v];
             }
-            let (mat, _) = local_matrix(self.kind, n, &xd[..m], self.norm);
-            let q = bilinear(&mat, c, a, b);
             let mut out = [0.0; MAX_LOCAL];
-            if let Some(g) = q.eps.0 {
-                out[..m].copy_from_slice(&g.as_slice()[..m]);
-            }
+            local_grad(self.kind, n, coords, &al, &bl, self.norm, &mut out);
             out
         });
         Ok(self.gather_vertices(&per_cell, n))
