@@ -378,14 +378,21 @@ impl SignalNorm {
         Ok(self.gather_vertices(&per_cell, 1))
     }
 
-    /// Lumped vertex masses of x: the row sums of the mass part. A vertex
-    /// with zero mass makes D_s(x) singular.
-    pub(crate) fn check_mass(&self, x: &[f64]) -> Result<(), FemError> {
+    /// Refuses a singular matrix: a vertex whose row of D sums to zero
+    /// carries no mass. The row sums of the assembled lower-triangle
+    /// `values` are the lumped vertex masses (stiffness rows sum to zero),
+    /// so no cell is visited again.
+    pub(crate) fn check_mass(&self, values: &[f64]) -> Result<(), FemError> {
+        let (col_ptr, row_idx) = (self.pattern.col_ptr(), self.pattern.row_idx());
         let mut mass = vec![0.0; self.n_vertices];
-        let mut buf = [0.0; MAX_LOCAL];
-        for c in self.cells.chunks_exact(self.corners()) {
-            let r = volume(self.kind, self.dim, self.gather_coords(x, c, &mut buf));
-            c.iter().for_each(|&v| mass[v] += r);
+        for c in 0..self.n_vertices {
+            for e in col_ptr[c]..col_ptr[c + 1] {
+                let r = row_idx[e];
+                mass[r] += values[e];
+                if r != c {
+                    mass[c] += values[e];
+                }
+            }
         }
         match mass.iter().position(|&m| !exceeds(m, 0.0)) {
             Some(vertex) => Err(FemError::Singular { vertex }),

@@ -67,7 +67,7 @@ impl Solver<'_> {
     pub fn factor(&mut self, x: &[f64]) -> Result<(), FemError> {
         self.factored = false;
         self.values = self.norm.assemble(x)?;
-        self.norm.check_mass(x)?;
+        self.norm.check_mass(&self.values)?;
         if let Some(symbolic) = self.symbolic {
             let a = SparseColMatRef::new(self.norm.pattern.as_ref(), &self.values);
             symbolic
