@@ -1,6 +1,7 @@
 //! The vectorised paths for the most common case: exact sums with a
 //! Gaussian or a sum of a few Gaussians (the multi-scale deformation
-//! kernels), out_i = Σ_j k(|x_i − y_j|²) b_j and the x-gradient of aᵀK b.
+//! kernels): out_i = Σ_j k(|x_i − y_j|²) b_j, the x-gradient of aᵀK b, and
+//! the directional derivatives of both (the exact adjoint of shooting).
 //!
 //! Eight targets are processed together as the lanes of `[f64; 8]` arrays,
 //! so each target's sum still runs over j in increasing order and each y_j
@@ -109,58 +110,128 @@ pub(crate) fn sq_dist_lanes<const D: usize>(x: &[[f64; L]; D], y: &[f64]) -> [f6
     u
 }
 
-/// One block of L targets against every source: Σ_j k(u) b_j (`GRAD` =
-/// false) or Σ_j 2 k'(u) (a_i·b_j)(x_i − y_j) (`GRAD` = true), for
-/// k = Σ_t w_t exp(−a_t u).
-struct Block<'a, const D: usize, const BD: usize, const GRAD: bool> {
-    terms: &'a GaussTerms,
-    x: &'a [[f64; L]; D],
-    /// The targets' own weights a_i by component (gradient only).
-    ai: &'a [[f64; L]; BD],
-    y: &'a [f64],
-    b: &'a [f64],
+/// What a block computes, per target i (k = Σ_t w_t exp(−a_t u), u = |x_i − y_j|²):
+/// `CONV`: Σ_j k b_j; `GRAD`: Σ_j 2k' (a_i·b_j)(x_i − y_j); `CONV_JVP` and
+/// `GRAD_JVP`: their directional derivatives when x, y, a, b move by
+/// dx, dy, da, db (formulas in `sums.rs`).
+pub(crate) const CONV: u8 = 0;
+pub(crate) const GRAD: u8 = 1;
+pub(crate) const CONV_JVP: u8 = 2;
+pub(crate) const GRAD_JVP: u8 = 3;
+
+/// The flat inputs of a vectorised sum; unused ones are empty.
+#[derive(Clone, Copy)]
+pub(crate) struct Inputs<'a> {
+    pub(crate) x: &'a [f64],
+    pub(crate) dx: &'a [f64],
+    pub(crate) y: &'a [f64],
+    pub(crate) dy: &'a [f64],
+    pub(crate) a: &'a [f64],
+    pub(crate) da: &'a [f64],
+    pub(crate) b: &'a [f64],
+    pub(crate) db: &'a [f64],
 }
 
-impl<const D: usize, const BD: usize, const GRAD: bool> WithSimd for Block<'_, D, BD, GRAD> {
-    /// Conv: BD sums per lane; gradient: D components per lane (the first D
-    /// rows; BD rows are allocated for simplicity, D ≤ 3 = max BD).
+/// The per-lane target data of one block, by axis or component.
+struct Lanes<const D: usize, const BD: usize> {
+    x: [[f64; L]; D],
+    dx: [[f64; L]; D],
+    a: [[f64; L]; BD],
+    da: [[f64; L]; BD],
+}
+
+/// One block of L targets against every source.
+struct Block<'a, const D: usize, const BD: usize, const MODE: u8> {
+    terms: &'a GaussTerms,
+    t: &'a Lanes<D, BD>,
+    inp: Inputs<'a>,
+}
+
+impl<const D: usize, const BD: usize, const MODE: u8> WithSimd for Block<'_, D, BD, MODE> {
+    /// BD sums per lane (conv modes) or D components (gradient modes); 3
+    /// rows are allocated for simplicity (D, BD ≤ 3).
     type Output = [[f64; L]; 3];
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) -> Self::Output {
+        let (t, inp) = (self.t, self.inp);
         let mut acc = [[0.0; L]; 3];
-        for (yj, bj) in self.y.chunks_exact(D).zip(self.b.chunks_exact(BD)) {
-            let u = sq_dist_lanes(self.x, yj);
-            // k(u), or k'(u) for the gradient, summed over the terms.
-            let mut kv = [0.0; L];
-            for t in 0..self.terms.n {
-                let (a, w) = (self.terms.a[t], self.terms.w[t]);
+        let m = inp.y.len() / D;
+        for j in 0..m {
+            let yj = &inp.y[j * D..(j + 1) * D];
+            let bj = &inp.b[j * BD..(j + 1) * BD];
+            let u = sq_dist_lanes(&t.x, yj);
+            // k, k', k'' summed over the terms (each from one exponential).
+            let (mut k0, mut k1, mut k2) = ([0.0; L], [0.0; L], [0.0; L]);
+            for term in 0..self.terms.n {
+                let (a, w) = (self.terms.a[term], self.terms.w[term]);
                 let mut arg = [0.0; L];
                 for l in 0..L {
                     arg[l] = -a * u[l];
                 }
                 let e = exp_lanes(arg);
-                let coef = if GRAD { -a * w } else { w };
                 for l in 0..L {
-                    kv[l] += coef * e[l];
+                    k0[l] += w * e[l];
+                    k1[l] -= a * w * e[l];
+                    k2[l] += a * a * w * e[l];
                 }
             }
-            if GRAD {
-                let mut s = [0.0; L];
-                for c in 0..BD {
-                    for l in 0..L {
-                        s[l] += self.ai[c][l] * bj[c];
-                    }
-                }
+            // du = 2 (x_i − y_j)·(dx_i − dy_j), for the JVP modes.
+            let mut du = [0.0; L];
+            if MODE == CONV_JVP || MODE == GRAD_JVP {
+                let dyj = &inp.dy[j * D..(j + 1) * D];
                 for k in 0..D {
                     for l in 0..L {
-                        acc[k][l] += 2.0 * kv[l] * s[l] * (self.x[k][l] - yj[k]);
+                        du[l] += 2.0 * (t.x[k][l] - yj[k]) * (t.dx[k][l] - dyj[k]);
                     }
                 }
-            } else {
-                for c in 0..BD {
-                    for l in 0..L {
-                        acc[c][l] += kv[l] * bj[c];
+            }
+            match MODE {
+                CONV => {
+                    for c in 0..BD {
+                        for l in 0..L {
+                            acc[c][l] += k0[l] * bj[c];
+                        }
+                    }
+                }
+                CONV_JVP => {
+                    let dbj = &inp.db[j * BD..(j + 1) * BD];
+                    for c in 0..BD {
+                        for l in 0..L {
+                            acc[c][l] += k1[l] * du[l] * bj[c] + k0[l] * dbj[c];
+                        }
+                    }
+                }
+                _ => {
+                    let mut ab = [0.0; L];
+                    for c in 0..BD {
+                        for l in 0..L {
+                            ab[l] += t.a[c][l] * bj[c];
+                        }
+                    }
+                    if MODE == GRAD {
+                        for k in 0..D {
+                            for l in 0..L {
+                                acc[k][l] += 2.0 * k1[l] * ab[l] * (t.x[k][l] - yj[k]);
+                            }
+                        }
+                    } else {
+                        let (dyj, dbj) = (&inp.dy[j * D..(j + 1) * D], &inp.db[j * BD..(j + 1) * BD]);
+                        let mut dab = [0.0; L];
+                        for c in 0..BD {
+                            for l in 0..L {
+                                dab[l] += t.da[c][l] * bj[c] + t.a[c][l] * dbj[c];
+                            }
+                        }
+                        for k in 0..D {
+                            for l in 0..L {
+                                let diff = t.x[k][l] - yj[k];
+                                let ddiff = t.dx[k][l] - dyj[k];
+                                acc[k][l] += 2.0 * k2[l] * du[l] * ab[l] * diff
+                                    + 2.0 * k1[l] * dab[l] * diff
+                                    + 2.0 * k1[l] * ab[l] * ddiff;
+                            }
+                        }
                     }
                 }
             }
@@ -169,80 +240,51 @@ impl<const D: usize, const BD: usize, const GRAD: bool> WithSimd for Block<'_, D
     }
 }
 
-/// Σ_j k(|x_i − y_j|²) b_j for every target i, for an untapered sum of
-/// Gaussians, points in 2-D or 3-D and b of 1 to 3 components (`None`
-/// otherwise: the caller uses the general path).
-pub(crate) fn gaussian_conv(
+/// Runs `MODE` for every target, for an untapered sum of Gaussians, points
+/// in 2-D or 3-D and weights of 1 to 3 components (`None` otherwise: the
+/// caller uses the general path).
+pub(crate) fn gaussian_sum<const MODE: u8>(
     terms: &GaussTerms,
-    x: &[f64],
-    y: &[f64],
+    inp: Inputs<'_>,
     dim: usize,
-    b: &[f64],
-    bdim: usize,
-    parallel: bool,
-) -> Option<Vec<f64>> {
-    dispatch::<false>(terms, x, y, dim, &[], b, bdim, parallel)
-}
-
-/// Σ_j 2 k'(|x_i − y_j|²) (a_i·b_j)(x_i − y_j) for every target i (the
-/// gradient of aᵀK b in x), same cases as [`gaussian_conv`].
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn gaussian_grad(
-    terms: &GaussTerms,
-    x: &[f64],
-    y: &[f64],
-    dim: usize,
-    a: &[f64],
-    b: &[f64],
-    bdim: usize,
-    parallel: bool,
-) -> Option<Vec<f64>> {
-    dispatch::<true>(terms, x, y, dim, a, b, bdim, parallel)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn dispatch<const GRAD: bool>(
-    terms: &GaussTerms,
-    x: &[f64],
-    y: &[f64],
-    dim: usize,
-    a: &[f64],
-    b: &[f64],
     bdim: usize,
     parallel: bool,
 ) -> Option<Vec<f64>> {
     Some(match (dim, bdim) {
-        (2, 1) => run::<2, 1, GRAD>(terms, x, y, a, b, parallel),
-        (2, 2) => run::<2, 2, GRAD>(terms, x, y, a, b, parallel),
-        (2, 3) => run::<2, 3, GRAD>(terms, x, y, a, b, parallel),
-        (3, 1) => run::<3, 1, GRAD>(terms, x, y, a, b, parallel),
-        (3, 2) => run::<3, 2, GRAD>(terms, x, y, a, b, parallel),
-        (3, 3) => run::<3, 3, GRAD>(terms, x, y, a, b, parallel),
+        (2, 1) => run::<2, 1, MODE>(terms, inp, parallel),
+        (2, 2) => run::<2, 2, MODE>(terms, inp, parallel),
+        (2, 3) => run::<2, 3, MODE>(terms, inp, parallel),
+        (3, 1) => run::<3, 1, MODE>(terms, inp, parallel),
+        (3, 2) => run::<3, 2, MODE>(terms, inp, parallel),
+        (3, 3) => run::<3, 3, MODE>(terms, inp, parallel),
         _ => return None,
     })
 }
 
-fn run<const D: usize, const BD: usize, const GRAD: bool>(
+fn run<const D: usize, const BD: usize, const MODE: u8>(
     terms: &GaussTerms,
-    x: &[f64],
-    y: &[f64],
-    a: &[f64],
-    b: &[f64],
+    inp: Inputs<'_>,
     parallel: bool,
 ) -> Vec<f64> {
-    let nx = x.len() / D;
-    let w_out = if GRAD { D } else { BD };
+    let nx = inp.x.len() / D;
+    let w_out = if MODE == CONV || MODE == CONV_JVP { BD } else { D };
     let mut out = vec![0.0; nx * w_out];
     let arch = Arch::new();
+    let uses_a = MODE == GRAD || MODE == GRAD_JVP;
+    let uses_d = MODE == CONV_JVP || MODE == GRAD_JVP;
     let block = |(blk, o): (usize, &mut [f64])| {
         let i0 = blk * L;
         let lanes = o.len() / w_out;
-        // Targets by axis (and their weights); unused lanes repeat the last.
+        // Unused lanes repeat the last target.
         let lane = |l: usize| i0 + l.min(lanes - 1);
-        let xs: [[f64; L]; D] = std::array::from_fn(|k| std::array::from_fn(|l| x[lane(l) * D + k]));
-        let ai: [[f64; L]; BD] =
-            std::array::from_fn(|c| std::array::from_fn(|l| if GRAD { a[lane(l) * BD + c] } else { 0.0 }));
-        let acc = arch.dispatch(Block::<D, BD, GRAD> { terms, x: &xs, ai: &ai, y, b });
+        let pick = |v: &[f64], w: usize, on: bool, c: usize, l: usize| if on { v[lane(l) * w + c] } else { 0.0 };
+        let t = Lanes::<D, BD> {
+            x: std::array::from_fn(|k| std::array::from_fn(|l| inp.x[lane(l) * D + k])),
+            dx: std::array::from_fn(|k| std::array::from_fn(|l| pick(inp.dx, D, uses_d, k, l))),
+            a: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.a, BD, uses_a, c, l))),
+            da: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.da, BD, uses_a && uses_d, c, l))),
+        };
+        let acc = arch.dispatch(Block::<D, BD, MODE> { terms, t: &t, inp });
         for (c, acc_c) in acc.iter().enumerate().take(w_out) {
             for l in 0..lanes {
                 o[l * w_out + c] = acc_c[l];

@@ -5,6 +5,7 @@ use std::sync::OnceLock;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+use crate::fast::{self, Inputs};
 use crate::{Kernel, KernelError};
 
 /// A spatial index over the source points y, for truncated kernels.
@@ -116,6 +117,11 @@ impl<'a> KernelSums<'a> {
     /// The kernel.
     pub fn kernel(&self) -> &Kernel {
         self.kernel
+    }
+
+    /// Inputs with every slice empty, to fill in with `..`.
+    fn no_inputs(&self) -> Inputs<'static> {
+        Inputs { x: &[], dx: &[], y: &[], dy: &[], a: &[], da: &[], b: &[], db: &[] }
     }
 
     /// The k-d tree over y for a truncated kernel (built once), or `None`.
@@ -254,7 +260,8 @@ impl<'a> KernelSums<'a> {
         self.check_len("b", b, self.n_sources() * bdim)?;
         if let Some(terms) = self.kernel.gaussian_terms() {
             self.check_targets(x)?;
-            if let Some(out) = crate::fast::gaussian_conv(&terms, x, self.y, self.dim, b, bdim, self.parallel) {
+            let inp = Inputs { x, y: self.y, b, ..self.no_inputs() };
+            if let Some(out) = fast::gaussian_sum::<{ fast::CONV }>(&terms, inp, self.dim, bdim, self.parallel) {
                 return Ok(out);
             }
         }
@@ -282,7 +289,8 @@ impl<'a> KernelSums<'a> {
         self.check_len("b", b, self.n_sources() * bdim)?;
         if let Some(terms) = self.kernel.gaussian_terms() {
             self.check_targets(x)?;
-            if let Some(out) = crate::fast::gaussian_grad(&terms, x, self.y, self.dim, a, b, bdim, self.parallel) {
+            let inp = Inputs { x, y: self.y, a, b, ..self.no_inputs() };
+            if let Some(out) = fast::gaussian_sum::<{ fast::GRAD }>(&terms, inp, self.dim, bdim, self.parallel) {
                 return Ok(out);
             }
         }
@@ -313,6 +321,13 @@ impl<'a> KernelSums<'a> {
         self.check_len("dy", dy, self.y.len())?;
         self.check_len("b", b, self.n_sources() * bdim)?;
         self.check_len("db", db, self.n_sources() * bdim)?;
+        if let Some(terms) = self.kernel.gaussian_terms() {
+            self.check_targets(x)?;
+            let inp = Inputs { x, dx, y: self.y, dy, b, db, ..self.no_inputs() };
+            if let Some(out) = fast::gaussian_sum::<{ fast::CONV_JVP }>(&terms, inp, self.dim, bdim, self.parallel) {
+                return Ok(out);
+            }
+        }
         self.map_targets(x, bdim, |i, p, o| {
             let [k, dk, _] = self.kernel.derivatives(p.u);
             let du: f64 = (0..n).map(|c| 2.0 * p.diff[c] * (dx[i * n + c] - dy[p.j * n + c])).sum();
@@ -349,6 +364,13 @@ impl<'a> KernelSums<'a> {
             ("db", db, self.n_sources() * bdim),
         ] {
             self.check_len(what, v, len)?;
+        }
+        if let Some(terms) = self.kernel.gaussian_terms() {
+            self.check_targets(x)?;
+            let inp = Inputs { x, dx, y: self.y, dy, a, da, b, db };
+            if let Some(out) = fast::gaussian_sum::<{ fast::GRAD_JVP }>(&terms, inp, self.dim, bdim, self.parallel) {
+                return Ok(out);
+            }
         }
         self.map_targets(x, n, |i, p, o| {
             let [_, dk, ddk] = self.kernel.derivatives(p.u);

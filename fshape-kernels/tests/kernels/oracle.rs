@@ -217,3 +217,47 @@ fn cross_gradient_matches_the_brute_force_oracle() {
         }
     }
 }
+
+#[test]
+fn jacobian_vector_products_match_the_brute_force_oracle() {
+    let mut rng = SplitMix64(78);
+    for (name, k) in kernels() {
+        for (dim, x, y) in cases(4) {
+            let bd = dim;
+            let (nx, ny) = (x.len() / dim, y.len() / dim);
+            let mut r = |n: usize| -> Vec<f64> { (0..n).map(|_| rng.range(-1.0, 1.0)).collect() };
+            let (dx, dy, a, da, b, db) = (r(x.len()), r(y.len()), r(nx * bd), r(nx * bd), r(ny * bd), r(ny * bd));
+            let sums = KernelSums::try_new(&k, &y, dim).unwrap();
+            let cj = sums.conv_jvp(&x, &dx, &dy, &b, &db, bd).unwrap();
+            let gj = sums.grad_cross_jvp(&x, &dx, &dy, &a, &da, &b, &db, bd).unwrap();
+            // The formulas of the docs, as an obvious double loop.
+            let (mut cs, mut gs) = (vec![0.0; nx * bd], vec![0.0; nx * dim]);
+            let mut scale: f64 = 1e-300;
+            for i in 0..nx {
+                for j in 0..ny {
+                    let d: Vec<f64> = (0..dim).map(|c| x[i * dim + c] - y[j * dim + c]).collect();
+                    let dd: Vec<f64> = (0..dim).map(|c| dx[i * dim + c] - dy[j * dim + c]).collect();
+                    let u: f64 = d.iter().map(|v| v * v).sum();
+                    let du: f64 = 2.0 * d.iter().zip(&dd).map(|(p, q)| p * q).sum::<f64>();
+                    let [k0, k1, k2] = k.derivatives(u);
+                    let ab: f64 = (0..bd).map(|c| a[i * bd + c] * b[j * bd + c]).sum();
+                    let dab: f64 =
+                        (0..bd).map(|c| da[i * bd + c] * b[j * bd + c] + a[i * bd + c] * db[j * bd + c]).sum();
+                    for c in 0..bd {
+                        let t = k1 * du * b[j * bd + c] + k0 * db[j * bd + c];
+                        cs[i * bd + c] += t;
+                        scale = scale.max(t.abs());
+                    }
+                    for c in 0..dim {
+                        let t = 2.0 * k2 * du * ab * d[c] + 2.0 * k1 * dab * d[c] + 2.0 * k1 * ab * dd[c];
+                        gs[i * dim + c] += t;
+                        scale = scale.max(t.abs());
+                    }
+                }
+            }
+            let tol = 1e-13 * scale * ny.max(1) as f64;
+            assert!(cj.iter().zip(&cs).all(|(p, q)| (p - q).abs() <= tol), "{name} conv_jvp dim {dim}");
+            assert!(gj.iter().zip(&gs).all(|(p, q)| (p - q).abs() <= tol), "{name} grad_cross_jvp dim {dim}");
+        }
+    }
+}
