@@ -198,12 +198,15 @@ impl SignalNorm {
         out
     }
 
-    /// The local matrices of every cell at x.
-    fn locals(&self, x: &[f64], norm: Norm) -> Vec<Local<f64>> {
+    /// The local matrices of every cell at x, and the cells' volumes (which
+    /// the local formula computes anyway).
+    fn locals_and_volumes(&self, x: &[f64], norm: Norm) -> (Vec<Local<f64>>, Vec<f64>) {
         self.map_cells(|_, c| {
             let mut buf = [0.0; MAX_LOCAL];
-            local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), norm).0
+            local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), norm)
         })
+        .into_iter()
+        .unzip()
     }
 
     /// The values of the lower triangle of D_s(x), in the order of
@@ -219,10 +222,16 @@ impl SignalNorm {
     /// ```
     pub fn assemble(&self, x: &[f64]) -> Result<Vec<f64>, FemError> {
         self.check_x(x)?;
+        let (locals, volumes) = self.locals_and_volumes(x, self.norm);
+        // One pass over the cells: the stiffness of a degenerate cell is not
+        // finite, so refuse it before gathering.
         if matches!(self.norm, Norm::H1 { .. }) {
-            self.check_volumes(x, "stiffness matrix")?;
+            let tol = self.zero_volume_tolerance(x);
+            if let Some(cell) = volumes.iter().position(|v| !exceeds(*v, tol)) {
+                return Err(FemError::ZeroVolumeCell { cell, volume: volumes[cell], what: "stiffness matrix" });
+            }
         }
-        Ok(self.gather_entries(&self.locals(x, self.norm)))
+        Ok(self.gather_entries(&locals))
     }
 
     /// The P1 mass and P1 stiffness values separately, on this norm's

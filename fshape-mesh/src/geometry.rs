@@ -132,7 +132,7 @@ impl FShape {
     }
 
     /// The bounding box of all vertices (used or not). For a shape without
-    /// vertices both corners are empty... of `dim` zeros.
+    /// vertices both corners are `dim` zeros.
     pub fn bounding_box(&self) -> BoundingBox {
         let n = self.dim();
         if self.n_vertices() == 0 {
