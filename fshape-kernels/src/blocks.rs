@@ -20,30 +20,33 @@ use crate::fast::{L, exp_lanes, sq_dist_lanes};
 /// Sources per block.
 const LEAF: usize = 64;
 
-/// Points sorted into blocks, with the blocks' bounding boxes.
-struct Blocks<const D: usize> {
+/// Points sorted into blocks, with the blocks' bounding boxes (unused
+/// coordinates of planar points are 0).
+struct Blocks {
     /// order[k] = original index of the k-th sorted point.
     order: Vec<usize>,
     /// Block b covers sorted points start[b]..start[b + 1].
     start: Vec<usize>,
-    lo: Vec<[f64; D]>,
-    hi: Vec<[f64; D]>,
+    lo: Vec<[f64; 3]>,
+    hi: Vec<[f64; 3]>,
 }
 
-impl<const D: usize> Blocks<D> {
-    fn new(p: &[f64], size: usize) -> Self {
-        let n = p.len() / D;
+impl Blocks {
+    fn new(p: &[f64], dim: usize, size: usize) -> Self {
+        let n = p.len() / dim;
         let mut order: Vec<usize> = (0..n).collect();
         let mut start = Vec::new();
-        kd_sort::<D>(p, &mut order, size, &mut start, 0);
+        kd_sort(p, dim, &mut order, size, &mut start, 0);
         start.push(n);
         let (mut lo, mut hi) = (Vec::new(), Vec::new());
         for w in start.windows(2) {
-            let (mut l, mut h) = ([f64::INFINITY; D], [f64::NEG_INFINITY; D]);
-            for &i in &order[w[0]..w[1]] {
-                for k in 0..D {
-                    l[k] = l[k].min(p[i * D + k]);
-                    h[k] = h[k].max(p[i * D + k]);
+            let (mut l, mut h) = ([0.0; 3], [0.0; 3]);
+            for k in 0..dim {
+                l[k] = f64::INFINITY;
+                h[k] = f64::NEG_INFINITY;
+                for &i in &order[w[0]..w[1]] {
+                    l[k] = l[k].min(p[i * dim + k]);
+                    h[k] = h[k].max(p[i * dim + k]);
                 }
             }
             lo.push(l);
@@ -59,7 +62,7 @@ impl<const D: usize> Blocks<D> {
 
 /// Sorts `idx` into a k-d order whose leaves hold at most `size` points
 /// (all but the last leaf of a split hold exactly a multiple of `size`).
-fn kd_sort<const D: usize>(p: &[f64], idx: &mut [usize], size: usize, starts: &mut Vec<usize>, offset: usize) {
+fn kd_sort(p: &[f64], dim: usize, idx: &mut [usize], size: usize, starts: &mut Vec<usize>, offset: usize) {
     if idx.len() <= size {
         if !idx.is_empty() {
             starts.push(offset);
@@ -68,24 +71,24 @@ fn kd_sort<const D: usize>(p: &[f64], idx: &mut [usize], size: usize, starts: &m
     }
     let spread = |axis: usize| {
         let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
-            let v = p[i * D + axis];
+            let v = p[i * dim + axis];
             (lo.min(v), hi.max(v))
         });
         hi - lo
     };
-    let axis = (0..D).max_by(|&a, &b| spread(a).total_cmp(&spread(b))).unwrap_or(0);
+    let axis = (0..dim).max_by(|&a, &b| spread(a).total_cmp(&spread(b))).unwrap_or(0);
     let mid = ((idx.len() / 2).div_ceil(size) * size).clamp(1, idx.len() - 1);
-    idx.select_nth_unstable_by(mid, |&u, &v| p[u * D + axis].total_cmp(&p[v * D + axis]).then(u.cmp(&v)));
+    idx.select_nth_unstable_by(mid, |&u, &v| p[u * dim + axis].total_cmp(&p[v * dim + axis]).then(u.cmp(&v)));
     let (left, right) = idx.split_at_mut(mid);
-    kd_sort::<D>(p, left, size, starts, offset);
-    kd_sort::<D>(p, right, size, starts, offset + mid);
+    kd_sort(p, dim, left, size, starts, offset);
+    kd_sort(p, dim, right, size, starts, offset + mid);
 }
 
 /// Squared distance between two boxes (0 if they overlap), and the squared
 /// largest distance between their points.
-fn box_dist2<const D: usize>(alo: &[f64; D], ahi: &[f64; D], blo: &[f64; D], bhi: &[f64; D]) -> (f64, f64) {
+fn box_dist2(alo: &[f64; 3], ahi: &[f64; 3], blo: &[f64; 3], bhi: &[f64; 3]) -> (f64, f64) {
     let (mut near, mut far) = (0.0, 0.0);
-    for k in 0..D {
+    for k in 0..3 {
         let gap = (blo[k] - ahi[k]).max(alo[k] - bhi[k]).max(0.0);
         let span = (bhi[k] - alo[k]).max(ahi[k] - blo[k]);
         near += gap * gap;
@@ -174,10 +177,10 @@ fn conv<const D: usize, const BD: usize>(
     b: &[f64],
     parallel: bool,
 ) -> Vec<f64> {
-    let src = Blocks::<D>::new(y, LEAF);
+    let src = Blocks::new(y, D, LEAF);
     let ys: Vec<[f64; D]> = src.order.iter().map(|&j| std::array::from_fn(|k| y[j * D + k])).collect();
     let bs: Vec<[f64; BD]> = src.order.iter().map(|&j| std::array::from_fn(|c| b[j * BD + c])).collect();
-    let tgt = Blocks::<D>::new(x, L);
+    let tgt = Blocks::new(x, D, L);
     let arch = Arch::new();
     let block = |t: usize| -> Vec<(usize, [f64; BD])> {
         let ids = &tgt.order[tgt.start[t]..tgt.start[t + 1]];
@@ -217,4 +220,117 @@ fn conv<const D: usize, const BD: usize>(
         out[i * BD..(i + 1) * BD].copy_from_slice(&v);
     }
     out
+}
+
+/// A run of sorted sources, `range` in the order of
+/// [`BlockPairs::source_order`], that may interact with a target block.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SourceRun {
+    /// Positions in the sorted source order.
+    pub range: std::ops::Range<usize>,
+    /// `false` if every pair of the run lies inside the taper's inner
+    /// radius (or the kernel is not truncated): the taper is 1 there and can
+    /// be skipped ([`Kernel::lanes`](crate::Kernel::lanes)).
+    pub tapered: bool,
+}
+
+/// The block-sparse pair engine other crates build their vectorised sums
+/// on (fshape-varifold's data attachment uses it): targets are sorted into
+/// blocks of at most [`L`](crate::lanes::L) points and sources into blocks
+/// of 64, both along a k-d order, and each target block is handed the runs
+/// of sources whose bounding boxes come within the kernel's support radius
+/// (all of them for an untapered kernel).
+///
+/// The caller permutes its source data once into
+/// [`source_order`](Self::source_order), then in
+/// [`map_blocks`](Self::map_blocks) loads a target block into lanes and
+/// sums over the runs in the order given. That order depends only on the
+/// data, so results do not depend on the number of threads.
+///
+/// ```
+/// use fshape_kernels::{BlockPairs, Kernel};
+/// let x = [0.0, 0.0, 5.0, 0.0];
+/// let y = [0.1, 0.0, 9.0, 9.0];
+/// let k = Kernel::gaussian(0.5)?.truncated(1e-8)?;
+/// let pairs = BlockPairs::try_new(&x, &y, 2, &k)?;
+/// // Count, per target, the sources a truncated sum has to visit.
+/// let counts = pairs.map_blocks(false, |targets, runs| {
+///     let n: usize = runs.iter().map(|r| r.range.len()).sum();
+///     targets.iter().map(|&i| (i, n)).collect::<Vec<_>>()
+/// });
+/// assert_eq!(counts.concat(), [(0, 2), (1, 2)]); // one block of each: nothing skipped
+/// # Ok::<(), fshape_kernels::KernelError>(())
+/// ```
+pub struct BlockPairs {
+    tgt: Blocks,
+    src: Blocks,
+    taper: Option<crate::Taper>,
+}
+
+impl BlockPairs {
+    /// Sorts targets `x` and sources `y` (`dim` = 2 or 3 coordinates per
+    /// point, flat) into blocks for `kernel`'s support radius.
+    pub fn try_new(x: &[f64], y: &[f64], dim: usize, kernel: &crate::Kernel) -> Result<Self, crate::KernelError> {
+        use crate::KernelError;
+        if dim != 2 && dim != 3 {
+            return Err(KernelError::Dimension { what: "point dimension", expected: 3, found: dim });
+        }
+        for (what, p) in [("target coordinates", x), ("source coordinates", y)] {
+            if !p.len().is_multiple_of(dim) {
+                return Err(KernelError::Dimension { what, expected: p.len() / dim * dim, found: p.len() });
+            }
+        }
+        for (what, p) in [("target point", x), ("source point", y)] {
+            if let Some(i) = p.iter().position(|v| !v.is_finite()) {
+                return Err(KernelError::NonFinite { what, index: i / dim });
+            }
+        }
+        Ok(BlockPairs { tgt: Blocks::new(x, dim, L), src: Blocks::new(y, dim, LEAF), taper: kernel.taper() })
+    }
+
+    /// sorted position → original source index.
+    pub fn source_order(&self) -> &[usize] {
+        &self.src.order
+    }
+
+    /// Number of target blocks.
+    pub fn n_target_blocks(&self) -> usize {
+        self.tgt.n_blocks()
+    }
+
+    /// Calls `f(targets, runs)` for every target block, in parallel or not,
+    /// and returns the results in block order. `targets` holds the original
+    /// indices of the block's (at most [`L`](crate::lanes::L)) targets;
+    /// `runs` the source runs that can reach them, in increasing order.
+    pub fn map_blocks<T: Send>(&self, parallel: bool, f: impl Fn(&[usize], &[SourceRun]) -> T + Sync) -> Vec<T> {
+        let block = |t: usize| {
+            let mut runs: Vec<SourceRun> = Vec::new();
+            for s in 0..self.src.n_blocks() {
+                let tapered = match self.taper {
+                    None => false,
+                    Some(taper) => {
+                        let (near, far) = box_dist2(&self.tgt.lo[t], &self.tgt.hi[t], &self.src.lo[s], &self.src.hi[s]);
+                        if near >= taper.u_out {
+                            continue;
+                        }
+                        far > taper.u_in
+                    }
+                };
+                let range = self.src.start[s]..self.src.start[s + 1];
+                // Merge with the previous run when contiguous and alike.
+                match runs.last_mut() {
+                    Some(last) if last.range.end == range.start && last.tapered == tapered => {
+                        last.range.end = range.end
+                    }
+                    _ => runs.push(SourceRun { range, tapered }),
+                }
+            }
+            f(&self.tgt.order[self.tgt.start[t]..self.tgt.start[t + 1]], &runs)
+        };
+        if parallel {
+            (0..self.tgt.n_blocks()).into_par_iter().map(block).collect()
+        } else {
+            (0..self.tgt.n_blocks()).map(block).collect()
+        }
+    }
 }

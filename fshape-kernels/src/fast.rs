@@ -27,14 +27,14 @@ use rayon::prelude::*;
 use crate::profile::GaussTerms;
 
 /// Lanes per block.
-pub(crate) const L: usize = 32;
+pub const L: usize = 32;
 
 /// exp(x) for each lane, for x ≤ 0 (x < −708 gives 0, below
 /// f64's normal range). Cody–Waite reduction x = n ln2 + r, |r| ≤ ln2/2,
 /// the degree-12 Taylor polynomial of e^r (truncation < 2e-16 relative),
 /// and 2ⁿ built from its exponent bits.
 #[inline(always)]
-pub(crate) fn exp_lanes(x: [f64; L]) -> [f64; L] {
+pub fn exp_lanes(x: [f64; L]) -> [f64; L] {
     const LOG2E: f64 = std::f64::consts::LOG2_E;
     // 1.5·2^52: adding it rounds to an integer held in the low mantissa bits.
     const MAGIC: f64 = 6_755_399_441_055_744.0;

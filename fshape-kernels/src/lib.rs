@@ -38,8 +38,16 @@ mod fast;
 mod profile;
 mod sums;
 
+pub use blocks::{BlockPairs, SourceRun};
 pub use profile::{Kernel, Profile, TAPER_WIDTH, Taper};
 pub use sums::{KernelSums, Pair, SpatialIndex};
+
+/// Lane-wise building blocks for vectorised kernels in other crates: a
+/// block of [`L`] targets is held as `[f64; L]` arrays, and plain loops over
+/// the lanes inside a `pulp::WithSimd` body compile to SIMD.
+pub mod lanes {
+    pub use crate::fast::{L, exp_lanes};
+}
 
 /// Why a kernel or a kernel sum could not be set up.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]

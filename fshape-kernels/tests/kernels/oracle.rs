@@ -261,3 +261,49 @@ fn jacobian_vector_products_match_the_brute_force_oracle() {
         }
     }
 }
+
+#[test]
+fn block_pairs_hand_every_pair_within_the_support_to_its_target_once() {
+    use fshape_kernels::BlockPairs;
+    for (name, k) in kernels() {
+        for (case, (dim, x, y)) in cases(11).into_iter().enumerate() {
+            // Larger sets too, so that there are several blocks of each.
+            let mut rng = SplitMix64(case as u64);
+            let (x, y) = if case == 0 { (uniform(300, dim, &mut rng), uniform(400, dim, &mut rng)) } else { (x, y) };
+            let pairs = BlockPairs::try_new(&x, &y, dim, &k).unwrap();
+            let order = pairs.source_order();
+            let (nx, ny) = (x.len() / dim, y.len() / dim);
+            let mut seen = vec![vec![0u32; ny]; nx];
+            let mut untapered_ok = true;
+            let u = |i: usize, j: usize| -> f64 { (0..dim).map(|c| (x[i * dim + c] - y[j * dim + c]).powi(2)).sum() };
+            let visits = pairs.map_blocks(true, |targets, runs| {
+                let mut v = Vec::new();
+                for &i in targets {
+                    for run in runs {
+                        for &j in &order[run.range.clone()] {
+                            v.push((i, j, run.tapered));
+                        }
+                    }
+                }
+                v
+            });
+            for (i, j, tapered) in visits.into_iter().flatten() {
+                seen[i][j] += 1;
+                if let (Some(t), false) = (k.taper(), tapered) {
+                    untapered_ok &= u(i, j) <= t.u_in;
+                }
+            }
+            assert!(untapered_ok, "{name}, case {case}: an untapered run holds a pair beyond u_in");
+            for i in 0..nx {
+                for j in 0..ny {
+                    let needed = k.support_radius().is_none_or(|r| u(i, j) < r * r);
+                    assert!(seen[i][j] <= 1, "{name}, case {case}: pair ({i}, {j}) visited twice");
+                    assert!(
+                        !needed || seen[i][j] == 1,
+                        "{name}, case {case}: pair ({i}, {j}) within the support is missed"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -89,3 +89,23 @@ fn bad_parameters_are_refused() {
     let t = Kernel::gaussian(0.3).unwrap().truncated(1e-6).unwrap().taper().unwrap();
     assert!((t.u_in.sqrt() - 0.3 * (2.0 * 1e6f64.ln()).sqrt()).abs() < 1e-12);
 }
+
+#[test]
+fn lane_values_and_slopes_match_the_scalar_profile() {
+    use fshape_kernels::lanes::L;
+    for (name, k) in crate::kernels() {
+        let top = k.taper().map_or(30.0, |t| 1.2 * t.u_out);
+        let us: Vec<f64> = (0..4 * L).map(|i| top * (i as f64 / (4 * L - 1) as f64).powi(2)).collect();
+        for chunk in us.chunks(L) {
+            let u: [f64; L] = chunk.try_into().unwrap();
+            let (k0, k1) = k.lanes(&u, true);
+            for l in 0..L {
+                let d = k.derivatives(u[l]);
+                // A few ulps of k(0) and of |k'(0)|, the scales of the values.
+                let (s0, s1) = (k.value(0.0), k.derivatives(0.0)[1].abs());
+                assert!((k0[l] - d[0]).abs() <= 1e-15 * s0, "{name}: k({}) = {} vs {}", u[l], k0[l], d[0]);
+                assert!((k1[l] - d[1]).abs() <= 1e-15 * s1, "{name}: k'({}) = {} vs {}", u[l], k1[l], d[1]);
+            }
+        }
+    }
+}
