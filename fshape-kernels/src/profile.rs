@@ -1,8 +1,6 @@
 //! Radial kernel profiles k(u) of the squared distance u = |x − y|², with
 //! exact first and second derivatives, and the smooth truncation.
 
-#![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
-
 use crate::KernelError;
 use crate::fast::{L, exp_lanes};
 

@@ -273,7 +273,7 @@ fn block_pairs_hand_every_pair_within_the_support_to_its_target_once() {
             let pairs = BlockPairs::try_new(&x, &y, dim, &k).unwrap();
             let order = pairs.source_order();
             let (nx, ny) = (x.len() / dim, y.len() / dim);
-            let mut seen = vec![vec![0u32; ny]; nx];
+            let mut seen = vec![vec![0u32; ny]; nx]; // visits of each pair (i, j)
             let mut untapered_ok = true;
             let u = |i: usize, j: usize| -> f64 { (0..dim).map(|c| (x[i * dim + c] - y[j * dim + c]).powi(2)).sum() };
             let visits = pairs.map_blocks(true, |targets, runs| {
@@ -294,14 +294,11 @@ fn block_pairs_hand_every_pair_within_the_support_to_its_target_once() {
                 }
             }
             assert!(untapered_ok, "{name}, case {case}: an untapered run holds a pair beyond u_in");
-            for i in 0..nx {
-                for j in 0..ny {
+            for (i, row) in seen.iter().enumerate() {
+                for (j, &count) in row.iter().enumerate() {
                     let needed = k.support_radius().is_none_or(|r| u(i, j) < r * r);
-                    assert!(seen[i][j] <= 1, "{name}, case {case}: pair ({i}, {j}) visited twice");
-                    assert!(
-                        !needed || seen[i][j] == 1,
-                        "{name}, case {case}: pair ({i}, {j}) within the support is missed"
-                    );
+                    assert!(count <= 1, "{name}, case {case}: pair ({i}, {j}) visited twice");
+                    assert!(!needed || count == 1, "{name}, case {case}: pair ({i}, {j}) within the support is missed");
                 }
             }
         }

@@ -1,0 +1,243 @@
+//! The vectorised pair sums behind every inner product: for each target
+//! cell i of X and the cells j of Y that [`BlockPairs`] hands it (all of
+//! them, or those within k_p's support),
+//!
+//! - s0_i = Σ_j r_j k_p k_f k_t,
+//! - gc_i = Σ_j r_j 2k_p' (c_i − c_j) k_f k_t,
+//! - gu_i = Σ_j r_j k_p k_f k_t'(s) u_j,
+//! - gf_i = Σ_j r_j k_p k_f'(v) 2(f_i − f_j) k_t,
+//!
+//! with k_p, k_f, k_t at u = |c_i − c_j|², v = (f_i − f_j)², s = u_i·u_j.
+//! Then ⟨μ_X, μ_Y⟩ = Σ_i r_i s0_i, and r_i times the other sums are its
+//! derivatives in c_i, u_i and f_i (s0_i is the one in r_i).
+//!
+//! Targets are processed [`L`] at a time as lanes, like fshape-kernels'
+//! own vectorised paths, inside a pulp dispatch so the lane loops compile
+//! to the CPU's SIMD instructions. Each target's sum runs over j in the
+//! order BlockPairs fixes, so results do not depend on the thread count.
+
+#![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
+
+use fshape_kernels::BlockPairs;
+use fshape_kernels::lanes::{L, exp_lanes};
+use pulp::{Arch, Simd, WithSimd};
+
+use crate::{CellFeatures, GrassKernel, SignalKernel, VarifoldError, VarifoldKernel};
+
+/// Per-lane sums of one target block.
+#[derive(Clone, Copy)]
+struct Acc<const D: usize, const DU: usize> {
+    s0: [f64; L],
+    gc: [[f64; L]; D],
+    gu: [[f64; L]; DU],
+    gf: [f64; L],
+}
+
+/// One target block against one run of sorted sources.
+struct Tile<'a, const D: usize, const DU: usize, const GRAD: bool> {
+    k: &'a VarifoldKernel,
+    tc: &'a [[f64; L]; D],
+    tu: &'a [[f64; L]; DU],
+    tf: &'a [f64; L],
+    sc: &'a [[f64; D]],
+    su: &'a [[f64; DU]],
+    sf: &'a [f64],
+    sr: &'a [f64],
+    tapered: bool,
+    acc: Acc<D, DU>,
+}
+
+impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D, DU, GRAD> {
+    type Output = Acc<D, DU>;
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(mut self, _simd: S) -> Self::Output {
+        let acc = &mut self.acc;
+        for j in 0..self.sr.len() {
+            let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
+            let mut u2 = [0.0; L];
+            for k in 0..D {
+                for l in 0..L {
+                    let d = self.tc[k][l] - cj[k];
+                    u2[l] += d * d;
+                }
+            }
+            let (kp, kp1) = self.k.position().lanes(&u2, self.tapered);
+            // k_f and its derivative, and f_i − f_j.
+            let mut df = [0.0; L];
+            let (kf, kf1) = match self.k.signal() {
+                SignalKernel::Constant => ([1.0; L], [0.0; L]),
+                SignalKernel::Gaussian { sigma } => {
+                    let b = 0.5 / (sigma * sigma);
+                    let mut arg = [0.0; L];
+                    for l in 0..L {
+                        df[l] = self.tf[l] - self.sf[j];
+                        arg[l] = -b * df[l] * df[l];
+                    }
+                    let e = exp_lanes(arg);
+                    let mut e1 = [0.0; L];
+                    for l in 0..L {
+                        e1[l] = -b * e[l];
+                    }
+                    (e, e1)
+                }
+            };
+            let mut s = [0.0; L];
+            for k in 0..DU {
+                for l in 0..L {
+                    s[l] += self.tu[k][l] * uj[k];
+                }
+            }
+            let (mut kt, mut kt1) = ([0.0; L], [0.0; L]);
+            match self.k.grass() {
+                GrassKernel::Linear => {
+                    kt = s;
+                    kt1 = [1.0; L];
+                }
+                GrassKernel::Binet => {
+                    for l in 0..L {
+                        kt[l] = s[l] * s[l];
+                        kt1[l] = 2.0 * s[l];
+                    }
+                }
+                GrassKernel::OrientedGaussian { sigma } => {
+                    let c = 2.0 / (sigma * sigma);
+                    let mut arg = [0.0; L];
+                    for l in 0..L {
+                        arg[l] = c * (s[l] - 1.0);
+                    }
+                    kt = exp_lanes(arg);
+                    for l in 0..L {
+                        kt1[l] = c * kt[l];
+                    }
+                }
+                GrassKernel::UnorientedGaussian { sigma } => {
+                    let c = 2.0 / (sigma * sigma);
+                    let mut arg = [0.0; L];
+                    for l in 0..L {
+                        arg[l] = c * (s[l] * s[l] - 1.0);
+                    }
+                    kt = exp_lanes(arg);
+                    for l in 0..L {
+                        kt1[l] = 2.0 * c * s[l] * kt[l];
+                    }
+                }
+            }
+            let mut m = [0.0; L];
+            for l in 0..L {
+                m[l] = rj * kf[l] * kt[l];
+                acc.s0[l] += kp[l] * m[l];
+            }
+            if GRAD {
+                for k in 0..D {
+                    for l in 0..L {
+                        acc.gc[k][l] += 2.0 * kp1[l] * m[l] * (self.tc[k][l] - cj[k]);
+                    }
+                }
+                let mut w = [0.0; L];
+                for l in 0..L {
+                    w[l] = rj * kp[l] * kf[l] * kt1[l];
+                    acc.gf[l] += 2.0 * rj * kp[l] * kf1[l] * df[l] * kt[l];
+                }
+                for k in 0..DU {
+                    for l in 0..L {
+                        acc.gu[k][l] += w[l] * uj[k];
+                    }
+                }
+            }
+        }
+        self.acc
+    }
+}
+
+/// The per-target sums (module doc) of every cell of `x` against `y`: rows
+/// [s0] or, with `grad`, [s0, gc (dim), gu (du), gf].
+pub(crate) fn pair_sums(
+    x: &CellFeatures,
+    y: &CellFeatures,
+    k: &VarifoldKernel,
+    grad: bool,
+    parallel: bool,
+) -> Result<Vec<f64>, VarifoldError> {
+    match (x.dim(), x.dir_len(), grad) {
+        (2, 1, false) => run::<2, 1, false>(x, y, k, parallel),
+        (2, 1, true) => run::<2, 1, true>(x, y, k, parallel),
+        (2, 2, false) => run::<2, 2, false>(x, y, k, parallel),
+        (2, 2, true) => run::<2, 2, true>(x, y, k, parallel),
+        (3, 3, false) => run::<3, 3, false>(x, y, k, parallel),
+        (3, 3, true) => run::<3, 3, true>(x, y, k, parallel),
+        (dim, du, _) => Err(VarifoldError::Dimension { what: "direction components", expected: dim, found: du }),
+    }
+}
+
+/// The widest row: s0, 3 centre and 3 direction components, the signal.
+const MAX_ROW: usize = 8;
+
+/// Row width of [`pair_sums`]' output.
+pub(crate) fn row_len(dim: usize, du: usize, grad: bool) -> usize {
+    if grad { 2 + dim + du } else { 1 }
+}
+
+fn run<const D: usize, const DU: usize, const GRAD: bool>(
+    x: &CellFeatures,
+    y: &CellFeatures,
+    k: &VarifoldKernel,
+    parallel: bool,
+) -> Result<Vec<f64>, VarifoldError> {
+    let pairs = BlockPairs::try_new(x.centres(), y.centres(), D, k.position())?;
+    let order = pairs.source_order();
+    let zeros = vec![0.0; y.len()];
+    let (yf, xf) = (y.signal().unwrap_or(&zeros), x.signal());
+    let sc: Vec<[f64; D]> = order.iter().map(|&j| std::array::from_fn(|c| y.centres()[j * D + c])).collect();
+    let su: Vec<[f64; DU]> = order.iter().map(|&j| std::array::from_fn(|c| y.dirs()[j * DU + c])).collect();
+    let sf: Vec<f64> = order.iter().map(|&j| yf[j]).collect();
+    let sr: Vec<f64> = order.iter().map(|&j| y.weights()[j]).collect();
+    let w = row_len(D, DU, GRAD);
+    let arch = Arch::new();
+    let blocks = pairs.map_blocks(parallel, |targets, runs| {
+        let n = targets.len();
+        // Unused lanes repeat the last target; their sums are discarded.
+        let lane = |l: usize| targets[l.min(n - 1)];
+        let tc: [[f64; L]; D] = std::array::from_fn(|c| std::array::from_fn(|l| x.centres()[lane(l) * D + c]));
+        let tu: [[f64; L]; DU] = std::array::from_fn(|c| std::array::from_fn(|l| x.dirs()[lane(l) * DU + c]));
+        let tf: [f64; L] = std::array::from_fn(|l| xf.map_or(0.0, |f| f[lane(l)]));
+        let mut acc = Acc::<D, DU> { s0: [0.0; L], gc: [[0.0; L]; D], gu: [[0.0; L]; DU], gf: [0.0; L] };
+        for run in runs {
+            let r = run.range.clone();
+            let tile = Tile::<D, DU, GRAD> {
+                k,
+                tc: &tc,
+                tu: &tu,
+                tf: &tf,
+                sc: &sc[r.clone()],
+                su: &su[r.clone()],
+                sf: &sf[r.clone()],
+                sr: &sr[r],
+                tapered: run.tapered,
+                acc,
+            };
+            acc = arch.dispatch(tile);
+        }
+        let mut rows = Vec::with_capacity(n);
+        for (l, &i) in targets.iter().enumerate() {
+            let mut row = [0.0; MAX_ROW];
+            row[0] = acc.s0[l];
+            if GRAD {
+                for c in 0..D {
+                    row[1 + c] = acc.gc[c][l];
+                }
+                for c in 0..DU {
+                    row[1 + D + c] = acc.gu[c][l];
+                }
+                row[1 + D + DU] = acc.gf[l];
+            }
+            rows.push((i, row));
+        }
+        rows
+    });
+    let mut out = vec![0.0; x.len() * w];
+    for (i, row) in blocks.into_iter().flatten() {
+        out[i * w..(i + 1) * w].copy_from_slice(&row[..w]);
+    }
+    Ok(out)
+}

@@ -1,0 +1,1 @@
+//! Convergence under refinement (placeholder filled below).
