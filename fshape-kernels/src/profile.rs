@@ -59,6 +59,22 @@ pub(crate) struct GaussTerms {
     pub(crate) n: usize,
 }
 
+impl Taper {
+    /// The taper s(u) and its derivative s'(u) for the lanes of `u` (s = 1
+    /// below u_in, 0 beyond u_out).
+    #[inline(always)]
+    pub fn lanes(&self, u: &[f64; L]) -> ([f64; L], [f64; L]) {
+        let inv = 1.0 / (self.u_out - self.u_in);
+        let (mut s, mut ds) = ([0.0; L], [0.0; L]);
+        for l in 0..L {
+            let x = ((u[l] - self.u_in) * inv).clamp(0.0, 1.0);
+            s[l] = 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+            ds[l] = -30.0 * x * x * (1.0 - x) * (1.0 - x) * inv;
+        }
+        (s, ds)
+    }
+}
+
 /// How much wider the outer taper radius is than the inner one.
 pub const TAPER_WIDTH: f64 = 0.25;
 
@@ -228,14 +244,10 @@ impl Kernel {
             }
         }
         if let (Some(t), true) = (self.taper, apply_taper) {
-            let h = t.u_out - t.u_in;
-            let inv = 1.0 / h;
+            let (s, ds) = t.lanes(u);
             for l in 0..L {
-                let x = ((u[l] - t.u_in) * inv).clamp(0.0, 1.0);
-                let s = 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
-                let ds = -30.0 * x * x * (1.0 - x) * (1.0 - x) * inv;
-                k1[l] = k1[l] * s + k0[l] * ds;
-                k0[l] *= s;
+                k1[l] = k1[l] * s[l] + k0[l] * ds[l];
+                k0[l] *= s[l];
             }
         }
         (k0, k1)
@@ -262,9 +274,10 @@ impl Kernel {
         Some(g)
     }
 
-    /// For a single Gaussian (the case with vectorised paths): its
-    /// coefficient a = 1/(2σ²), weight, and taper if truncated.
-    pub(crate) fn single_gaussian(&self) -> Option<(f64, f64, Option<Taper>)> {
+    /// For a single Gaussian w·exp(−a u) (the case with vectorised paths,
+    /// and the one other crates fuse with their own exponential factors):
+    /// its coefficient a = 1/(2σ²), weight w, and taper if truncated.
+    pub fn single_gaussian(&self) -> Option<(f64, f64, Option<Taper>)> {
         match self.terms.as_slice() {
             [Term::Gauss { a, w }] => Some((*a, *w, self.taper)),
             _ => None,

@@ -52,6 +52,10 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
 
     #[inline(always)]
     fn with_simd<S: Simd>(mut self, _simd: S) -> Self::Output {
+        if let Some((a, w, taper)) = self.k.position().single_gaussian() {
+            self.fused(a, w, if self.tapered { taper } else { None });
+            return self.acc;
+        }
         let acc = &mut self.acc;
         for j in 0..self.sr.len() {
             let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
@@ -147,6 +151,118 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
             }
         }
         self.acc
+    }
+}
+
+impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
+    /// The common case, k_p a single Gaussian w·exp(−a u): the exponential
+    /// factors k_p, k_f and (for the Gaussian direction kernels) k_t are
+    /// computed as one exponential of the sum of their arguments, three
+    /// times fewer than the general loop. The same sums to rounding (the
+    /// oracle tests cover both loops).
+    #[inline(always)]
+    fn fused(&mut self, a: f64, w: f64, taper: Option<fshape_kernels::Taper>) {
+        let acc = &mut self.acc;
+        let b = match self.k.signal() {
+            SignalKernel::Constant => 0.0,
+            SignalKernel::Gaussian { sigma } => 0.5 / (sigma * sigma),
+        };
+        for j in 0..self.sr.len() {
+            let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
+            let mut u2 = [0.0; L];
+            for k in 0..D {
+                for l in 0..L {
+                    let d = self.tc[k][l] - cj[k];
+                    u2[l] += d * d;
+                }
+            }
+            let mut df = [0.0; L];
+            let fj = self.sf.get(j).copied().unwrap_or(0.0);
+            for l in 0..L {
+                df[l] = self.tf[l] - fj;
+            }
+            let mut s = [0.0; L];
+            for k in 0..DU {
+                for l in 0..L {
+                    s[l] += self.tu[k][l] * uj[k];
+                }
+            }
+            // arg = −a u − b v (+ the Gaussian k_t's argument); the
+            // polynomial k_t (p, p') and the k_t'/k_t of the exponential one.
+            let mut arg = [0.0; L];
+            for l in 0..L {
+                arg[l] = -a * u2[l] - b * df[l] * df[l];
+            }
+            let (mut p, mut p1, mut q) = ([1.0; L], [0.0; L], [0.0; L]);
+            match self.k.grass() {
+                GrassKernel::Linear => {
+                    p = s;
+                    p1 = [1.0; L];
+                }
+                GrassKernel::Binet => {
+                    for l in 0..L {
+                        p[l] = s[l] * s[l];
+                        p1[l] = 2.0 * s[l];
+                    }
+                }
+                GrassKernel::OrientedGaussian { sigma } => {
+                    let c = 2.0 / (sigma * sigma);
+                    for l in 0..L {
+                        arg[l] += c * (s[l] - 1.0);
+                        q[l] = c;
+                    }
+                }
+                GrassKernel::UnorientedGaussian { sigma } => {
+                    let c = 2.0 / (sigma * sigma);
+                    for l in 0..L {
+                        arg[l] += c * (s[l] * s[l] - 1.0);
+                        q[l] = 2.0 * c * s[l];
+                    }
+                }
+            }
+            // m = w r_j exp(arg): the untapered product; with the taper t(u),
+            // the term is m·t·p and its u-derivative m·(−a t + t')·p.
+            let e = exp_lanes(arg);
+            let (mut m, mut mt, mut mdu) = ([0.0; L], [0.0; L], [0.0; L]);
+            for l in 0..L {
+                m[l] = w * rj * e[l];
+            }
+            match taper {
+                Some(t) => {
+                    let (ts, tds) = t.lanes(&u2);
+                    for l in 0..L {
+                        mt[l] = m[l] * ts[l];
+                        mdu[l] = m[l] * (-a * ts[l] + tds[l]);
+                    }
+                }
+                None => {
+                    for l in 0..L {
+                        mt[l] = m[l];
+                        mdu[l] = -a * m[l];
+                    }
+                }
+            }
+            for l in 0..L {
+                acc.s0[l] += mt[l] * p[l];
+            }
+            if GRAD {
+                for k in 0..D {
+                    for l in 0..L {
+                        acc.gc[k][l] += 2.0 * mdu[l] * p[l] * (self.tc[k][l] - cj[k]);
+                    }
+                }
+                let mut g = [0.0; L];
+                for l in 0..L {
+                    acc.gf[l] += -2.0 * b * mt[l] * p[l] * df[l];
+                    g[l] = mt[l] * (p[l] * q[l] + p1[l]);
+                }
+                for k in 0..DU {
+                    for l in 0..L {
+                        acc.gu[k][l] += g[l] * uj[k];
+                    }
+                }
+            }
+        }
     }
 }
 

@@ -138,3 +138,64 @@ impl GrassKernel {
         matches!(self, GrassKernel::Binet | GrassKernel::UnorientedGaussian { .. })
     }
 }
+
+/// Splits "name:args" and parses the comma-separated numbers of args.
+fn parse_spec(what: &'static str, spec: &str, expected: &'static str) -> Result<(String, Vec<f64>), VarifoldError> {
+    let bad = || VarifoldError::Parse { what, input: spec.to_string(), expected };
+    let (name, args) = spec.split_once(':').unwrap_or((spec, ""));
+    let nums = if args.is_empty() {
+        Vec::new()
+    } else {
+        args.split(',').map(|a| a.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?
+    };
+    Ok((name.trim().to_ascii_lowercase(), nums))
+}
+
+impl VarifoldKernel {
+    /// Parses the command line's kernel specifications:
+    /// position `gaussian:σ`, `gaussian:σ1,σ2,…` (a sum with unit weights)
+    /// or `cauchy:σ`; signal `gaussian:σ_f` or `None` (constant); direction
+    /// `linear`, `binet`, `gaussian-oriented:σ_t` or `gaussian-unoriented:σ_t`.
+    ///
+    /// ```
+    /// use fshape_varifold::{GrassKernel, SignalKernel, VarifoldKernel};
+    /// let k = VarifoldKernel::parse("gaussian:5", Some("gaussian:0.3"), "gaussian-unoriented:0.5")?;
+    /// assert_eq!(k.signal(), SignalKernel::Gaussian { sigma: 0.3 });
+    /// assert_eq!(k.grass(), GrassKernel::UnorientedGaussian { sigma: 0.5 });
+    /// assert!(VarifoldKernel::parse("gauss:5", None, "binet").is_err());
+    /// # Ok::<(), fshape_varifold::VarifoldError>(())
+    /// ```
+    pub fn parse(position: &str, signal: Option<&str>, grass: &str) -> Result<Self, VarifoldError> {
+        use fshape_kernels::Profile;
+        const GEOM: &str = "gaussian:σ, gaussian:σ1,σ2,... or cauchy:σ";
+        let (name, nums) = parse_spec("position kernel", position, GEOM)?;
+        let bad = |what, input: &str, expected| VarifoldError::Parse { what, input: input.to_string(), expected };
+        let profile = match (name.as_str(), nums.as_slice()) {
+            ("gaussian", [sigma]) => Profile::Gaussian { sigma: *sigma },
+            ("gaussian", s) if s.len() > 1 => Profile::Gaussians { sigmas: s.to_vec(), weights: vec![1.0; s.len()] },
+            ("cauchy", [sigma]) => Profile::Cauchy { sigma: *sigma },
+            _ => return Err(bad("position kernel", position, GEOM)),
+        };
+        const SIG: &str = "gaussian:σ_f";
+        let signal = match signal {
+            None => SignalKernel::Constant,
+            Some(spec) => match parse_spec("signal kernel", spec, SIG)? {
+                (name, nums) if name == "gaussian" && nums.len() == 1 => SignalKernel::Gaussian { sigma: nums[0] },
+                _ => return Err(bad("signal kernel", spec, SIG)),
+            },
+        };
+        const GR: &str = "linear, binet, gaussian-oriented:σ_t or gaussian-unoriented:σ_t";
+        let grass_kernel = match parse_spec("direction kernel", grass, GR)? {
+            (name, nums) if name == "linear" && nums.is_empty() => GrassKernel::Linear,
+            (name, nums) if name == "binet" && nums.is_empty() => GrassKernel::Binet,
+            (name, nums) if name == "gaussian-oriented" && nums.len() == 1 => {
+                GrassKernel::OrientedGaussian { sigma: nums[0] }
+            }
+            (name, nums) if name == "gaussian-unoriented" && nums.len() == 1 => {
+                GrassKernel::UnorientedGaussian { sigma: nums[0] }
+            }
+            _ => return Err(bad("direction kernel", grass, GR)),
+        };
+        VarifoldKernel::try_new(Kernel::try_new(&profile)?, signal, grass_kernel)
+    }
+}

@@ -107,6 +107,16 @@ pub enum VarifoldError {
         /// Target direction components.
         target_dir: usize,
     },
+    /// A kernel specification could not be parsed.
+    #[error("{what} `{input}` not understood: expected {expected}")]
+    Parse {
+        /// Which kernel.
+        what: &'static str,
+        /// The text given.
+        input: String,
+        /// The accepted forms.
+        expected: &'static str,
+    },
     /// A signal kernel needs signals on both shapes.
     #[error(
         "the signal kernel compares signal values, but the {which} shape has no signal (use a constant signal kernel for purely geometric shapes)"

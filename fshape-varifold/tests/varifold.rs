@@ -22,13 +22,16 @@ pub const GRASS: [GrassKernel; 4] = [
     GrassKernel::UnorientedGaussian { sigma: 0.7 },
 ];
 
-/// Position kernels: one Gaussian, a sum of two, Cauchy, and a truncated one.
+/// Position kernels: one Gaussian (the engine's fused loop), a sum of two
+/// and Cauchy (its general loop), and one truncated kernel for each loop.
 pub fn position_kernels() -> Vec<Kernel> {
     let g = Kernel::gaussian(0.4).unwrap();
+    let cauchy = Kernel::try_new(&Profile::Cauchy { sigma: 0.3 }).unwrap();
     vec![
         g.clone(),
         Kernel::try_new(&Profile::Gaussians { sigmas: vec![0.6, 0.25], weights: vec![1.0, 0.5] }).unwrap(),
-        Kernel::try_new(&Profile::Cauchy { sigma: 0.3 }).unwrap(),
+        cauchy.truncated(0.2).unwrap(), // tapers from radius 0.6 to 0.75, inside the shapes
+        cauchy,
         g.truncated(1e-3).unwrap(),
     ]
 }
