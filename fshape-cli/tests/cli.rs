@@ -141,3 +141,96 @@ fn fem_summary_and_matrix_market_export() {
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("length scale must be positive"));
 }
+
+/// A one-triangle ASCII PLY lifted to height z.
+fn triangle_at(name: &str, z: f64) -> String {
+    let p = tmp(name);
+    let text = format!(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+         element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 {z}\n1 0 {z}\n0 1 {z}\n3 0 1 2\n"
+    );
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+#[test]
+fn distance_between_two_parallel_triangles_is_the_hand_computed_value() {
+    // Two triangles of area r = 1/2 with equal normals, centres 1 apart: with
+    // σ = 1 and currents, ⟨X,X⟩ = ⟨Y,Y⟩ = r², ⟨X,Y⟩ = r² e^{−1/2}, so
+    // A = 2r²(1 − e^{−1/2}).
+    let (a, b) = (triangle_at("t0.ply", 0.0), triangle_at("t1.ply", 1.0));
+    let v = json(&fshape(&["distance", &a, &b, "--kernel-geom", "gaussian:1", "--kernel-grass", "linear", "--json"]));
+    let expected = 0.5 * (1.0 - (-0.5f64).exp());
+    assert!((v["value"].as_f64().unwrap() - expected).abs() < 1e-15, "{v}");
+    assert!((v["xy"].as_f64().unwrap() - 0.25 * (-0.5f64).exp()).abs() < 1e-15, "{v}");
+}
+
+#[test]
+fn distance_between_the_shipped_hemispheres_with_thickness() {
+    let (lh, rh) = (repo("data/fsaverage5/lh.pial.thick.ply.gz"), repo("data/fsaverage5/rh.pial.ply.gz"));
+    let thick = repo("data/fsaverage5/rh.thick.csv.gz");
+    let kernels = ["--kernel-geom", "gaussian:20", "--kernel-signal", "gaussian:0.5", "--kernel-grass", "binet"];
+    let run = |extra: &[&str]| {
+        let mut args = vec!["distance"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&kernels);
+        args.extend(["--tolerance", "1e-6", "--json"]);
+        json(&fshape(&args))
+    };
+    let v = run(&[&lh, &rh, "--target-signal", &thick]);
+    let (a, xx, xy, yy) = ["value", "xx", "xy", "yy"].map(|k| v[k].as_f64().unwrap()).into();
+    assert!(a > 0.0 && (a - (xx - 2.0 * xy + yy)).abs() <= 1e-12 * (xx + yy), "{v}");
+    // Swapping source and target swaps the self terms and keeps A.
+    let w = run(&[&rh, &lh, "--source-signal", &thick]);
+    assert!((w["value"].as_f64().unwrap() - a).abs() <= 1e-12 * (xx + yy), "{v} vs {w}");
+    assert!((w["xx"].as_f64().unwrap() - yy).abs() <= 1e-12 * yy);
+    // Against itself: 0.
+    let z = run(&[&lh, &lh]);
+    assert!(z["value"].as_f64().unwrap().abs() <= 1e-12 * xx, "{z}");
+}
+
+#[test]
+fn distance_on_the_full_bunny_warns_about_its_unused_vertices() {
+    let full = repo("data/stanford_bunny/bun_zipper.ply.gz");
+    let coarse = repo("data/stanford_bunny/bun_zipper_res4.ply.gz");
+    let out = fshape(&[
+        "distance",
+        &full,
+        &coarse,
+        "--kernel-geom",
+        "gaussian:0.005",
+        "--kernel-grass",
+        "gaussian-unoriented:0.5",
+        "--tolerance",
+        "1e-6",
+        "--json",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(err.contains("1113 unused vertices"), "{err}");
+    let v = json(&out);
+    assert_eq!(v["source_cells"], 69451);
+    assert!(v["value"].as_f64().unwrap() > 0.0, "{v}");
+}
+
+#[test]
+fn distance_refuses_bad_kernels_naming_them() {
+    let lh = repo("data/fsaverage5/lh.pial.thick.ply.gz");
+    let bunny = repo("data/stanford_bunny/bun_zipper_res4.ply.gz");
+    for (args, needle) in [
+        (vec!["--kernel-geom", "gaussian:0", "--kernel-grass", "binet"], "position kernel width"),
+        (vec!["--kernel-geom", "gauss:1", "--kernel-grass", "binet"], "gauss:1"),
+        (vec!["--kernel-geom", "gaussian:1", "--kernel-grass", "wavy"], "wavy"),
+        (vec!["--kernel-geom", "gaussian:1", "--kernel-grass", "gaussian-oriented:-1"], "direction kernel width"),
+        (vec!["--kernel-geom", "gaussian:1", "--kernel-grass", "binet", "--kernel-signal", "gaussian:1"], "no signal"),
+        (vec!["--kernel-geom", "gaussian:1", "--kernel-grass", "binet", "--tolerance", "2"], "tolerance"),
+    ] {
+        let mut all = vec!["distance", lh.as_str(), bunny.as_str()];
+        all.extend(args);
+        let out = fshape(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{all:?}: {err}");
+        assert!(err.contains(needle), "{all:?}: {err}");
+    }
+    // A missing required flag is a usage error.
+    assert_eq!(fshape(&["distance", &lh, &bunny, "--kernel-geom", "gaussian:1"]).status.code(), Some(2));
+}

@@ -196,6 +196,10 @@ impl VarifoldKernel {
             }
             _ => return Err(bad("direction kernel", grass, GR)),
         };
-        VarifoldKernel::try_new(Kernel::try_new(&profile)?, signal, grass_kernel)
+        let position = Kernel::try_new(&profile).map_err(|e| match e {
+            fshape_kernels::KernelError::Width { sigma } => VarifoldError::Width { what: "position kernel", sigma },
+            other => other.into(),
+        })?;
+        VarifoldKernel::try_new(position, signal, grass_kernel)
     }
 }
