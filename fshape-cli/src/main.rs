@@ -148,10 +148,24 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", message(&e));
             ExitCode::from(1)
         }
     }
+}
+
+/// The error and its causes joined by ": ", skipping a cause whose text the
+/// previous message already contains (the library errors name their source
+/// in their own message and also return it from `source()`).
+fn message(e: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in e.chain() {
+        let m = cause.to_string();
+        if !parts.last().is_some_and(|p| p.contains(&m)) {
+            parts.push(m);
+        }
+    }
+    parts.join(": ")
 }
 
 /// Reads a mesh and, if given, replaces its signal by a CSV column.

@@ -234,3 +234,16 @@ fn distance_refuses_bad_kernels_naming_them() {
     // A missing required flag is a usage error.
     assert_eq!(fshape(&["distance", &lh, &bunny, "--kernel-geom", "gaussian:1"]).status.code(), Some(2));
 }
+
+#[test]
+fn an_error_names_its_place_once() {
+    // A signal CSV with a missing value on its third data line (file line 4).
+    let csv = tmp("nan.csv");
+    std::fs::write(&csv, "thickness\n1.0\n2.0\nnan\n").unwrap();
+    let mesh = triangle_at("nan_mesh.ply", 0.0);
+    let out = fshape(&["info", &mesh, "--signal", &csv.display().to_string()]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("nan.csv") && err.contains("line 4"), "{err}");
+    assert_eq!(err.matches("line 4").count(), 1, "the cause is repeated: {err}");
+}
