@@ -1,0 +1,213 @@
+//! The TOML configuration of a model (serde), validated into a [`Model`].
+//!
+//! ```toml
+//! [model]
+//! kind = "metamorphosis"   # metamorphosis | tangential | lddmm   (default metamorphosis)
+//! norm = "h1"              # l2-lumped | l2 | h1                  (default l2-lumped)
+//! length = 1.0             # ℓ of the H1 norm, in mesh units      (default 1)
+//! gamma_v = 1.0            # weight γ_V of the deformation energy (default 1)
+//! gamma_f = 1.0            # weight γ_f of the signal energy      (default 1)
+//! gamma_w = 1.0            # weight γ_W of the data attachment    (default 1)
+//!
+//! [deformation]
+//! widths = [0.2, 0.1]      # Gaussian widths σ_i, exp(−u/(2σ²))   (required)
+//! weights = [1.0, 1.0]     # one per width                        (default all 1)
+//! tolerance = 1e-6         # smooth truncation τ                  (default: exact)
+//!
+//! [integrator]
+//! scheme = "rk4"           # rk4 | midpoint | euler               (default rk4)
+//! steps = 10               # time steps on [0, 1]                 (default 10)
+//!
+//! [attachment]
+//! kernel_geom = "gaussian:0.05"     # as `fshape distance --kernel-geom` (required)
+//! kernel_signal = "gaussian:0.5"    # omit for a purely geometric term
+//! kernel_grass = "binet"            # (default binet)
+//! tolerance = 1e-6                  # truncation of k_p (default: exact)
+//! ```
+//!
+//! Unknown keys are refused by name; every value is checked before any work.
+
+use fshape_fem::Norm;
+use fshape_kernels::{Kernel, Profile};
+use fshape_varifold::VarifoldKernel;
+use serde::Deserialize;
+
+use crate::{Integrator, Model, ModelKind, ShootError};
+
+/// The whole file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// `[model]`.
+    #[serde(default)]
+    pub model: ModelSection,
+    /// `[deformation]`.
+    pub deformation: DeformationSection,
+    /// `[integrator]`.
+    #[serde(default)]
+    pub integrator: IntegratorSection,
+    /// `[attachment]` (needed for matching, not for shooting).
+    pub attachment: Option<AttachmentSection>,
+}
+
+/// `[model]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelSection {
+    /// metamorphosis | tangential | lddmm.
+    pub kind: String,
+    /// l2-lumped | l2 | h1.
+    pub norm: String,
+    /// ℓ of the H1 norm.
+    pub length: f64,
+    /// γ_V.
+    pub gamma_v: f64,
+    /// γ_f.
+    pub gamma_f: f64,
+    /// γ_W.
+    pub gamma_w: f64,
+}
+
+impl Default for ModelSection {
+    fn default() -> Self {
+        ModelSection {
+            kind: "metamorphosis".into(),
+            norm: "l2-lumped".into(),
+            length: 1.0,
+            gamma_v: 1.0,
+            gamma_f: 1.0,
+            gamma_w: 1.0,
+        }
+    }
+}
+
+/// `[deformation]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeformationSection {
+    /// Gaussian widths.
+    pub widths: Vec<f64>,
+    /// Weights, one per width (default all 1).
+    pub weights: Option<Vec<f64>>,
+    /// Truncation tolerance (default exact).
+    pub tolerance: Option<f64>,
+}
+
+/// `[integrator]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IntegratorSection {
+    /// rk4 | midpoint | euler.
+    pub scheme: String,
+    /// Number of time steps.
+    pub steps: usize,
+}
+
+impl Default for IntegratorSection {
+    fn default() -> Self {
+        IntegratorSection { scheme: "rk4".into(), steps: 10 }
+    }
+}
+
+/// `[attachment]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttachmentSection {
+    /// Position kernel, as `fshape distance --kernel-geom`.
+    pub kernel_geom: String,
+    /// Signal kernel (omit for a geometric term).
+    pub kernel_signal: Option<String>,
+    /// Direction kernel (default binet).
+    #[serde(default = "binet")]
+    pub kernel_grass: String,
+    /// Truncation tolerance of k_p (default exact).
+    pub tolerance: Option<f64>,
+}
+
+fn binet() -> String {
+    "binet".into()
+}
+
+impl Config {
+    /// Parses TOML text (errors name the key and the line).
+    ///
+    /// ```
+    /// let c = fshape_shoot::Config::parse("[deformation]\nwidths = [0.2, 0.1]\n")?;
+    /// let model = c.model()?;
+    /// assert_eq!(model.steps, 10);
+    /// assert!(fshape_shoot::Config::parse("[deformation]\nwidths = [0.2]\nwidht = 1\n").is_err());
+    /// # Ok::<(), fshape_shoot::ShootError>(())
+    /// ```
+    pub fn parse(text: &str) -> Result<Config, ShootError> {
+        toml::from_str(text).map_err(|e| ShootError::Config(e.to_string()))
+    }
+
+    /// Reads and parses a file.
+    pub fn read(path: &std::path::Path) -> Result<Config, ShootError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ShootError::Config(format!("{}: {e}", path.display())))?;
+        Config::parse(&text).map_err(|e| match e {
+            ShootError::Config(m) => ShootError::Config(format!("{}: {m}", path.display())),
+            other => other,
+        })
+    }
+
+    /// The validated model.
+    pub fn model(&self) -> Result<Model, ShootError> {
+        let bad = |key: &str, why: String| ShootError::Config(format!("{key}: {why}"));
+        let m = &self.model;
+        let kind = match m.kind.as_str() {
+            "metamorphosis" => ModelKind::Metamorphosis,
+            "tangential" => ModelKind::Tangential,
+            "lddmm" => ModelKind::Lddmm,
+            other => return Err(bad("model.kind", format!("`{other}` (expected metamorphosis, tangential or lddmm)"))),
+        };
+        for (key, v) in [("model.gamma_v", m.gamma_v), ("model.gamma_f", m.gamma_f), ("model.gamma_w", m.gamma_w)] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(bad(key, format!("must be positive and finite, got {v}")));
+            }
+        }
+        let norm = Norm::parse(&m.norm, m.length).map_err(|e| bad("model.norm", e.to_string()))?;
+        if let Norm::H1 { length } = norm
+            && !(length > 0.0 && length.is_finite())
+        {
+            return Err(bad("model.length", format!("must be positive and finite, got {length}")));
+        }
+        let d = &self.deformation;
+        let weights = d.weights.clone().unwrap_or_else(|| vec![1.0; d.widths.len()]);
+        let profile = Profile::Gaussians { sigmas: d.widths.clone(), weights };
+        let mut kernel = Kernel::try_new(&profile).map_err(|e| bad("deformation", e.to_string()))?;
+        if let Some(tol) = d.tolerance {
+            kernel = kernel.truncated(tol).map_err(|e| bad("deformation.tolerance", e.to_string()))?;
+        }
+        let integrator = match self.integrator.scheme.as_str() {
+            "rk4" => Integrator::Rk4,
+            "midpoint" => Integrator::Midpoint,
+            "euler" => Integrator::Euler,
+            other => return Err(bad("integrator.scheme", format!("`{other}` (expected rk4, midpoint or euler)"))),
+        };
+        if self.integrator.steps == 0 {
+            return Err(bad("integrator.steps", "must be at least 1".into()));
+        }
+        Ok(Model {
+            kind,
+            norm,
+            gamma_v: m.gamma_v,
+            gamma_f: m.gamma_f,
+            gamma_w: m.gamma_w,
+            kernel,
+            integrator,
+            steps: self.integrator.steps,
+        })
+    }
+
+    /// The data attachment kernel of `[attachment]`.
+    pub fn attachment_kernel(&self) -> Result<VarifoldKernel, ShootError> {
+        let a = self.attachment.as_ref().ok_or_else(|| ShootError::Config("missing section [attachment]".into()))?;
+        let bad = |e: fshape_varifold::VarifoldError| ShootError::Config(format!("attachment: {e}"));
+        let mut k = VarifoldKernel::parse(&a.kernel_geom, a.kernel_signal.as_deref(), &a.kernel_grass).map_err(bad)?;
+        if let Some(tol) = a.tolerance {
+            k = k.truncated(tol).map_err(bad)?;
+        }
+        Ok(k)
+    }
+}

@@ -1,0 +1,440 @@
+//! Forward shooting with explicit Runge–Kutta schemes, the discrete
+//! adjoint, and the matching objective J with its exact gradient.
+
+use fshape_fem::SignalNorm;
+use fshape_mesh::FShape;
+use fshape_varifold::{Attachment, VarifoldKernel};
+
+use crate::dynamics::{Dynamics, Layout, Timings};
+use crate::{Integrator, Model, ModelKind, ShootError};
+
+impl Integrator {
+    /// The Butcher tableau (a strictly lower triangular, row by row; b).
+    fn tableau(self) -> (&'static [&'static [f64]], &'static [f64]) {
+        match self {
+            Integrator::Euler => (&[&[]], &[1.0]),
+            Integrator::Midpoint => (&[&[], &[0.5]], &[0.0, 1.0]),
+            Integrator::Rk4 => {
+                (&[&[], &[0.5], &[0.0, 0.5], &[0.0, 0.0, 1.0]], &[1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0])
+            }
+        }
+    }
+}
+
+/// A shooting: the states at the time steps t_k = k/N, the stage states
+/// (kept for the adjoint), the Hamiltonian at every step and timings.
+#[derive(Clone, Debug)]
+pub struct Trajectory {
+    layout: Layout,
+    /// z at t_0..t_N.
+    nodes: Vec<Vec<f64>>,
+    /// F(z) at the nodes (for interpolation).
+    slopes: Vec<Vec<f64>>,
+    /// Stage states of each step.
+    stages: Vec<Vec<Vec<f64>>>,
+    /// H(z_k) at every node.
+    pub hamiltonian: Vec<f64>,
+    /// Where the forward time went.
+    pub timings: Timings,
+}
+
+impl Trajectory {
+    /// Number of time steps N.
+    pub fn steps(&self) -> usize {
+        self.nodes.len() - 1
+    }
+
+    /// Vertex positions at step k (flat).
+    pub fn points(&self, k: usize) -> &[f64] {
+        &self.nodes[k][self.layout.x()]
+    }
+
+    /// Signal at step k.
+    pub fn signal(&self, k: usize) -> &[f64] {
+        &self.nodes[k][self.layout.f()]
+    }
+
+    /// Momenta p at step k.
+    pub fn momenta(&self, k: usize) -> &[f64] {
+        &self.nodes[k][self.layout.mom()]
+    }
+
+    /// Signal momentum p^f at step k.
+    pub fn signal_momentum(&self, k: usize) -> &[f64] {
+        &self.nodes[k][self.layout.pf()]
+    }
+
+    /// (x, f) at any t ∈ [0, 1]: cubic Hermite interpolation between the
+    /// steps with the field's ẋ, ḟ at both ends (exact at the steps).
+    pub fn at(&self, t: f64) -> (Vec<f64>, Vec<f64>) {
+        let n = self.steps();
+        let s = (t.clamp(0.0, 1.0) * n as f64).min(n as f64);
+        let k = (s.floor() as usize).min(n - 1);
+        let u = s - k as f64;
+        let dt = 1.0 / n as f64;
+        let (h00, h10, h01, h11) = (
+            2.0 * u.powi(3) - 3.0 * u * u + 1.0,
+            u.powi(3) - 2.0 * u * u + u,
+            -2.0 * u.powi(3) + 3.0 * u * u,
+            u.powi(3) - u * u,
+        );
+        let (z0, z1, d0, d1) = (&self.nodes[k], &self.nodes[k + 1], &self.slopes[k], &self.slopes[k + 1]);
+        let interp = |r: std::ops::Range<usize>| -> Vec<f64> {
+            r.map(|i| h00 * z0[i] + h10 * dt * d0[i] + h01 * z1[i] + h11 * dt * d1[i]).collect()
+        };
+        (interp(self.layout.x()), interp(self.layout.f()))
+    }
+}
+
+/// The value of the matching objective and its parts.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Objective {
+    /// J = energy + γ_W·A.
+    pub value: f64,
+    /// H(x_0, p_0, p^f) (metamorphosis, LDDMM), plus (γ_f/2)ζᵀD_s(x_0)ζ for
+    /// the tangential model: the path energy.
+    pub energy: f64,
+    /// The signal part of the energy.
+    pub signal_energy: f64,
+    /// A(x_1, f_1; target).
+    pub attachment: f64,
+}
+
+/// A matching problem: template, model, and (optionally) a target.
+pub struct Problem {
+    template: FShape,
+    model: Model,
+    fem: Option<SignalNorm>,
+    attachment: Option<Attachment>,
+    layout: Layout,
+}
+
+impl Problem {
+    /// Shooting only (no target).
+    pub fn new(template: &FShape, model: Model) -> Result<Self, ShootError> {
+        let (n, dim) = (template.n_vertices(), template.dim());
+        let fem = if model.kind == ModelKind::Lddmm {
+            None
+        } else {
+            let fem = SignalNorm::try_new(template, model.norm)?;
+            // Run the symbolic analysis now, once for every evaluation.
+            fem.solver()?;
+            Some(fem)
+        };
+        let mut template = template.clone();
+        if template.signal().is_none() {
+            template = template.with_signal(Some(vec![0.0; n]))?;
+        }
+        Ok(Problem { template, model, fem, attachment: None, layout: Layout { pn: n * dim, p: n, dim } })
+    }
+
+    /// With a target and data attachment kernel (⟨Y,Y⟩ computed here, once).
+    pub fn with_target(mut self, target: &FShape, kernel: VarifoldKernel) -> Result<Self, ShootError> {
+        self.attachment = Some(Attachment::new(target, kernel)?);
+        Ok(self)
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The template (with a zero signal if it had none).
+    pub fn template(&self) -> &FShape {
+        &self.template
+    }
+
+    fn dynamics(&self) -> Dynamics<'_> {
+        let evolving = self.model.kind == ModelKind::Metamorphosis;
+        Dynamics {
+            kernel: &self.model.kernel,
+            fem: if evolving { self.fem.as_ref() } else { None },
+            gamma_v: self.model.gamma_v,
+            gamma_f: self.model.gamma_f,
+            layout: self.layout,
+        }
+    }
+
+    fn check(&self, p0: &[f64], pf: &[f64]) -> Result<(), ShootError> {
+        let l = self.layout;
+        for (what, v, n) in [("momentum p0", p0, l.pn), ("signal momentum", pf, l.p)] {
+            if v.len() != n {
+                return Err(ShootError::Dimension { what, expected: n, found: v.len() });
+            }
+            if let Some(i) = v.iter().position(|a| !a.is_finite()) {
+                return Err(ShootError::NonFinite { what, index: i / (n / l.p).max(1) });
+            }
+        }
+        Ok(())
+    }
+
+    /// The initial state: for the tangential model the signal residual ζ
+    /// is added to the template signal (and p^f is 0).
+    fn initial(&self, p0: &[f64], pf: &[f64]) -> Vec<f64> {
+        let l = self.layout;
+        let mut z = vec![0.0; l.len()];
+        z[l.x()].copy_from_slice(self.template.points());
+        z[l.f()].copy_from_slice(self.template.signal().expect("set in new"));
+        z[l.mom()].copy_from_slice(p0);
+        match self.model.kind {
+            ModelKind::Metamorphosis => z[l.pf()].copy_from_slice(pf),
+            ModelKind::Tangential => {
+                for (a, b) in z[l.f()].iter_mut().zip(pf) {
+                    *a += b;
+                }
+            }
+            ModelKind::Lddmm => {}
+        }
+        z
+    }
+
+    /// Shoots from the template with momenta p_0 (P × n) and p^f (P; for
+    /// the tangential model the signal residual ζ, for LDDMM ignored).
+    pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
+        self.check(p0, pf)?;
+        self.shoot_from(self.initial(p0, pf))
+    }
+
+    fn shoot_from(&self, mut z: Vec<f64>) -> Result<Trajectory, ShootError> {
+        let dynamics = self.dynamics();
+        let mut solver = match dynamics.fem {
+            Some(fem) => Some(fem.solver()?),
+            None => None,
+        };
+        let (a, b) = self.model.integrator.tableau();
+        let n = self.model.steps;
+        let dt = 1.0 / n as f64;
+        let mut t = Timings::default();
+        let l = self.layout;
+        let (mut nodes, mut slopes, mut stages, mut ham) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for step in 0..=n {
+            let (k0, _) = dynamics.field(&z, &mut solver, &mut t)?;
+            let energy = 0.5 * (dot(&z[l.mom()], &k0[l.x()]) + dot(&z[l.pf()], &k0[l.f()]));
+            if !energy.is_finite() || z.iter().any(|v| !v.is_finite()) {
+                return Err(ShootError::Diverged { step });
+            }
+            ham.push(energy);
+            if step == n {
+                nodes.push(z);
+                slopes.push(k0);
+                break;
+            }
+            let mut ks: Vec<Vec<f64>> = vec![k0.clone()];
+            let mut zs: Vec<Vec<f64>> = vec![z.clone()];
+            for row in a.iter().skip(1) {
+                let mut zi = z.clone();
+                for (aij, kj) in row.iter().zip(&ks) {
+                    if *aij != 0.0 {
+                        axpy(&mut zi, dt * aij, kj);
+                    }
+                }
+                let (ki, _) = dynamics.field(&zi, &mut solver, &mut t)?;
+                ks.push(ki);
+                zs.push(zi);
+            }
+            let mut next = z.clone();
+            for (bi, ki) in b.iter().zip(&ks) {
+                if *bi != 0.0 {
+                    axpy(&mut next, dt * bi, ki);
+                }
+            }
+            nodes.push(z);
+            slopes.push(k0);
+            stages.push(zs);
+            z = next;
+        }
+        Ok(Trajectory { layout: l, nodes, slopes, stages, hamiltonian: ham, timings: t })
+    }
+
+    fn attachment(&self) -> Result<&Attachment, ShootError> {
+        self.attachment.as_ref().ok_or(ShootError::NoTarget)
+    }
+
+    /// The signal part of the energy and its gradient in the control pf.
+    fn signal_energy(&self, pf: &[f64], t: &mut Timings) -> Result<(f64, Vec<f64>), ShootError> {
+        let g = self.model.gamma_f;
+        match (self.model.kind, &self.fem) {
+            (ModelKind::Tangential, Some(fem)) => timed(&mut t.fem, || {
+                // (γ_f/2) ζᵀD(x_0)ζ, gradient γ_f D(x_0)ζ.
+                let dz = fem.matvec(self.template.points(), pf)?;
+                Ok((0.5 * g * dot(pf, &dz), dz.iter().map(|v| g * v).collect()))
+            }),
+            _ => Ok((0.0, vec![0.0; self.layout.p])),
+        }
+    }
+
+    /// J(p_0, p^f) and its parts.
+    pub fn objective(&self, p0: &[f64], pf: &[f64]) -> Result<(Objective, Trajectory), ShootError> {
+        let att = self.attachment()?;
+        let traj = self.shoot(p0, pf)?;
+        let mut t = traj.timings;
+        let (es, _) = self.signal_energy(pf, &mut t)?;
+        let last = self.model.steps;
+        let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
+        let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
+        let a = timed(&mut t.attachment, || att.eval(&x1))?.value;
+        let h0 = traj.hamiltonian[0];
+        let metamorphosis_signal = if self.model.kind == ModelKind::Metamorphosis {
+            0.5 * dot(&traj.nodes[0][self.layout.pf()], &traj.slopes[0][self.layout.f()])
+        } else {
+            0.0
+        };
+        let energy = h0 + es;
+        let obj = Objective {
+            value: energy + self.model.gamma_w * a,
+            energy,
+            signal_energy: es + metamorphosis_signal,
+            attachment: a,
+        };
+        Ok((obj, Trajectory { timings: t, ..traj }))
+    }
+
+    /// J and its exact gradient (∂J/∂p_0, ∂J/∂p^f): the discrete adjoint
+    /// of the integrator in use, so the gradient is that of the discrete
+    /// J. Also returns the timings: forward, backward.
+    pub fn objective_grad(&self, p0: &[f64], pf: &[f64]) -> Result<Gradient, ShootError> {
+        let start = std::time::Instant::now();
+        let (obj, traj) = self.objective(p0, pf)?;
+        let forward = start.elapsed().as_secs_f64();
+        let mut t = traj.timings;
+        let l = self.layout;
+        let last = self.model.steps;
+        let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
+        let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
+        let att = self.attachment()?;
+        let (_, ga) = timed(&mut t.attachment, || att.eval_grad(&x1))?;
+        let back = std::time::Instant::now();
+        // λ_N = ∂J/∂z_N.
+        let gw = self.model.gamma_w;
+        let mut lam = vec![0.0; l.len()];
+        for (o, v) in lam[l.x()].iter_mut().zip(&ga.points) {
+            *o = gw * v;
+        }
+        for (o, v) in lam[l.f()].iter_mut().zip(&ga.signal) {
+            *o = gw * v;
+        }
+        let dynamics = self.dynamics();
+        let mut solver = match dynamics.fem {
+            Some(fem) => Some(fem.solver()?),
+            None => None,
+        };
+        let (a, b) = self.model.integrator.tableau();
+        let dt = 1.0 / last as f64;
+        for step in (0..last).rev() {
+            let zs = &traj.stages[step];
+            let s = zs.len();
+            let mut gz: Vec<Vec<f64>> = vec![Vec::new(); s];
+            for i in (0..s).rev() {
+                // ∂J/∂k_i = dt b_i λ + Σ_{j>i} dt a_ji ∂J/∂Z_j.
+                let mut gk: Vec<f64> = lam.iter().map(|v| dt * b[i] * v).collect();
+                for j in i + 1..s {
+                    let aji = a[j].get(i).copied().unwrap_or(0.0);
+                    if aji != 0.0 {
+                        axpy(&mut gk, dt * aji, &gz[j]);
+                    }
+                }
+                if gk.iter().all(|v| *v == 0.0) {
+                    gz[i] = vec![0.0; l.len()];
+                    continue;
+                }
+                // Refactor at Z_i and recover h there.
+                let h = match (&mut solver, dynamics.fem) {
+                    (Some(sv), Some(_)) => timed(&mut t.fem, || -> Result<Vec<f64>, ShootError> {
+                        sv.factor(&zs[i][l.x()])?;
+                        Ok(sv.solve(&zs[i][l.pf()])?)
+                    })?,
+                    _ => Vec::new(),
+                };
+                gz[i] = dynamics.vjp(&zs[i], &h, &gk, &mut solver, &mut t)?;
+            }
+            for g in &gz {
+                axpy(&mut lam, 1.0, g);
+            }
+        }
+        let backward = back.elapsed().as_secs_f64();
+        // ∂J/∂p_0 = ∂H_0/∂p + λ_p; ∂J/∂p^f = ∂H_0/∂p^f + λ_pf (metamorphosis),
+        // or the signal energy's gradient + λ_f (tangential: f_0 = f + ζ).
+        let k0 = &traj.slopes[0];
+        let grad_p: Vec<f64> = lam[l.mom()].iter().zip(&k0[l.x()]).map(|(a, b)| a + b).collect();
+        let (_, ges) = self.signal_energy(pf, &mut t)?;
+        let grad_pf: Vec<f64> = match self.model.kind {
+            ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
+            ModelKind::Tangential => lam[l.f()].iter().zip(&ges).map(|(a, b)| a + b).collect(),
+            ModelKind::Lddmm => vec![0.0; l.p],
+        };
+        Ok(Gradient { objective: obj, p0: grad_p, pf: grad_pf, forward, backward, timings: t, trajectory: traj })
+    }
+
+    /// Flows extra points (M × n) along a trajectory: ẏ = K_{y,x} p / γ_V,
+    /// integrated with the same scheme and stages as the shooting. Returns
+    /// their positions at every step.
+    pub fn flow_points(&self, traj: &Trajectory, y0: &[f64]) -> Result<Vec<Vec<f64>>, ShootError> {
+        let l = self.layout;
+        if !y0.len().is_multiple_of(l.dim) {
+            return Err(ShootError::Dimension {
+                what: "points to flow",
+                expected: y0.len() / l.dim * l.dim,
+                found: y0.len(),
+            });
+        }
+        let (a, b) = self.model.integrator.tableau();
+        let dt = 1.0 / self.model.steps as f64;
+        let field = |y: &[f64], z: &[f64]| -> Result<Vec<f64>, ShootError> {
+            let sums = fshape_kernels::KernelSums::try_new(&self.model.kernel, &z[l.x()], l.dim)?;
+            Ok(sums.conv(y, &z[l.mom()], l.dim)?.iter().map(|v| v / self.model.gamma_v).collect())
+        };
+        let mut y = y0.to_vec();
+        let mut out = vec![y.clone()];
+        for zs in &traj.stages {
+            let mut ks: Vec<Vec<f64>> = Vec::new();
+            for (i, zi) in zs.iter().enumerate() {
+                let mut yi = y.clone();
+                for (aij, kj) in a[i].iter().zip(&ks) {
+                    axpy(&mut yi, dt * aij, kj);
+                }
+                ks.push(field(&yi, zi)?);
+            }
+            for (bi, ki) in b.iter().zip(&ks) {
+                axpy(&mut y, dt * bi, ki);
+            }
+            out.push(y.clone());
+        }
+        Ok(out)
+    }
+}
+
+/// J, its gradient and where the time went.
+#[derive(Clone, Debug)]
+pub struct Gradient {
+    /// J and its parts.
+    pub objective: Objective,
+    /// ∂J/∂p_0 (P × n).
+    pub p0: Vec<f64>,
+    /// ∂J/∂p^f (P): ∂J/∂ζ for the tangential model, zeros for LDDMM.
+    pub pf: Vec<f64>,
+    /// Seconds in the forward pass (shooting + A).
+    pub forward: f64,
+    /// Seconds in the backward pass (adjoint).
+    pub backward: f64,
+    /// Split by component over both passes.
+    pub timings: Timings,
+    /// The forward trajectory.
+    pub trajectory: Trajectory,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
+    for (u, v) in y.iter_mut().zip(x) {
+        *u += a * v;
+    }
+}
+
+fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = std::time::Instant::now();
+    let out = f();
+    *acc += t.elapsed().as_secs_f64();
+    out
+}

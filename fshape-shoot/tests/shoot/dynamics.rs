@@ -1,0 +1,1 @@
+//! Properties of the flow: time reversal, rest, the LDDMM limit.

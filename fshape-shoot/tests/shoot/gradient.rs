@@ -1,0 +1,70 @@
+//! The exact gradient of J against central finite differences in random
+//! directions, for every norm, model and integrator, with exact and
+//! truncated deformation kernels.
+
+use fshape_mesh::generate::SplitMix64;
+use fshape_mesh::test_support::{check_gradient, random_direction};
+use fshape_shoot::Problem;
+use fshape_varifold::VarifoldKernel;
+
+use crate::{curves, model, momenta, surfaces};
+
+fn attachment() -> VarifoldKernel {
+    VarifoldKernel::parse("gaussian:0.4", Some("gaussian:0.7"), "binet").unwrap()
+}
+
+fn check(problem: &Problem, p0: &[f64], pf: &[f64], label: &str, rng: &mut SplitMix64) -> f64 {
+    let g = problem.objective_grad(p0, pf).unwrap();
+    let n = p0.len();
+    let z: Vec<f64> = p0.iter().chain(pf).copied().collect();
+    let grad: Vec<f64> = g.p0.iter().chain(&g.pf).copied().collect();
+    let j = |z: &[f64]| problem.objective(&z[..n], &z[n..]).unwrap().0.value;
+    let mut worst: f64 = 0.0;
+    for _ in 0..2 {
+        let v = random_direction(z.len(), rng);
+        let c = check_gradient(j, &z, &grad, &v, 1e-5);
+        assert!(c.rel_error < 1e-6, "{label}: {c:?}");
+        worst = worst.max(c.rel_error);
+    }
+    worst
+}
+
+#[test]
+fn the_gradient_of_j_matches_central_differences_for_every_norm_and_model() {
+    let (template, target) = surfaces();
+    let (p0, pf) = momenta(&template, 0.3, 1);
+    let mut rng = SplitMix64(5);
+    let mut worst: f64 = 0.0;
+    for kind in ["metamorphosis", "tangential", "lddmm"] {
+        for norm in ["l2-lumped", "l2", "h1"] {
+            if kind == "lddmm" && norm != "l2-lumped" {
+                continue; // no signal norm in pure LDDMM
+            }
+            for truncation in ["", "tolerance = 1e-6"] {
+                let m = model(
+                    &format!("kind = \"{kind}\"\nnorm = \"{norm}\"\nlength = 0.5\ngamma_f = 0.5\ngamma_w = 2.0"),
+                    truncation,
+                    "rk4",
+                    5,
+                );
+                let problem = Problem::new(&template, m).unwrap().with_target(&target, attachment()).unwrap();
+                let label = format!("{kind}, {norm}, '{truncation}'");
+                worst = worst.max(check(&problem, &p0, &pf, &label, &mut rng));
+            }
+        }
+    }
+    eprintln!("worst relative error: {worst:e}");
+}
+
+#[test]
+fn the_gradient_is_exact_for_each_integrator_and_for_curves() {
+    let mut rng = SplitMix64(6);
+    for scheme in ["rk4", "midpoint", "euler"] {
+        for (what, (template, target)) in [("surface", crate::surfaces()), ("curve", curves())] {
+            let (p0, pf) = momenta(&template, 0.3, 2);
+            let m = model("norm = \"h1\"\nlength = 0.3", "", scheme, 4);
+            let problem = Problem::new(&template, m).unwrap().with_target(&target, attachment()).unwrap();
+            check(&problem, &p0, &pf, &format!("{scheme}, {what}"), &mut rng);
+        }
+    }
+}
