@@ -28,6 +28,7 @@
 
 mod config;
 mod dynamics;
+pub mod paper;
 mod shoot;
 
 pub use config::{AttachmentSection, Config, DeformationSection, IntegratorSection, ModelSection};
