@@ -94,6 +94,32 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Shoot a metamorphosis geodesic from SOURCE with initial momenta and
+    /// write the states at the chosen times (VTK + ParaView .pvd, PLY with
+    /// the signal as vertex property `signal`) and summary.json.
+    Shoot {
+        /// The template mesh (its signal, if any, is f_0; else 0).
+        source: PathBuf,
+        /// Initial momenta p_0: CSV, a header line then p_x,p_y[,p_z] per vertex.
+        #[arg(long)]
+        momentum: PathBuf,
+        /// Signal momentum p^f (one-column CSV; default 0). For the
+        /// tangential model, the signal residual ζ.
+        #[arg(long)]
+        signal_momentum: Option<PathBuf>,
+        /// Model configuration (TOML; see fshape_shoot::Config).
+        #[arg(long)]
+        config: PathBuf,
+        /// Output directory (created if needed).
+        #[arg(long)]
+        out: PathBuf,
+        /// Times in [0, 1] at which to write the state.
+        #[arg(long, value_delimiter = ',', default_value = "0,0.25,0.5,0.75,1")]
+        times: Vec<f64>,
+        /// Vertex property of SOURCE to read as the signal.
+        #[arg(long)]
+        signal_name: Option<String>,
+    },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
     /// optionally .gz), optionally attaching a signal from a CSV file.
     Convert {
@@ -140,6 +166,15 @@ fn main() -> ExitCode {
             signal_name,
             signals: (source_signal.as_deref(), target_signal.as_deref()),
             json,
+        }),
+        Command::Shoot { source, momentum, signal_momentum, config, out, times, signal_name } => shoot(&ShootArgs {
+            source: &source,
+            momentum: &momentum,
+            signal_momentum: signal_momentum.as_deref(),
+            config: &config,
+            out: &out,
+            times: &times,
+            signal_name,
         }),
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {
             convert(&input, &output, signal_name, signal.as_deref(), ascii, repair)
@@ -444,5 +479,154 @@ fn distance(a: &DistanceArgs<'_>) -> Result<()> {
         println!("<X,X> = {:.12e}\n<X,Y> = {:.12e}\n<Y,Y> = {:.12e}", d.xx, d.xy, d.yy);
         println!("({} and {} cells, {:.3} s)", x.n_cells(), y.n_cells(), summary.seconds);
     }
+    Ok(())
+}
+
+struct ShootArgs<'a> {
+    source: &'a Path,
+    momentum: &'a Path,
+    signal_momentum: Option<&'a Path>,
+    config: &'a Path,
+    out: &'a Path,
+    times: &'a [f64],
+    signal_name: Option<String>,
+}
+
+#[derive(Serialize)]
+struct ShootSummary {
+    source: String,
+    config: String,
+    model: String,
+    norm: &'static str,
+    integrator: String,
+    steps: usize,
+    /// H(z_k) at every step k = 0..N.
+    hamiltonian: Vec<f64>,
+    /// Relative drift max_k |H_k − H_0| / |H_0| (0 when H_0 = 0).
+    hamiltonian_drift: f64,
+    times: Vec<f64>,
+    files: Vec<String>,
+    final_state: FinalState,
+    seconds: Timing,
+}
+
+#[derive(Serialize)]
+struct FinalState {
+    /// Largest vertex displacement |x_1 − x_0|.
+    max_displacement: f64,
+    /// Root-mean-square displacement.
+    rms_displacement: f64,
+    /// ‖f_1 − f_0‖∞.
+    max_signal_change: f64,
+    /// Largest momentum norm |p_1|.
+    max_momentum: f64,
+}
+
+#[derive(Serialize)]
+struct Timing {
+    total: f64,
+    kernels: f64,
+    fem: f64,
+}
+
+fn shoot(a: &ShootArgs<'_>) -> Result<()> {
+    use fshape_shoot::{Config, Problem};
+    let start = std::time::Instant::now();
+    let config = Config::read(a.config)?;
+    let model = config.model()?;
+    if let Some(t) = a.times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
+        anyhow::bail!("--times: {t} is outside [0, 1]");
+    }
+    let shape = load(a.source, a.signal_name.clone(), None)?;
+    let (n, dim) = (shape.n_vertices(), shape.dim());
+    let p0 = io::csv::read_vectors(a.momentum, dim)?;
+    if p0.len() != n * dim {
+        anyhow::bail!("{}: {} rows, but {} has {n} vertices", a.momentum.display(), p0.len() / dim, a.source.display());
+    }
+    let pf = match a.signal_momentum {
+        Some(p) => {
+            let v = io::csv::read_signal(p, false)?.values;
+            if v.len() != n {
+                anyhow::bail!("{}: {} values, but {} has {n} vertices", p.display(), v.len(), a.source.display());
+            }
+            v
+        }
+        None => vec![0.0; n],
+    };
+    let kind = format!("{:?}", model.kind).to_lowercase();
+    let (norm, integrator, steps) = (model.norm.name(), format!("{:?}", model.integrator).to_lowercase(), model.steps);
+    let problem = Problem::new(&shape, model).with_context(|| format!("setting up {}", a.source.display()))?;
+    let traj = problem.shoot(&p0, &pf).with_context(|| format!("shooting from {}", a.source.display()))?;
+    // Everything is computed before anything is written.
+    let template = problem.template().clone();
+    let mut outputs: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let mut files = Vec::new();
+    let mut pvd =
+        String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
+    for (k, &t) in a.times.iter().enumerate() {
+        let (x, f) = traj.at(t);
+        let state = template.clone().with_points(x)?.with_signal(Some(f))?;
+        for ext in ["vtk", "ply"] {
+            let name = format!("state_{k:03}.{ext}");
+            let format = if ext == "vtk" { io::Format::Vtk } else { io::Format::Ply };
+            let mut bytes = Vec::new();
+            io::write_to(&mut bytes, &state, format, Encoding::Binary)?;
+            outputs.push((a.out.join(&name), bytes));
+            files.push(name);
+        }
+        pvd.push_str(&format!("    <DataSet timestep=\"{t}\" part=\"0\" file=\"state_{k:03}.vtk\"/>\n"));
+    }
+    pvd.push_str("  </Collection>\n</VTKFile>\n");
+    outputs.push((a.out.join("trajectory.pvd"), pvd.into_bytes()));
+    files.push("trajectory.pvd".into());
+    let h = traj.hamiltonian.clone();
+    let drift = if h[0] == 0.0 { 0.0 } else { h.iter().map(|v| (v - h[0]).abs()).fold(0.0, f64::max) / h[0].abs() };
+    let (x0, x1) = (template.points(), traj.points(steps));
+    let disp: Vec<f64> = x0
+        .chunks_exact(dim)
+        .zip(x1.chunks_exact(dim))
+        .map(|(p, q)| p.iter().zip(q).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt())
+        .collect();
+    let norm_rows =
+        |v: &[f64]| v.chunks_exact(dim).map(|r| r.iter().map(|u| u * u).sum::<f64>().sqrt()).fold(0.0, f64::max);
+    let summary = ShootSummary {
+        source: a.source.display().to_string(),
+        config: a.config.display().to_string(),
+        model: kind,
+        norm,
+        integrator,
+        steps,
+        hamiltonian_drift: drift,
+        hamiltonian: h,
+        times: a.times.to_vec(),
+        files,
+        final_state: FinalState {
+            max_displacement: disp.iter().copied().fold(0.0, f64::max),
+            rms_displacement: (disp.iter().map(|d| d * d).sum::<f64>() / n.max(1) as f64).sqrt(),
+            max_signal_change: traj
+                .signal(steps)
+                .iter()
+                .zip(template.signal().unwrap_or(&[]))
+                .map(|(u, v)| (u - v).abs())
+                .fold(0.0, f64::max),
+            max_momentum: norm_rows(traj.momenta(steps)),
+        },
+        seconds: Timing { total: start.elapsed().as_secs_f64(), kernels: traj.timings.kernels, fem: traj.timings.fem },
+    };
+    outputs.push((a.out.join("summary.json"), serde_json::to_string_pretty(&summary)?.into_bytes()));
+    std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    for (path, bytes) in &outputs {
+        io::write_atomic(path, bytes, false)?;
+    }
+    println!(
+        "{}: {} steps, H from {:.6e} to {:.6e}, max displacement {:.4e}; wrote {} files to {}",
+        a.source.display(),
+        steps,
+        summary.hamiltonian[0],
+        summary.hamiltonian[steps],
+        summary.final_state.max_displacement,
+        outputs.len(),
+        a.out.display()
+    );
     Ok(())
 }

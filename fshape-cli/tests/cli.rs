@@ -247,3 +247,104 @@ fn an_error_names_its_place_once() {
     assert!(err.contains("nan.csv") && err.contains("line 4"), "{err}");
     assert_eq!(err.matches("line 4").count(), 1, "the cause is repeated: {err}");
 }
+
+/// A level-2 icosphere with a smooth signal written to a temporary PLY,
+/// random momenta CSVs, and a config; returns their paths.
+fn shoot_inputs(tag: &str) -> (String, String, String, String) {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    let sphere = fshape_mesh::generate::icosphere(2, 1.0);
+    let f: Vec<f64> = sphere.points().chunks_exact(3).map(|p| p[0] + 0.5 * p[2]).collect();
+    let sphere = sphere.with_signal(Some(f)).unwrap();
+    let mesh = tmp(&format!("{tag}_sphere.ply"));
+    write_mesh(&mesh, &sphere, Encoding::Ascii).unwrap();
+    let mut rng = fshape_mesh::generate::SplitMix64(3);
+    let mut p = String::from("p_x,p_y,p_z\n");
+    let mut pf = String::from("pf\n");
+    for _ in 0..sphere.n_vertices() {
+        p.push_str(&format!("{},{},{}\n", rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3)));
+        pf.push_str(&format!("{}\n", rng.range(-0.3, 0.3)));
+    }
+    let (pp, pfp, cfg) = (tmp(&format!("{tag}_p.csv")), tmp(&format!("{tag}_pf.csv")), tmp(&format!("{tag}.toml")));
+    std::fs::write(&pp, p).unwrap();
+    std::fs::write(&pfp, pf).unwrap();
+    std::fs::write(
+        &cfg,
+        "[model]\nnorm = \"h1\"\nlength = 0.5\n[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 8\n",
+    )
+    .unwrap();
+    let s = |p: PathBuf| p.display().to_string();
+    (s(mesh), s(pp), s(pfp), s(cfg))
+}
+
+#[test]
+fn shoot_writes_states_a_collection_and_a_summary_that_read_back() {
+    use fshape_mesh::io::{ReadOptions, read_mesh};
+    let (mesh, p, pf, cfg) = shoot_inputs("ok");
+    let out = tmp("shoot_out");
+    let o = fshape(&[
+        "shoot",
+        &mesh,
+        "--momentum",
+        &p,
+        "--signal-momentum",
+        &pf,
+        "--config",
+        &cfg,
+        "--out",
+        &out.display().to_string(),
+        "--times",
+        "0,0.5,1",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let template = read_mesh(mesh.as_ref(), &ReadOptions::default()).unwrap();
+    // The library's own shooting, for the end state.
+    let model = fshape_shoot::Config::read(cfg.as_ref()).unwrap().model().unwrap();
+    let p0 = fshape_mesh::io::csv::read_vectors(p.as_ref(), 3).unwrap();
+    let pfv = fshape_mesh::io::csv::read_signal(pf.as_ref(), false).unwrap().values;
+    let traj = fshape_shoot::Problem::new(&template, model).unwrap().shoot(&p0, &pfv).unwrap();
+    for ext in ["vtk", "ply"] {
+        let start = read_mesh(&out.join(format!("state_000.{ext}")), &ReadOptions::default()).unwrap();
+        assert_eq!(start.cells(), template.cells());
+        let end = read_mesh(&out.join(format!("state_002.{ext}")), &ReadOptions::default()).unwrap();
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(u, v)| (u - v).abs() < 1e-6 * (1.0 + v.abs()));
+        assert!(close(start.points(), template.points()) && close(start.signal().unwrap(), template.signal().unwrap()));
+        assert!(close(end.points(), traj.points(8)) && close(end.signal().unwrap(), traj.signal(8)), "{ext}");
+        assert!(!close(end.points(), template.points()), "the shape did move");
+    }
+    let pvd = std::fs::read_to_string(out.join("trajectory.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 3);
+    assert!(pvd.contains("timestep=\"0.5\" part=\"0\" file=\"state_001.vtk\""));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["hamiltonian"].as_array().unwrap().len(), 9);
+    assert!(summary["hamiltonian_drift"].as_f64().unwrap() < 1e-4, "{summary}");
+}
+
+#[test]
+fn shoot_refuses_bad_input_and_writes_nothing() {
+    let (mesh, p, _, cfg) = shoot_inputs("bad");
+    let short = tmp("short_p.csv");
+    std::fs::write(&short, "p_x,p_y,p_z\n1,2,3\n").unwrap();
+    let bad_cfg = tmp("unknown_key.toml");
+    std::fs::write(&bad_cfg, "[deformation]\nwidths = [0.5]\nsteps = 3\n").unwrap();
+    let (short, bad_cfg) = (short.display().to_string(), bad_cfg.display().to_string());
+    for (i, (args, needle)) in [
+        (vec!["--momentum", short.as_str(), "--config", cfg.as_str()], "short_p.csv"),
+        (vec!["--momentum", p.as_str(), "--config", bad_cfg.as_str()], "steps"),
+        (vec!["--momentum", p.as_str(), "--config", cfg.as_str(), "--times", "0,2"], "--times"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = tmp(&format!("refused_{i}"));
+        let mut all = vec!["shoot", mesh.as_str(), "--out"];
+        let o = out.display().to_string();
+        all.push(&o);
+        all.extend(args);
+        let r = fshape(&all);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{all:?}: {err}");
+        assert!(err.contains(needle), "{all:?}: {err}");
+        assert!(!out.exists(), "{all:?}: output written despite the error");
+    }
+}

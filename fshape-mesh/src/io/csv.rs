@@ -63,6 +63,63 @@ pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, Pa
     Ok(SignalColumn { name, values })
 }
 
+/// Parses a vector-field CSV (momenta, velocities): a header line, then one
+/// row of `dim` finite numbers separated by commas per vertex. Returns the
+/// rows flat (n × dim). Errors name the line.
+///
+/// ```
+/// use fshape_mesh::io::csv::parse_vectors;
+/// let v = parse_vectors(b"p_x,p_y\n1,2\n3,4.5\n", 2)?;
+/// assert_eq!(v, [1.0, 2.0, 3.0, 4.5]);
+/// assert!(parse_vectors(b"p_x,p_y\n1,2,3\n", 2).is_err()); // three columns
+/// # Ok::<(), fshape_mesh::io::ParseError>(())
+/// ```
+pub fn parse_vectors(data: &[u8], dim: usize) -> Result<Vec<f64>, ParseError> {
+    let mut cur = Cursor::new(data);
+    let header = cur
+        .text_line("a header line")?
+        .ok_or_else(|| cur.error(ParseErrorKind::Missing { what: "the header line (column names)" }))?;
+    let first = header.split(',').next().unwrap_or("").trim();
+    if parse_f64(first.as_bytes()).is_some() {
+        return Err(ParseError {
+            at: super::Location::Line(1),
+            kind: ParseErrorKind::BadToken {
+                expected: "a header line naming the columns",
+                found: lossy(header.as_bytes()),
+            },
+        });
+    }
+    let mut out = Vec::new();
+    loop {
+        let at = cur.at();
+        let Some(line) = cur.text_line("a row of numbers")? else {
+            break;
+        };
+        let t = line.trim();
+        if t.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = t.split(',').map(str::trim).collect();
+        let bad = |expected: &'static str| ParseError {
+            at,
+            kind: ParseErrorKind::BadToken { expected, found: lossy(t.as_bytes()) },
+        };
+        if fields.len() != dim {
+            return Err(bad(if dim == 2 { "2 comma-separated numbers" } else { "3 comma-separated numbers" }));
+        }
+        for f in fields {
+            out.push(parse_f64(f.as_bytes()).filter(|v| v.is_finite()).ok_or_else(|| bad("finite numbers"))?);
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a vector-field CSV file (optionally gzipped); see [`parse_vectors`].
+pub fn read_vectors(path: &Path, dim: usize) -> Result<Vec<f64>, ReadError> {
+    let data = read_bytes(path)?;
+    parse_vectors(&data, dim).map_err(|source| ReadError::Parse { path: path.into(), source })
+}
+
 /// Reads a signal CSV file (optionally gzipped).
 pub fn read_signal(path: &Path, allow_missing: bool) -> Result<SignalColumn, ReadError> {
     let data = read_bytes(path)?;
