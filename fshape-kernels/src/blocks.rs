@@ -1,21 +1,18 @@
-//! Block-sparse evaluation of truncated single-Gaussian sums.
+//! Block-sparse pair enumeration for the vectorised sums.
 //!
 //! Targets and sources are sorted along a k-d order (recursive median
 //! splits) into contiguous blocks with bounding boxes. For each block of
 //! [`L`] targets, the source blocks whose box comes within the support
-//! radius are summed densely with the vectorised kernel of `fast.rs` and
-//! the others skipped; a source block entirely within the inner radius
-//! needs no taper. This keeps the exact path's SIMD speed on the surviving
-//! pairs, which a per-pair tree visit cannot (measured in the README).
-//! Each target's sum runs over source blocks in increasing order, so the
-//! results do not depend on the number of threads.
+//! radius are summed densely with a vectorised kernel (`fast.rs`, or
+//! another crate's) and the others skipped; a source block entirely within
+//! the inner radius needs no taper. This keeps the exact path's SIMD speed
+//! on the surviving pairs, which a per-pair tree visit cannot (measured in
+//! the README). Each target's sum runs over source blocks in increasing
+//! order, so the results do not depend on the number of threads.
 
-#![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
-
-use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
 
-use crate::fast::{L, exp_lanes, sq_dist_lanes};
+use crate::fast::L;
 
 /// Sources per block.
 const LEAF: usize = 64;
@@ -53,6 +50,15 @@ impl Blocks {
             hi.push(h);
         }
         Blocks { order, start, lo, hi }
+    }
+
+    /// Points in their own order, in consecutive blocks of `size` (no
+    /// boxes: for an untapered kernel nothing is ever skipped).
+    fn identity(n: usize, size: usize) -> Self {
+        let mut start: Vec<usize> = (0..n).step_by(size).collect();
+        start.push(n);
+        let boxes = vec![[0.0; 3]; start.len() - 1];
+        Blocks { order: (0..n).collect(), start, lo: boxes.clone(), hi: boxes }
     }
 
     fn n_blocks(&self) -> usize {
@@ -95,131 +101,6 @@ fn box_dist2(alo: &[f64; 3], ahi: &[f64; 3], blo: &[f64; 3], bhi: &[f64; 3]) -> 
         far += span * span;
     }
     (near, far)
-}
-
-/// The taper of `Kernel::truncated`, per lane: 1 − S((u − u_in)/(u_out − u_in)).
-#[derive(Clone, Copy)]
-pub(crate) struct TaperLanes {
-    pub(crate) u_in: f64,
-    pub(crate) u_out: f64,
-}
-
-struct Tile<'a, const D: usize, const BD: usize> {
-    a: f64,
-    taper: Option<TaperLanes>,
-    x: &'a [[f64; L]; D],
-    /// Sorted source coordinates and weights of the block.
-    y: &'a [[f64; D]],
-    b: &'a [[f64; BD]],
-    acc: [[f64; L]; BD],
-}
-
-impl<const D: usize, const BD: usize> WithSimd for Tile<'_, D, BD> {
-    type Output = [[f64; L]; BD];
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(mut self, _simd: S) -> Self::Output {
-        for (yj, bj) in self.y.iter().zip(self.b) {
-            let u = sq_dist_lanes(self.x, yj);
-            let mut arg = [0.0; L];
-            for l in 0..L {
-                arg[l] = -self.a * u[l];
-            }
-            let mut e = exp_lanes(arg);
-            if let Some(t) = self.taper {
-                let inv = 1.0 / (t.u_out - t.u_in);
-                for l in 0..L {
-                    let s = ((u[l] - t.u_in) * inv).clamp(0.0, 1.0);
-                    e[l] *= 1.0 - s * s * s * (10.0 + s * (-15.0 + 6.0 * s));
-                }
-            }
-            for c in 0..BD {
-                for l in 0..L {
-                    self.acc[c][l] += e[l] * bj[c];
-                }
-            }
-        }
-        self.acc
-    }
-}
-
-/// Σ_j w exp(−a|x_i − y_j|²) s(|x_i − y_j|²) b_j with the taper s of
-/// `taper`, visiting only source blocks within the support radius.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn truncated_conv(
-    a: f64,
-    w: f64,
-    taper: TaperLanes,
-    x: &[f64],
-    y: &[f64],
-    dim: usize,
-    b: &[f64],
-    bdim: usize,
-    parallel: bool,
-) -> Option<Vec<f64>> {
-    match (dim, bdim) {
-        (2, 1) => Some(conv::<2, 1>(a, w, taper, x, y, b, parallel)),
-        (2, 2) => Some(conv::<2, 2>(a, w, taper, x, y, b, parallel)),
-        (2, 3) => Some(conv::<2, 3>(a, w, taper, x, y, b, parallel)),
-        (3, 1) => Some(conv::<3, 1>(a, w, taper, x, y, b, parallel)),
-        (3, 2) => Some(conv::<3, 2>(a, w, taper, x, y, b, parallel)),
-        (3, 3) => Some(conv::<3, 3>(a, w, taper, x, y, b, parallel)),
-        _ => None,
-    }
-}
-
-fn conv<const D: usize, const BD: usize>(
-    a: f64,
-    w: f64,
-    taper: TaperLanes,
-    x: &[f64],
-    y: &[f64],
-    b: &[f64],
-    parallel: bool,
-) -> Vec<f64> {
-    let src = Blocks::new(y, D, LEAF);
-    let ys: Vec<[f64; D]> = src.order.iter().map(|&j| std::array::from_fn(|k| y[j * D + k])).collect();
-    let bs: Vec<[f64; BD]> = src.order.iter().map(|&j| std::array::from_fn(|c| b[j * BD + c])).collect();
-    let tgt = Blocks::new(x, D, L);
-    let arch = Arch::new();
-    let block = |t: usize| -> Vec<(usize, [f64; BD])> {
-        let ids = &tgt.order[tgt.start[t]..tgt.start[t + 1]];
-        let lanes = ids.len();
-        let mut xs = [[0.0; L]; D];
-        for (k, xk) in xs.iter_mut().enumerate() {
-            for (l, v) in xk.iter_mut().enumerate() {
-                *v = x[ids[l.min(lanes - 1)] * D + k];
-            }
-        }
-        let mut acc = [[0.0; L]; BD];
-        for s in 0..src.n_blocks() {
-            let (near, far) = box_dist2(&tgt.lo[t], &tgt.hi[t], &src.lo[s], &src.hi[s]);
-            if near >= taper.u_out {
-                continue;
-            }
-            let range = src.start[s]..src.start[s + 1];
-            let tile = Tile::<D, BD> {
-                a,
-                taper: (far > taper.u_in).then_some(taper),
-                x: &xs,
-                y: &ys[range.clone()],
-                b: &bs[range],
-                acc,
-            };
-            acc = arch.dispatch(tile);
-        }
-        (0..lanes).map(|l| (ids[l], std::array::from_fn(|c| w * acc[c][l]))).collect()
-    };
-    let parts: Vec<Vec<(usize, [f64; BD])>> = if parallel {
-        (0..tgt.n_blocks()).into_par_iter().map(block).collect()
-    } else {
-        (0..tgt.n_blocks()).map(block).collect()
-    };
-    let mut out = vec![0.0; x.len() / D * BD];
-    for (i, v) in parts.into_iter().flatten() {
-        out[i * BD..(i + 1) * BD].copy_from_slice(&v);
-    }
-    out
 }
 
 /// A run of sorted sources, `range` in the order of
@@ -285,7 +166,20 @@ impl BlockPairs {
                 return Err(KernelError::NonFinite { what, index: i / dim });
             }
         }
-        Ok(BlockPairs { tgt: Blocks::new(x, dim, L), src: Blocks::new(y, dim, LEAF), taper: kernel.taper() })
+        Ok(BlockPairs::with_taper(x, y, dim, kernel.taper()))
+    }
+
+    /// The same without validation (callers inside the crate validated).
+    pub(crate) fn with_taper(x: &[f64], y: &[f64], dim: usize, taper: Option<crate::Taper>) -> Self {
+        if taper.is_none() {
+            // Exact sums visit every source: sorting would only cost time.
+            return BlockPairs {
+                tgt: Blocks::identity(x.len() / dim, L),
+                src: Blocks::identity(y.len() / dim, LEAF),
+                taper,
+            };
+        }
+        BlockPairs { tgt: Blocks::new(x, dim, L), src: Blocks::new(y, dim, LEAF), taper }
     }
 
     /// sorted position → original source index.

@@ -1,16 +1,20 @@
-//! The vectorised paths for the most common case: exact sums with a
-//! Gaussian or a sum of a few Gaussians (the multi-scale deformation
-//! kernels): out_i = Σ_j k(|x_i − y_j|²) b_j, the x-gradient of aᵀK b, and
-//! the directional derivatives of both (the exact adjoint of shooting).
+//! The vectorised paths for the most common case: sums with a Gaussian or a
+//! sum of a few Gaussians (the multi-scale deformation kernels), exact or
+//! smoothly truncated: out_i = Σ_j k(|x_i − y_j|²) b_j, the x-gradient of
+//! aᵀK b, the directional derivatives of both (the exact adjoint of
+//! shooting), and fused pairs of them that share the exponentials.
 //!
-//! Eight targets are processed together as the lanes of `[f64; 8]` arrays,
-//! so each target's sum still runs over j in increasing order and each y_j
-//! is loaded once per eight targets; the lanes are fixed by i (block i/8),
-//! so results do not depend on the number of threads. The block kernel is
-//! plain lane-wise arithmetic, compiled through pulp's runtime dispatch
-//! (AVX-512, AVX2 or scalar, whichever the CPU has) so that LLVM vectorises
-//! it without special build flags and without unsafe code here. It uses no
-//! fused multiply-add, so every instruction set gives the same bits.
+//! Targets are processed [`L`] at a time as the lanes of `[f64; L]` arrays
+//! and sources in the runs that [`BlockPairs`] hands each target block (all
+//! sources for an exact kernel; those whose block comes within the support
+//! radius for a truncated one, with the taper skipped where a whole run is
+//! inside its inner radius). Each target's sum runs over the sources in the
+//! order BlockPairs fixes, so results do not depend on the number of
+//! threads. The block kernel is plain lane-wise arithmetic, compiled through
+//! pulp's runtime dispatch (AVX-512, AVX2 or scalar, whichever the CPU has)
+//! so that LLVM vectorises it without special build flags and without
+//! unsafe code here. It uses no fused multiply-add, so every instruction set
+//! gives the same bits.
 //!
 //! The exponential is written here ([`exp_lanes`]) because the arguments
 //! are always finite and ≤ 0: the general-purpose SIMD exps (wide's, with
@@ -22,9 +26,9 @@
 #![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
 
 use pulp::{Arch, Simd, WithSimd};
-use rayon::prelude::*;
 
 use crate::profile::GaussTerms;
+use crate::{BlockPairs, Taper};
 
 /// Lanes per block.
 pub const L: usize = 32;
@@ -119,6 +123,19 @@ pub(crate) const CONV: u8 = 0;
 pub(crate) const GRAD: u8 = 1;
 pub(crate) const CONV_JVP: u8 = 2;
 pub(crate) const GRAD_JVP: u8 = 3;
+/// `CONV` then `GRAD` in one pass (rows 0..BD, then BD..BD + D).
+pub(crate) const CONV_GRAD: u8 = 4;
+/// `CONV_JVP` then `GRAD_JVP` in one pass.
+pub(crate) const BOTH_JVP: u8 = 5;
+
+/// Output rows of a mode.
+const fn rows(mode: u8, d: usize, bd: usize) -> usize {
+    match mode {
+        CONV | CONV_JVP => bd,
+        GRAD | GRAD_JVP => d,
+        _ => bd + d,
+    }
+}
 
 /// The flat inputs of a vectorised sum; unused ones are empty.
 #[derive(Clone, Copy)]
@@ -141,143 +158,280 @@ struct Lanes<const D: usize, const BD: usize> {
     da: [[f64; L]; BD],
 }
 
-/// One block of L targets against every source.
+/// The sorted sources of one run and their weights (empty when unused).
+#[derive(Clone, Copy)]
+struct Run<'a, const D: usize, const BD: usize> {
+    y: &'a [[f64; D]],
+    dy: &'a [[f64; D]],
+    b: &'a [[f64; BD]],
+    db: &'a [[f64; BD]],
+}
+
+/// One block of L targets against its runs of sources (one dispatch per
+/// block: the accumulators stay in registers or L1 across runs).
 struct Block<'a, const D: usize, const BD: usize, const MODE: u8> {
     terms: &'a GaussTerms,
+    taper: Option<Taper>,
     t: &'a Lanes<D, BD>,
-    inp: Inputs<'a>,
+    /// All sorted sources; `runs` index into them.
+    all: Run<'a, D, BD>,
+    runs: &'a [crate::SourceRun],
+}
+
+/// e^m per lane (m ≥ 1) by repeated squaring; 0 where e < `floor` =
+/// 1e-300^{1/m}, i.e. where e^m would fall below 1e-300.
+#[inline(always)]
+fn power_lanes(e: [f64; L], m: u32, floor: f64) -> [f64; L] {
+    if m == 1 {
+        return e;
+    }
+    let mut b = [0.0; L];
+    for l in 0..L {
+        b[l] = if e[l] < floor { 0.0 } else { e[l] };
+    }
+    let mut out = [1.0; L];
+    let mut k = m;
+    while k > 0 {
+        if k & 1 == 1 {
+            for l in 0..L {
+                out[l] *= b[l];
+            }
+        }
+        k >>= 1;
+        if k > 0 {
+            for l in 0..L {
+                b[l] *= b[l];
+            }
+        }
+    }
+    out
+}
+
+/// s(u), s'(u), s''(u) of the quintic taper (see `Kernel::derivatives`).
+#[inline(always)]
+fn taper_lanes(t: Taper, u: &[f64; L]) -> ([f64; L], [f64; L], [f64; L]) {
+    let h = t.u_out - t.u_in;
+    let inv = 1.0 / h;
+    let (mut s, mut ds, mut dds) = ([0.0; L], [0.0; L], [0.0; L]);
+    for l in 0..L {
+        let x = ((u[l] - t.u_in) * inv).clamp(0.0, 1.0);
+        s[l] = 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+        ds[l] = -30.0 * x * x * (1.0 - x) * (1.0 - x) * inv;
+        dds[l] = -60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) * inv * inv;
+    }
+    (s, ds, dds)
 }
 
 impl<const D: usize, const BD: usize, const MODE: u8> WithSimd for Block<'_, D, BD, MODE> {
-    /// BD sums per lane (conv modes) or D components (gradient modes); 3
-    /// rows are allocated for simplicity (D, BD ≤ 3).
-    type Output = [[f64; L]; 3];
+    /// Up to 6 rows per lane: BD sums, D gradient components, or both.
+    type Output = [[f64; L]; 6];
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, _simd: S) -> Self::Output {
-        let (t, inp) = (self.t, self.inp);
-        let mut acc = [[0.0; L]; 3];
-        let m = inp.y.len() / D;
-        for j in 0..m {
-            let yj = &inp.y[j * D..(j + 1) * D];
-            let bj = &inp.b[j * BD..(j + 1) * BD];
+        let mut acc = [[0.0; L]; 6];
+        for r in self.runs {
+            let run = Run {
+                y: part(self.all.y, &r.range),
+                dy: part(self.all.dy, &r.range),
+                b: part(self.all.b, &r.range),
+                db: part(self.all.db, &r.range),
+            };
+            self.run(run, if r.tapered { self.taper } else { None }, &mut acc);
+        }
+        acc
+    }
+}
+
+impl<const D: usize, const BD: usize, const MODE: u8> Block<'_, D, BD, MODE> {
+    #[inline(always)]
+    fn run(&self, run: Run<'_, D, BD>, taper: Option<Taper>, acc: &mut [[f64; L]; 6]) {
+        let t = self.t;
+        let conv = matches!(MODE, CONV | CONV_JVP | CONV_GRAD | BOTH_JVP);
+        let grad = matches!(MODE, GRAD | GRAD_JVP | CONV_GRAD | BOTH_JVP);
+        let jvp = matches!(MODE, CONV_JVP | GRAD_JVP | BOTH_JVP);
+        // Gradient rows follow the conv rows in the fused modes.
+        let g0 = if conv { BD } else { 0 };
+        for j in 0..run.y.len() {
+            let (yj, bj) = (&run.y[j], &run.b[j]);
             let u = sq_dist_lanes(&t.x, yj);
             // k, k', k'' summed over the terms (each from one exponential).
             let (mut k0, mut k1, mut k2) = ([0.0; L], [0.0; L], [0.0; L]);
+            // With integer ratios a_t = m_t·a_min, one exponential e and its
+            // powers e^{m_t} (a few ulps from exp(−a_t u); lanes where the
+            // power would be subnormal are set to 0, as exp_lanes does
+            // below e^−708, to avoid slow subnormal arithmetic).
+            let base = match self.terms.powers {
+                Some(_) => {
+                    let a = self.terms.a[..self.terms.n].iter().copied().fold(f64::INFINITY, f64::min);
+                    let mut arg = [0.0; L];
+                    for l in 0..L {
+                        arg[l] = -a * u[l];
+                    }
+                    Some(exp_lanes(arg))
+                }
+                None => None,
+            };
             for term in 0..self.terms.n {
                 let (a, w) = (self.terms.a[term], self.terms.w[term]);
-                let mut arg = [0.0; L];
-                for l in 0..L {
-                    arg[l] = -a * u[l];
-                }
-                let e = exp_lanes(arg);
+                let e = match (base, self.terms.powers) {
+                    (Some(e1), Some(m)) => power_lanes(e1, m[term], self.terms.floors[term]),
+                    _ => {
+                        let mut arg = [0.0; L];
+                        for l in 0..L {
+                            arg[l] = -a * u[l];
+                        }
+                        exp_lanes(arg)
+                    }
+                };
+                // Only the derivatives the mode uses (MODE is a constant).
                 for l in 0..L {
                     k0[l] += w * e[l];
-                    k1[l] -= a * w * e[l];
-                    k2[l] += a * a * w * e[l];
+                }
+                if grad || jvp {
+                    for l in 0..L {
+                        k1[l] -= a * w * e[l];
+                    }
+                }
+                if grad && jvp {
+                    for l in 0..L {
+                        k2[l] += a * a * w * e[l];
+                    }
+                }
+            }
+            if let Some(tp) = taper {
+                if grad || jvp {
+                    let (s, ds, dds) = taper_lanes(tp, &u);
+                    for l in 0..L {
+                        k2[l] = k2[l] * s[l] + 2.0 * k1[l] * ds[l] + k0[l] * dds[l];
+                        k1[l] = k1[l] * s[l] + k0[l] * ds[l];
+                        k0[l] *= s[l];
+                    }
+                } else {
+                    let (s, _) = tp.lanes(&u);
+                    for l in 0..L {
+                        k0[l] *= s[l];
+                    }
                 }
             }
             // du = 2 (x_i − y_j)·(dx_i − dy_j), for the JVP modes.
             let mut du = [0.0; L];
-            if MODE == CONV_JVP || MODE == GRAD_JVP {
-                let dyj = &inp.dy[j * D..(j + 1) * D];
+            if jvp {
+                let dyj = &run.dy[j];
                 for k in 0..D {
                     for l in 0..L {
                         du[l] += 2.0 * (t.x[k][l] - yj[k]) * (t.dx[k][l] - dyj[k]);
                     }
                 }
             }
-            match MODE {
-                CONV => {
+            if conv {
+                if jvp {
+                    let dbj = &run.db[j];
+                    for c in 0..BD {
+                        for l in 0..L {
+                            acc[c][l] += k1[l] * du[l] * bj[c] + k0[l] * dbj[c];
+                        }
+                    }
+                } else {
                     for c in 0..BD {
                         for l in 0..L {
                             acc[c][l] += k0[l] * bj[c];
                         }
                     }
                 }
-                CONV_JVP => {
-                    let dbj = &inp.db[j * BD..(j + 1) * BD];
-                    for c in 0..BD {
-                        for l in 0..L {
-                            acc[c][l] += k1[l] * du[l] * bj[c] + k0[l] * dbj[c];
-                        }
+            }
+            if grad {
+                let mut ab = [0.0; L];
+                for c in 0..BD {
+                    for l in 0..L {
+                        ab[l] += t.a[c][l] * bj[c];
                     }
                 }
-                _ => {
-                    let mut ab = [0.0; L];
-                    for c in 0..BD {
+                if !jvp {
+                    for k in 0..D {
                         for l in 0..L {
-                            ab[l] += t.a[c][l] * bj[c];
+                            acc[g0 + k][l] += 2.0 * k1[l] * ab[l] * (t.x[k][l] - yj[k]);
                         }
                     }
-                    if MODE == GRAD {
-                        for k in 0..D {
-                            for l in 0..L {
-                                acc[k][l] += 2.0 * k1[l] * ab[l] * (t.x[k][l] - yj[k]);
-                            }
+                } else {
+                    let (dyj, dbj) = (&run.dy[j], &run.db[j]);
+                    let mut dab = [0.0; L];
+                    for c in 0..BD {
+                        for l in 0..L {
+                            dab[l] += t.da[c][l] * bj[c] + t.a[c][l] * dbj[c];
                         }
-                    } else {
-                        let (dyj, dbj) = (&inp.dy[j * D..(j + 1) * D], &inp.db[j * BD..(j + 1) * BD]);
-                        let mut dab = [0.0; L];
-                        for c in 0..BD {
-                            for l in 0..L {
-                                dab[l] += t.da[c][l] * bj[c] + t.a[c][l] * dbj[c];
-                            }
-                        }
-                        for k in 0..D {
-                            for l in 0..L {
-                                let diff = t.x[k][l] - yj[k];
-                                let ddiff = t.dx[k][l] - dyj[k];
-                                acc[k][l] += 2.0 * k2[l] * du[l] * ab[l] * diff
-                                    + 2.0 * k1[l] * dab[l] * diff
-                                    + 2.0 * k1[l] * ab[l] * ddiff;
-                            }
+                    }
+                    for k in 0..D {
+                        for l in 0..L {
+                            let diff = t.x[k][l] - yj[k];
+                            let ddiff = t.dx[k][l] - dyj[k];
+                            acc[g0 + k][l] += 2.0 * k2[l] * du[l] * ab[l] * diff
+                                + 2.0 * k1[l] * dab[l] * diff
+                                + 2.0 * k1[l] * ab[l] * ddiff;
                         }
                     }
                 }
             }
         }
-        acc
     }
 }
 
-/// Runs `MODE` for every target, for an untapered sum of Gaussians, points
-/// in 2-D or 3-D and weights of 1 to 3 components (`None` otherwise: the
-/// caller uses the general path).
+/// Runs `MODE` for every target, for a sum of Gaussians (exact or
+/// truncated), points in 2-D or 3-D and weights of 1 to 3 components
+/// (`None` otherwise: the caller uses the general path). The output has
+/// `rows(MODE)` values per target.
 pub(crate) fn gaussian_sum<const MODE: u8>(
     terms: &GaussTerms,
+    taper: Option<Taper>,
     inp: Inputs<'_>,
     dim: usize,
     bdim: usize,
     parallel: bool,
 ) -> Option<Vec<f64>> {
     Some(match (dim, bdim) {
-        (2, 1) => run::<2, 1, MODE>(terms, inp, parallel),
-        (2, 2) => run::<2, 2, MODE>(terms, inp, parallel),
-        (2, 3) => run::<2, 3, MODE>(terms, inp, parallel),
-        (3, 1) => run::<3, 1, MODE>(terms, inp, parallel),
-        (3, 2) => run::<3, 2, MODE>(terms, inp, parallel),
-        (3, 3) => run::<3, 3, MODE>(terms, inp, parallel),
+        (2, 1) => run::<2, 1, MODE>(terms, taper, inp, parallel),
+        (2, 2) => run::<2, 2, MODE>(terms, taper, inp, parallel),
+        (2, 3) => run::<2, 3, MODE>(terms, taper, inp, parallel),
+        (3, 1) => run::<3, 1, MODE>(terms, taper, inp, parallel),
+        (3, 2) => run::<3, 2, MODE>(terms, taper, inp, parallel),
+        (3, 3) => run::<3, 3, MODE>(terms, taper, inp, parallel),
         _ => return None,
     })
 }
 
+/// `v` (rows of `W`) gathered into the sorted source order, or empty.
+fn gather<const W: usize>(v: &[f64], order: &[usize]) -> Vec<[f64; W]> {
+    if v.is_empty() {
+        return Vec::new();
+    }
+    order.iter().map(|&j| std::array::from_fn(|c| v[j * W + c])).collect()
+}
+
+/// `v[range]`, or `v` itself if it is empty (an unused input).
+fn part<'v, T>(v: &'v [T], range: &std::ops::Range<usize>) -> &'v [T] {
+    if v.is_empty() { v } else { &v[range.clone()] }
+}
+
 fn run<const D: usize, const BD: usize, const MODE: u8>(
     terms: &GaussTerms,
+    taper: Option<Taper>,
     inp: Inputs<'_>,
     parallel: bool,
 ) -> Vec<f64> {
-    let nx = inp.x.len() / D;
-    let w_out = if MODE == CONV || MODE == CONV_JVP { BD } else { D };
-    let mut out = vec![0.0; nx * w_out];
+    let w_out = rows(MODE, D, BD);
+    let uses_a = matches!(MODE, GRAD | GRAD_JVP | CONV_GRAD | BOTH_JVP);
+    let uses_d = matches!(MODE, CONV_JVP | GRAD_JVP | BOTH_JVP);
+    // Inputs were validated by the caller; the taper only decides which
+    // runs BlockPairs hands out.
+    let pairs = BlockPairs::with_taper(inp.x, inp.y, D, taper);
+    let order = pairs.source_order();
+    let (ys, bs) = (gather::<D>(inp.y, order), gather::<BD>(inp.b, order));
+    let (dys, dbs) =
+        if uses_d { (gather::<D>(inp.dy, order), gather::<BD>(inp.db, order)) } else { (Vec::new(), Vec::new()) };
     let arch = Arch::new();
-    let uses_a = MODE == GRAD || MODE == GRAD_JVP;
-    let uses_d = MODE == CONV_JVP || MODE == GRAD_JVP;
-    let block = |(blk, o): (usize, &mut [f64])| {
-        let i0 = blk * L;
-        let lanes = o.len() / w_out;
+    let blocks = pairs.map_blocks(parallel, |targets, runs| {
+        let lanes = targets.len();
         // Unused lanes repeat the last target.
-        let lane = |l: usize| i0 + l.min(lanes - 1);
+        let lane = |l: usize| targets[l.min(lanes - 1)];
         let pick = |v: &[f64], w: usize, on: bool, c: usize, l: usize| if on { v[lane(l) * w + c] } else { 0.0 };
         let t = Lanes::<D, BD> {
             x: std::array::from_fn(|k| std::array::from_fn(|l| inp.x[lane(l) * D + k])),
@@ -285,17 +439,13 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
             a: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.a, BD, uses_a, c, l))),
             da: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.da, BD, uses_a && uses_d, c, l))),
         };
-        let acc = arch.dispatch(Block::<D, BD, MODE> { terms, t: &t, inp });
-        for (c, acc_c) in acc.iter().enumerate().take(w_out) {
-            for l in 0..lanes {
-                o[l * w_out + c] = acc_c[l];
-            }
-        }
-    };
-    if parallel {
-        out.par_chunks_mut(L * w_out).enumerate().for_each(block);
-    } else {
-        out.chunks_mut(L * w_out).enumerate().for_each(block);
+        let all = Run { y: &ys, dy: &dys, b: &bs, db: &dbs };
+        let acc = arch.dispatch(Block::<D, BD, MODE> { terms, taper, t: &t, all, runs });
+        (0..lanes).map(|l| (targets[l], std::array::from_fn::<f64, 6, _>(|c| acc[c][l]))).collect::<Vec<_>>()
+    });
+    let mut out = vec![0.0; inp.x.len() / D * w_out];
+    for (i, row) in blocks.into_iter().flatten() {
+        out[i * w_out..(i + 1) * w_out].copy_from_slice(&row[..w_out]);
     }
     out
 }

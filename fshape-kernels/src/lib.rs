@@ -12,15 +12,16 @@
 //!   gradient identity (and finite-difference test) holds for it exactly,
 //!   and each output obeys |out_i − exact_i| ≤ τ·k(0)·Σ_{j changed} |b_j|.
 //! - [`KernelSums`]: sums against source points y, in parallel over targets
-//!   and deterministic (serial = parallel, bitwise); exact sums visit every
-//!   j (a vectorised path for one Gaussian), truncated ones skip blocks of
-//!   sources beyond the support radius (one Gaussian) or visit only the j a
-//!   spatial index (obvhs BVH or kiddo k-d tree) finds within it (the
-//!   general engine). Derivatives:
+//!   and deterministic (serial = parallel, bitwise). Sums of Gaussians take
+//!   a vectorised block path (exact: every j; truncated: blocks of sources
+//!   beyond the support radius skipped); other kernels the general engine,
+//!   which visits every j or only the j a spatial index (obvhs BVH or
+//!   kiddo k-d tree) finds within the support. Derivatives:
 //!   [`KernelSums::grad_cross`] (∂_x of aᵀK b), [`KernelSums::conv_jvp`] and
 //!   [`KernelSums::grad_cross_jvp`] (directional derivatives for the exact
-//!   adjoint of shooting), and [`KernelSums::map_targets`], the general
-//!   engine other crates reuse.
+//!   adjoint of shooting), fused pairs of them sharing the exponentials
+//!   ([`KernelSums::conv_and_grad`], [`KernelSums::conv_and_grad_jvp`]), and
+//!   [`KernelSums::map_targets`], the general engine.
 //!
 //! ```
 //! use fshape_kernels::{Kernel, KernelSums};

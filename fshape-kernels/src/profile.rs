@@ -51,13 +51,23 @@ pub struct Taper {
 /// The most Gaussian terms the vectorised exact paths take.
 pub(crate) const MAX_TERMS: usize = 4;
 
-/// The terms of an untapered sum of Gaussians, Σ_t w_t exp(−a_t u).
+/// The terms of a sum of Gaussians, Σ_t w_t exp(−a_t u).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct GaussTerms {
     pub(crate) a: [f64; MAX_TERMS],
     pub(crate) w: [f64; MAX_TERMS],
     pub(crate) n: usize,
+    /// When every a_t is an integer multiple m_t ≤ [`MAX_POWER`] of the
+    /// smallest one (widths σ, σ/2, σ/√3, ...: the usual multi-scale
+    /// kernels), `Some(m)`: then exp(−a_t u) = exp(−a_min u)^{m_t}, one
+    /// exponential per pair instead of one per term.
+    pub(crate) powers: Option<[u32; MAX_TERMS]>,
+    /// Per term, 1e-300^{1/m_t}: below it the power is set to 0.
+    pub(crate) floors: [f64; MAX_TERMS],
 }
+
+/// The largest integer ratio of widths² computed by powering.
+pub(crate) const MAX_POWER: u32 = 16;
 
 impl Taper {
     /// The taper s(u) and its derivative s'(u) for the lanes of `u` (s = 1
@@ -253,14 +263,15 @@ impl Kernel {
         (k0, k1)
     }
 
-    /// For an untapered sum of at most [`MAX_TERMS`] Gaussians (the case
-    /// with vectorised exact paths): the coefficients a_t = 1/(2σ_t²) and
-    /// weights w_t.
+    /// For a sum of at most [`MAX_TERMS`] Gaussians, exact or truncated
+    /// (the case with vectorised paths): the coefficients a_t = 1/(2σ_t²)
+    /// and weights w_t (the taper is [`Kernel::taper`]).
     pub(crate) fn gaussian_terms(&self) -> Option<GaussTerms> {
-        if self.taper.is_some() || self.terms.len() > MAX_TERMS {
+        if self.terms.len() > MAX_TERMS {
             return None;
         }
-        let mut g = GaussTerms { a: [0.0; MAX_TERMS], w: [0.0; MAX_TERMS], n: 0 };
+        let mut g =
+            GaussTerms { a: [0.0; MAX_TERMS], w: [0.0; MAX_TERMS], n: 0, powers: None, floors: [0.0; MAX_TERMS] };
         for term in &self.terms {
             match *term {
                 Term::Gauss { a, w } => {
@@ -269,6 +280,21 @@ impl Kernel {
                     g.n += 1;
                 }
                 Term::Cauchy { .. } => return None,
+            }
+        }
+        if g.n > 1 {
+            let base = g.a[..g.n].iter().copied().fold(f64::INFINITY, f64::min);
+            let mut powers = [0u32; MAX_TERMS];
+            let mut all = true;
+            for ((a, power), floor) in g.a[..g.n].iter().zip(&mut powers).zip(&mut g.floors) {
+                let r = a / base;
+                let m = r.round();
+                all &= (r - m).abs() <= 1e-12 * r && m <= MAX_POWER as f64;
+                *power = m as u32;
+                *floor = 1e-300f64.powf(1.0 / m.max(1.0));
+            }
+            if all {
+                g.powers = Some(powers);
             }
         }
         Some(g)

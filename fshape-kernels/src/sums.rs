@@ -37,10 +37,13 @@ pub enum SpatialIndex {
 /// over y ([`SpatialIndex`]: obvhs by default, or kiddo) visits only the j
 /// within the support radius; the index is built
 /// on first use, once, so **build a new `KernelSums` when y moves** (in
-/// shooting: once per evaluation of the vector field). Sums with one
-/// truncated Gaussian (`conv`) use a faster block-sparse path instead: the
-/// points are sorted into blocks and whole blocks beyond the support radius
-/// are skipped. Outputs are computed in
+/// shooting: once per evaluation of the vector field). Sums of up to four
+/// Gaussians, exact or truncated, take a faster vectorised path for every
+/// operation instead: the points are sorted into blocks, whole blocks
+/// beyond the support radius are skipped ([`crate::BlockPairs`]), and with
+/// integer ratios between the a_t = 1/(2σ_t²) one exponential serves all
+/// terms. The per-pair engine serves Cauchy kernels and longer sums.
+/// Outputs are computed in
 /// parallel over i, each summed in an order that depends only on the data:
 /// serial and parallel results are equal bit for bit.
 pub struct KernelSums<'a> {
@@ -225,6 +228,73 @@ impl<'a> KernelSums<'a> {
         Ok(out)
     }
 
+    /// The vectorised path for sums of Gaussians (exact or truncated), or
+    /// `None` for other kernels and dimensions.
+    fn fast<const MODE: u8>(&self, inp: Inputs<'_>, bdim: usize) -> Result<Option<Vec<f64>>, KernelError> {
+        let Some(terms) = self.kernel.gaussian_terms() else { return Ok(None) };
+        self.check_targets(inp.x)?;
+        Ok(fast::gaussian_sum::<MODE>(&terms, self.kernel.taper(), inp, self.dim, bdim, self.parallel))
+    }
+
+    /// Splits fused rows (first `w1` values, then `w2`, per target).
+    fn split(rows: &[f64], w1: usize, w2: usize) -> (Vec<f64>, Vec<f64>) {
+        let (mut a, mut b) = (Vec::with_capacity(rows.len() / (w1 + w2) * w1), Vec::new());
+        for r in rows.chunks_exact(w1 + w2) {
+            a.extend_from_slice(&r[..w1]);
+            b.extend_from_slice(&r[w1..]);
+        }
+        (a, b)
+    }
+
+    /// [`KernelSums::conv`] of b and [`KernelSums::grad_cross`] of (a, b)
+    /// together: the vectorised path computes both from the same
+    /// exponentials (the shooting field needs K p and ∂_x(pᵀK p) at once).
+    pub fn conv_and_grad(
+        &self,
+        x: &[f64],
+        a: &[f64],
+        b: &[f64],
+        bdim: usize,
+    ) -> Result<(Vec<f64>, Vec<f64>), KernelError> {
+        self.check_len("a", a, x.len() / self.dim * bdim)?;
+        self.check_len("b", b, self.n_sources() * bdim)?;
+        if let Some(rows) = self.fast::<{ fast::CONV_GRAD }>(Inputs { x, y: self.y, a, b, ..self.no_inputs() }, bdim)? {
+            return Ok(Self::split(&rows, bdim, self.dim));
+        }
+        Ok((self.conv(x, b, bdim)?, self.grad_cross(x, a, b, bdim)?))
+    }
+
+    /// [`KernelSums::conv_jvp`] and [`KernelSums::grad_cross_jvp`] together
+    /// (shared exponentials on the vectorised path).
+    #[allow(clippy::too_many_arguments)]
+    pub fn conv_and_grad_jvp(
+        &self,
+        x: &[f64],
+        dx: &[f64],
+        dy: &[f64],
+        a: &[f64],
+        da: &[f64],
+        b: &[f64],
+        db: &[f64],
+        bdim: usize,
+    ) -> Result<(Vec<f64>, Vec<f64>), KernelError> {
+        let nx = x.len() / self.dim;
+        for (what, v, len) in [
+            ("dx", dx, x.len()),
+            ("dy", dy, self.y.len()),
+            ("a", a, nx * bdim),
+            ("da", da, nx * bdim),
+            ("b", b, self.n_sources() * bdim),
+            ("db", db, self.n_sources() * bdim),
+        ] {
+            self.check_len(what, v, len)?;
+        }
+        if let Some(rows) = self.fast::<{ fast::BOTH_JVP }>(Inputs { x, dx, y: self.y, dy, a, da, b, db }, bdim)? {
+            return Ok(Self::split(&rows, bdim, self.dim));
+        }
+        Ok((self.conv_jvp(x, dx, dy, b, db, bdim)?, self.grad_cross_jvp(x, dx, dy, a, da, b, db, bdim)?))
+    }
+
     fn check_targets(&self, x: &[f64]) -> Result<(), KernelError> {
         if !x.len().is_multiple_of(self.dim) {
             return Err(KernelError::Dimension {
@@ -258,19 +328,8 @@ impl<'a> KernelSums<'a> {
     /// ```
     pub fn conv(&self, x: &[f64], b: &[f64], bdim: usize) -> Result<Vec<f64>, KernelError> {
         self.check_len("b", b, self.n_sources() * bdim)?;
-        if let Some(terms) = self.kernel.gaussian_terms() {
-            self.check_targets(x)?;
-            let inp = Inputs { x, y: self.y, b, ..self.no_inputs() };
-            if let Some(out) = fast::gaussian_sum::<{ fast::CONV }>(&terms, inp, self.dim, bdim, self.parallel) {
-                return Ok(out);
-            }
-        }
-        if let Some((a, wt, Some(t))) = self.kernel.single_gaussian() {
-            self.check_targets(x)?;
-            let t = crate::blocks::TaperLanes { u_in: t.u_in, u_out: t.u_out };
-            if let Some(out) = crate::blocks::truncated_conv(a, wt, t, x, self.y, self.dim, b, bdim, self.parallel) {
-                return Ok(out);
-            }
+        if let Some(out) = self.fast::<{ fast::CONV }>(Inputs { x, y: self.y, b, ..self.no_inputs() }, bdim)? {
+            return Ok(out);
         }
         self.map_targets(x, bdim, |_, p, o| {
             let k = self.kernel.value(p.u);
@@ -287,12 +346,8 @@ impl<'a> KernelSums<'a> {
         let n = self.dim;
         self.check_len("a", a, x.len() / n * bdim)?;
         self.check_len("b", b, self.n_sources() * bdim)?;
-        if let Some(terms) = self.kernel.gaussian_terms() {
-            self.check_targets(x)?;
-            let inp = Inputs { x, y: self.y, a, b, ..self.no_inputs() };
-            if let Some(out) = fast::gaussian_sum::<{ fast::GRAD }>(&terms, inp, self.dim, bdim, self.parallel) {
-                return Ok(out);
-            }
+        if let Some(out) = self.fast::<{ fast::GRAD }>(Inputs { x, y: self.y, a, b, ..self.no_inputs() }, bdim)? {
+            return Ok(out);
         }
         self.map_targets(x, n, |i, p, o| {
             let ab: f64 = (0..bdim).map(|c| a[i * bdim + c] * b[p.j * bdim + c]).sum();
@@ -321,12 +376,9 @@ impl<'a> KernelSums<'a> {
         self.check_len("dy", dy, self.y.len())?;
         self.check_len("b", b, self.n_sources() * bdim)?;
         self.check_len("db", db, self.n_sources() * bdim)?;
-        if let Some(terms) = self.kernel.gaussian_terms() {
-            self.check_targets(x)?;
-            let inp = Inputs { x, dx, y: self.y, dy, b, db, ..self.no_inputs() };
-            if let Some(out) = fast::gaussian_sum::<{ fast::CONV_JVP }>(&terms, inp, self.dim, bdim, self.parallel) {
-                return Ok(out);
-            }
+        let inp = Inputs { x, dx, y: self.y, dy, b, db, ..self.no_inputs() };
+        if let Some(out) = self.fast::<{ fast::CONV_JVP }>(inp, bdim)? {
+            return Ok(out);
         }
         self.map_targets(x, bdim, |i, p, o| {
             let [k, dk, _] = self.kernel.derivatives(p.u);
@@ -365,12 +417,8 @@ impl<'a> KernelSums<'a> {
         ] {
             self.check_len(what, v, len)?;
         }
-        if let Some(terms) = self.kernel.gaussian_terms() {
-            self.check_targets(x)?;
-            let inp = Inputs { x, dx, y: self.y, dy, a, da, b, db };
-            if let Some(out) = fast::gaussian_sum::<{ fast::GRAD_JVP }>(&terms, inp, self.dim, bdim, self.parallel) {
-                return Ok(out);
-            }
+        if let Some(out) = self.fast::<{ fast::GRAD_JVP }>(Inputs { x, dx, y: self.y, dy, a, da, b, db }, bdim)? {
+            return Ok(out);
         }
         self.map_targets(x, n, |i, p, o| {
             let [_, dk, ddk] = self.kernel.derivatives(p.u);

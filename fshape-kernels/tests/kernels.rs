@@ -15,6 +15,8 @@ pub fn kernels() -> Vec<(String, Kernel)> {
     let profiles = [
         Profile::Gaussian { sigma: 0.4 },
         Profile::Gaussians { sigmas: vec![0.5, 0.2], weights: vec![1.0, 0.5] },
+        // Widths σ and σ/2: exp(−a₂u) is computed as exp(−a₁u)⁴.
+        Profile::Gaussians { sigmas: vec![0.4, 0.2], weights: vec![1.0, 0.7] },
         Profile::Cauchy { sigma: 0.3 },
     ];
     let mut out = Vec::new();

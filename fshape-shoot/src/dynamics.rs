@@ -104,7 +104,7 @@ impl Dynamics<'_> {
         let mut out = vec![0.0; l.len()];
         let (kp, gk) = timed(&mut t.kernels, || -> Result<_, ShootError> {
             let sums = KernelSums::try_new(self.kernel, x, l.dim)?;
-            Ok((sums.conv(x, p, l.dim)?, sums.grad_cross(x, p, p, l.dim)?))
+            Ok(sums.conv_and_grad(x, p, p, l.dim)?)
         })?;
         for (o, v) in out[l.x()].iter_mut().zip(&kp) {
             *o = v / self.gamma_v;
@@ -147,7 +147,7 @@ impl Dynamics<'_> {
         let mut out = vec![0.0; l.len()];
         let (dkp, dgk) = timed(&mut t.kernels, || -> Result<_, ShootError> {
             let sums = KernelSums::try_new(self.kernel, x, l.dim)?;
-            Ok((sums.conv_jvp(x, dx, dx, p, dp, l.dim)?, sums.grad_cross_jvp(x, dx, dx, p, dp, p, dp, l.dim)?))
+            Ok(sums.conv_and_grad_jvp(x, dx, dx, p, dp, p, dp, l.dim)?)
         })?;
         for (o, v) in out[l.x()].iter_mut().zip(&dkp) {
             *o = v / self.gamma_v;

@@ -195,7 +195,11 @@ fn cross_gradient_matches_the_brute_force_oracle() {
             let (nx, ny) = (x.len() / dim, y.len() / dim);
             let a: Vec<f64> = (0..nx * bdim).map(|_| rng.range(-1.0, 1.0)).collect();
             let b: Vec<f64> = (0..ny * bdim).map(|_| rng.range(-1.0, 1.0)).collect();
-            let fast = KernelSums::try_new(&k, &y, dim).unwrap().grad_cross(&x, &a, &b, bdim).unwrap();
+            let sums = KernelSums::try_new(&k, &y, dim).unwrap();
+            let fast = sums.grad_cross(&x, &a, &b, bdim).unwrap();
+            // The fused pass sums the same terms in the same order.
+            let conv = sums.conv(&x, &b, bdim).unwrap();
+            assert_eq!(sums.conv_and_grad(&x, &a, &b, bdim).unwrap(), (conv, fast.clone()), "{name}");
             // Σ_j 2 k'(u)(a_i·b_j)(x_i − y_j), the obvious double loop.
             let mut slow = vec![0.0; nx * dim];
             let mut scale: f64 = 0.0;
@@ -258,6 +262,8 @@ fn jacobian_vector_products_match_the_brute_force_oracle() {
             let tol = 1e-13 * scale * ny.max(1) as f64;
             assert!(cj.iter().zip(&cs).all(|(p, q)| (p - q).abs() <= tol), "{name} conv_jvp dim {dim}");
             assert!(gj.iter().zip(&gs).all(|(p, q)| (p - q).abs() <= tol), "{name} grad_cross_jvp dim {dim}");
+            // The fused pass sums the same terms in the same order.
+            assert_eq!(sums.conv_and_grad_jvp(&x, &dx, &dy, &a, &da, &b, &db, bd).unwrap(), (cj, gj), "{name}");
         }
     }
 }
