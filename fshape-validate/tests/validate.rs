@@ -1,5 +1,7 @@
 //! The theory checks (one binary, modules in `tests/validate/`).
 
+#[path = "validate/conservation.rs"]
+mod conservation;
 #[path = "validate/hamiltonian.rs"]
 mod hamiltonian;
 #[path = "validate/sphere.rs"]
