@@ -92,40 +92,16 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
                     s[l] += self.tu[k][l] * uj[k];
                 }
             }
+            // k_t = p·e^{arg_t}, k_t' = (p·q + p')·e^{arg_t} (grass_lanes).
+            let (p, p1, q, arg_t) = grass_lanes(self.k.grass(), &s);
+            let et = match arg_t {
+                Some(at) => exp_lanes(at),
+                None => [1.0; L],
+            };
             let (mut kt, mut kt1) = ([0.0; L], [0.0; L]);
-            match self.k.grass() {
-                GrassKernel::Linear => {
-                    kt = s;
-                    kt1 = [1.0; L];
-                }
-                GrassKernel::Binet => {
-                    for l in 0..L {
-                        kt[l] = s[l] * s[l];
-                        kt1[l] = 2.0 * s[l];
-                    }
-                }
-                GrassKernel::OrientedGaussian { sigma } => {
-                    let c = 2.0 / (sigma * sigma);
-                    let mut arg = [0.0; L];
-                    for l in 0..L {
-                        arg[l] = c * (s[l] - 1.0);
-                    }
-                    kt = exp_lanes(arg);
-                    for l in 0..L {
-                        kt1[l] = c * kt[l];
-                    }
-                }
-                GrassKernel::UnorientedGaussian { sigma } => {
-                    let c = 2.0 / (sigma * sigma);
-                    let mut arg = [0.0; L];
-                    for l in 0..L {
-                        arg[l] = c * (s[l] * s[l] - 1.0);
-                    }
-                    kt = exp_lanes(arg);
-                    for l in 0..L {
-                        kt1[l] = 2.0 * c * s[l] * kt[l];
-                    }
-                }
+            for l in 0..L {
+                kt[l] = p[l] * et[l];
+                kt1[l] = (p[l] * q[l] + p1[l]) * et[l];
             }
             let mut m = [0.0; L];
             for l in 0..L {
@@ -193,31 +169,10 @@ impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
             for l in 0..L {
                 arg[l] = -a * u2[l] - b * df[l] * df[l];
             }
-            let (mut p, mut p1, mut q) = ([1.0; L], [0.0; L], [0.0; L]);
-            match self.k.grass() {
-                GrassKernel::Linear => {
-                    p = s;
-                    p1 = [1.0; L];
-                }
-                GrassKernel::Binet => {
-                    for l in 0..L {
-                        p[l] = s[l] * s[l];
-                        p1[l] = 2.0 * s[l];
-                    }
-                }
-                GrassKernel::OrientedGaussian { sigma } => {
-                    let c = 2.0 / (sigma * sigma);
-                    for l in 0..L {
-                        arg[l] += c * (s[l] - 1.0);
-                        q[l] = c;
-                    }
-                }
-                GrassKernel::UnorientedGaussian { sigma } => {
-                    let c = 2.0 / (sigma * sigma);
-                    for l in 0..L {
-                        arg[l] += c * (s[l] * s[l] - 1.0);
-                        q[l] = 2.0 * c * s[l];
-                    }
+            let (p, p1, q, arg_t) = grass_lanes(self.k.grass(), &s);
+            if let Some(at) = arg_t {
+                for l in 0..L {
+                    arg[l] += at[l];
                 }
             }
             // m = w r_j exp(arg): the untapered product; with the taper t(u),
@@ -264,6 +219,44 @@ impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
             }
         }
     }
+}
+
+/// k_t in factored form for the lanes of s = u_i·u_j: k_t = p·e^{arg},
+/// k_t' = (p·q + p')·e^{arg}, with `arg` `None` (e^{arg} = 1) for the
+/// polynomial kernels. Returns (p, p', q, arg). The fused loop adds `arg`
+/// into its one exponential; the general loop takes its own.
+#[inline(always)]
+fn grass_lanes(grass: GrassKernel, s: &[f64; L]) -> ([f64; L], [f64; L], [f64; L], Option<[f64; L]>) {
+    let (mut p, mut p1, mut q, mut arg) = ([1.0; L], [0.0; L], [0.0; L], [0.0; L]);
+    match grass {
+        GrassKernel::Linear => {
+            p = *s;
+            p1 = [1.0; L];
+            return (p, p1, q, None);
+        }
+        GrassKernel::Binet => {
+            for l in 0..L {
+                p[l] = s[l] * s[l];
+                p1[l] = 2.0 * s[l];
+            }
+            return (p, p1, q, None);
+        }
+        GrassKernel::OrientedGaussian { sigma } => {
+            let c = 2.0 / (sigma * sigma);
+            for l in 0..L {
+                arg[l] = c * (s[l] - 1.0);
+                q[l] = c;
+            }
+        }
+        GrassKernel::UnorientedGaussian { sigma } => {
+            let c = 2.0 / (sigma * sigma);
+            for l in 0..L {
+                arg[l] = c * (s[l] * s[l] - 1.0);
+                q[l] = 2.0 * c * s[l];
+            }
+        }
+    }
+    (p, p1, q, Some(arg))
 }
 
 /// The per-target sums (module doc) of every cell of `x` against `y`: rows
