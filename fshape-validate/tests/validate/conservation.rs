@@ -69,9 +69,15 @@ fn vertex_normals(s: &FShape) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// max over t ∈ {0, 0.5, 1} of |⟨p_t,u⟩ + ⟨p^f, ∇f_t·u⟩| / (Σ|p_k||u_k| + Σ|p^f_k||∇f_t·u|_k)
-/// for a smooth field u projected on the tangent planes.
-fn residual(level: u32) -> (f64, f64) {
+/// An optimal trajectory ending at X_1 (an icosphere of `level` carrying
+/// f), built by shooting backward from the optimality conditions.
+struct Optimal {
+    x1: FShape,
+    traj: fshape_shoot::Trajectory,
+    pf: Vec<f64>,
+}
+
+fn optimal(level: u32) -> Optimal {
     let sphere = icosphere(level, 1.0);
     let sig: Vec<f64> = sphere.points().chunks_exact(3).map(f).collect();
     let x1 = sphere.with_signal(Some(sig)).unwrap();
@@ -89,14 +95,34 @@ fn residual(level: u32) -> (f64, f64) {
     .unwrap();
     let gamma_w = 1.0;
     let (_, g) = Attachment::new(&target, k).unwrap().eval_grad(&x1).unwrap();
-    // Backward in time: shoot from X_1 with −p_1 and −p^f.
+    // p_1 = −γ_W ∂_x A, p^f = −γ_W ∂_f A; backward in time = forward from
+    // X_1 with the momenta negated.
     let back_p: Vec<f64> = g.points.iter().map(|v| gamma_w * v).collect();
     let back_pf: Vec<f64> = g.signal.iter().map(|v| gamma_w * v).collect();
     let m = model(0.4, "h1", 0.3, 1.0, 0.5, "rk4", 10);
     let traj = Problem::new(&x1, m).unwrap().shoot(&back_p, &back_pf).unwrap();
     let pf: Vec<f64> = g.signal.iter().map(|v| -gamma_w * v).collect();
+    Optimal { x1, traj, pf }
+}
+
+/// The trajectories for levels 3, 4, 5, built once for every test here.
+fn optimals() -> &'static [Optimal] {
+    static CACHE: std::sync::OnceLock<Vec<Optimal>> = std::sync::OnceLock::new();
+    CACHE.get_or_init(|| (3..=5).map(optimal).collect())
+}
+
+/// The smooth ambient field w(p) = (c₀ sin 2y + c₁, c₂ cos z + c₃ x, c₄ xy + c₅ z²).
+fn field(c: &[f64; 6], p: &[f64]) -> [f64; 3] {
+    [c[0] * (2.0 * p[1]).sin() + c[1], c[2] * p[2].cos() + c[3] * p[0], c[4] * p[0] * p[1] + c[5] * p[2] * p[2]]
+}
+
+/// max over every step t of |⟨p_t,u⟩ + ⟨p^f, ∇f_t·u⟩| / (Σ|p_k||u_k| +
+/// Σ|p^f_k||∇f_t·u|_k), u = w projected on the tangent planes; and the
+/// pointwise tangential residual Σ|p_tan + p^f ∇f_t| / Σ(|p_tan| + |p^f ∇f_t|).
+fn residual(o: &Optimal, c: &[f64; 6]) -> (f64, f64) {
+    let (x1, traj, pf) = (&o.x1, &o.traj, &o.pf);
     let (mut worst, mut worst_tan): (f64, f64) = (0.0, 0.0);
-    for step in [0, 5, 10] {
+    for step in 0..=traj.steps() {
         let xt = x1.clone().with_points(traj.points(step).to_vec()).unwrap();
         let ft = traj.signal(step);
         let pt: Vec<f64> = traj.momenta(step).iter().map(|v| -v).collect();
@@ -115,7 +141,7 @@ fn residual(level: u32) -> (f64, f64) {
             let diff: Vec<f64> = (0..3).map(|i| ptan[i] + gtan[i]).collect();
             tan_num += len(&diff);
             tan_den += len(&ptan) + len(&gtan);
-            let w = [(2.0 * p[1]).sin() + 0.5, p[2].cos(), p[0] * p[1]];
+            let w = field(c, p);
             let wn: f64 = (0..3).map(|i| w[i] * normals[v][i]).sum();
             let u: Vec<f64> = (0..3).map(|i| w[i] - wn * normals[v][i]).collect();
             let du: f64 = (0..3).map(|i| grads[v][i] * u[i]).sum();
@@ -133,10 +159,12 @@ fn residual(level: u32) -> (f64, f64) {
 fn the_momentum_map_vanishes_along_optimal_trajectories() {
     // The discrete flow has no exact reparametrisation symmetry, so μ_t is
     // only as small as the discretisation error of A's invariance, O(h²)
-    // (fshape-varifold's reparametrisation test). Measured: 1.4e-2, 4.0e-3,
-    // 1.0e-3 at levels 3–5; with p^f's sign flipped it stays at 0.24, so the
-    // check sees the signal term.
-    let (r, t): (Vec<f64>, Vec<f64>) = (3..=5).map(residual).unzip();
+    // (fshape-varifold's reparametrisation test). Measured for w = (sin 2y +
+    // 0.5, cos z, xy), max over the 11 steps: 1.5e-2, 4.2e-3, 1.1e-3 at levels
+    // 3–5; with p^f's
+    // sign flipped it stays at 0.24, so the check sees the signal term.
+    let c = [1.0, 0.5, 1.0, 0.0, 1.0, 0.0];
+    let (r, t): (Vec<f64>, Vec<f64>) = optimals().iter().map(|o| residual(o, &c)).unzip();
     let h: Vec<f64> = (3..=5).map(|l| 0.5f64.powi(l)).collect();
     let order = observed_order(&h, &r);
     eprintln!("conservation law residuals, levels 3-5: {r:?}, order {order:.2}");
@@ -146,6 +174,27 @@ fn the_momentum_map_vanishes_along_optimal_trajectories() {
     // Pointwise, so larger than the averaged residual: measured 0.16, 0.046,
     // 0.012 (order 1.84).
     assert!((1.5..2.5).contains(&order_tan) && t[2] < 0.02, "tangential residuals {t:?}, order {order_tan}");
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config {
+        cases: 16,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(5),
+        failure_persistence: None,
+        ..proptest::test_runner::Config::default()
+    })]
+
+    #[test]
+    fn the_law_holds_for_random_smooth_tangent_fields(c in proptest::array::uniform6(-1.0f64..1.0)) {
+        // Every tangent field must see μ_t ≈ 0, at every step: the residual
+        // shrinks under refinement (level 3 → 5, two halvings of h: about
+        // 16× at order 2; asserted ≥ 4×) and is small on the finest mesh
+        // (the fixed field above gives 1.0e-3; 5e-3 leaves room for fields
+        // whose terms partly cancel in the normalisation).
+        let o = optimals();
+        let (r3, r5) = (residual(&o[0], &c).0, residual(&o[2], &c).0);
+        proptest::prop_assert!(r5 < r3 / 4.0 && r5 < 5e-3, "c = {c:?}: residual {r3:e} at level 3, {r5:e} at level 5");
+    }
 }
 
 /// Σ over interior vertices of |p_t + p^f ∇f_t|, relative to
