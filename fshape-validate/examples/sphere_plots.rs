@@ -1,7 +1,8 @@
 //! Draws r_t and f_t for the paper's three sphere settings (figure
 //! fig:metam_sphere): the ODE (re-derived χ with 2π, and the paper's 4π)
 //! against discrete shooting of the level-4 icosphere in lumped L².
-//! Writes `docs/sphere_geodesics.svg`.
+//! Writes `docs/sphere_geodesics.svg`, and the curves as CSV to
+//! `target/sphere_geodesics.csv` for `scripts/sphere_plot.sh` (the PNG).
 //!
 //! ```text
 //! cargo run --release -p fshape-validate --example sphere_plots
@@ -18,6 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     root.fill(&WHITE)?;
     let panels = root.split_evenly((2, 3));
     let times: Vec<f64> = (0..=100).map(|k| k as f64 / 100.0).collect();
+    let mut csv = String::from("setting,rho0,pf,t,ode_r,ode_f,paper_r,paper_f,discrete_r,discrete_f\n");
     for (i, s) in PAPER_SETTINGS.iter().enumerate() {
         let ode = sphere_ode(*s, 1.0, &times);
         let paper = sphere_ode(*s, 2.0, &times);
@@ -46,6 +48,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 (k as f64 / 20.0, r, f)
             })
             .collect();
+        for (k, t) in times.iter().enumerate() {
+            // Discrete values exist every 5th time (20 steps); blank otherwise.
+            let d = (k % 5 == 0).then(|| discrete[k / 5]);
+            let (dr, df) = d.map_or((String::new(), String::new()), |(_, r, f)| (r.to_string(), f.to_string()));
+            csv.push_str(&format!(
+                "{i},{},{},{t},{},{},{},{},{dr},{df}\n",
+                s.rho0, s.pf, ode[k][1], ode[k][0], paper[k][1], paper[k][0]
+            ));
+        }
         for (row, (name, idx)) in [("r_t", 1usize), ("f_t", 0usize)].iter().enumerate() {
             let area = &panels[row * 3 + i];
             let all: Vec<f64> = ode.iter().chain(&paper).map(|y| y[*idx]).collect();
@@ -80,6 +91,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     root.present()?;
-    println!("wrote {}", out.display());
+    let csv_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/sphere_geodesics.csv");
+    std::fs::write(&csv_path, csv)?;
+    println!("wrote {} and {}", out.display(), csv_path.display());
     Ok(())
 }

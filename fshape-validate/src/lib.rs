@@ -56,13 +56,13 @@
 //!   6.6e-3, 3.4e-3 at about 300, 1200, 4800 vertices, first order
 //!   (asserted in [0.8, 1.6]; the recovered vertex gradients limit it).
 //!
-//! Plots: `cargo run --release -p fshape-validate --example sphere_plots`
-//! writes `docs/sphere_geodesics.svg`, r_t and f_t of the paper's three
-//! settings: the derived ODE, the ODE with the paper's 4π, and discrete
-//! shooting of the 2562-vertex icosphere (lumped L²), like the paper's
-//! figure fig:metam_sphere. SVG, not the PNG the issue asked for: plotters'
-//! bitmap backend pulls system font libraries (`../shared/notes`), its SVG
-//! backend nothing.
+//! Plots: `scripts/sphere_plot.sh` writes `docs/sphere_geodesics.png` (and
+//! the example it runs, `cargo run --release -p fshape-validate --example
+//! sphere_plots`, an SVG of the same without Python): r_t and f_t of the
+//! paper's three settings, the derived ODE, the ODE with the paper's 4π,
+//! and discrete shooting of the 2562-vertex icosphere (lumped L²), like
+//! the paper's figure fig:metam_sphere. The discrete points lie on the 2π
+//! curves; the middle setting contracts then expands, as the paper says.
 //!
 //! # Errata found
 //!
