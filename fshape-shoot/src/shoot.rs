@@ -265,14 +265,25 @@ impl Problem {
 
     /// J(p_0, p^f) and its parts.
     pub fn objective(&self, p0: &[f64], pf: &[f64]) -> Result<(Objective, Trajectory), ShootError> {
+        self.evaluate(p0, pf, false).map(|e| (e.objective, e.trajectory))
+    }
+
+    /// Shoots and evaluates J; with `grad`, the attachment's gradient and the
+    /// signal energy's come from the same evaluations (each done once).
+    fn evaluate(&self, p0: &[f64], pf: &[f64], grad: bool) -> Result<Evaluation, ShootError> {
         let att = self.attachment()?;
         let traj = self.shoot(p0, pf)?;
         let mut t = traj.timings;
-        let (es, _) = self.signal_energy(pf, &mut t)?;
+        let (es, ges) = self.signal_energy(pf, &mut t)?;
         let last = self.model.steps;
         let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
         let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
-        let a = timed(&mut t.attachment, || att.eval(&x1))?.value;
+        let (a, ga) = if grad {
+            let (d, g) = timed(&mut t.attachment, || att.eval_grad(&x1))?;
+            (d.value, Some(g))
+        } else {
+            (timed(&mut t.attachment, || att.eval(&x1))?.value, None)
+        };
         let h0 = traj.hamiltonian[0];
         let metamorphosis_signal = if self.model.kind == ModelKind::Metamorphosis {
             0.5 * dot(&traj.nodes[0][self.layout.pf()], &traj.slopes[0][self.layout.f()])
@@ -280,13 +291,18 @@ impl Problem {
             0.0
         };
         let energy = h0 + es;
-        let obj = Objective {
+        let objective = Objective {
             value: energy + self.model.gamma_w * a,
             energy,
             signal_energy: es + metamorphosis_signal,
             attachment: a,
         };
-        Ok((obj, Trajectory { timings: t, ..traj }))
+        Ok(Evaluation {
+            objective,
+            trajectory: Trajectory { timings: t, ..traj },
+            attachment_grad: ga,
+            signal_grad: ges,
+        })
     }
 
     /// J and its exact gradient (∂J/∂p_0, ∂J/∂p^f): the discrete adjoint
@@ -294,15 +310,13 @@ impl Problem {
     /// J. Also returns the timings: forward, backward.
     pub fn objective_grad(&self, p0: &[f64], pf: &[f64]) -> Result<Gradient, ShootError> {
         let start = std::time::Instant::now();
-        let (obj, traj) = self.objective(p0, pf)?;
+        let Evaluation { objective: obj, trajectory: traj, attachment_grad, signal_grad: ges } =
+            self.evaluate(p0, pf, true)?;
+        let ga = attachment_grad.expect("requested");
         let forward = start.elapsed().as_secs_f64();
         let mut t = traj.timings;
         let l = self.layout;
         let last = self.model.steps;
-        let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
-        let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
-        let att = self.attachment()?;
-        let (_, ga) = timed(&mut t.attachment, || att.eval_grad(&x1))?;
         let back = std::time::Instant::now();
         // λ_N = ∂J/∂z_N.
         let gw = self.model.gamma_w;
@@ -356,7 +370,6 @@ impl Problem {
         // or the signal energy's gradient + λ_f (tangential: f_0 = f + ζ).
         let k0 = &traj.slopes[0];
         let grad_p: Vec<f64> = lam[l.mom()].iter().zip(&k0[l.x()]).map(|(a, b)| a + b).collect();
-        let (_, ges) = self.signal_energy(pf, &mut t)?;
         let grad_pf: Vec<f64> = match self.model.kind {
             ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
             ModelKind::Tangential => lam[l.f()].iter().zip(&ges).map(|(a, b)| a + b).collect(),
@@ -401,6 +414,15 @@ impl Problem {
         }
         Ok(out)
     }
+}
+
+/// One forward evaluation of J, with the end-point gradients when asked.
+struct Evaluation {
+    objective: Objective,
+    trajectory: Trajectory,
+    attachment_grad: Option<fshape_varifold::ShapeGrad>,
+    /// ∂/∂p^f of the signal energy (tangential model; zeros otherwise).
+    signal_grad: Vec<f64>,
 }
 
 /// J, its gradient and where the time went.
