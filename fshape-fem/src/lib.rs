@@ -40,7 +40,7 @@ mod local;
 mod norm;
 mod solver;
 
-pub use norm::SignalNorm;
+pub use norm::{SignalNorm, Workspace};
 pub use solver::Solver;
 
 /// Which signal norm D_s(x) to use.

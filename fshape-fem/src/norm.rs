@@ -12,8 +12,21 @@ use fshape_mesh::{CellKind, FShape, ZERO_VOLUME_REL};
 use num_dual::{Dual, Dual64, DualNum, DualSVec64};
 use rayon::prelude::*;
 
-use crate::local::{Local, MAX_LOCAL, local_grad, local_matrix, local_parts, volume};
+use crate::local::{Local, MAX_LOCAL, local_grad, local_matrix, local_matrix_f64, local_parts, volume};
 use crate::{FemError, Norm};
+
+/// Scratch memory for the `*_into` methods of [`SignalNorm`] (per-cell
+/// values, kept between calls), so that a loop over time steps allocates
+/// nothing once the first call has sized it. One per thread of work;
+/// `Workspace::default()` is empty.
+#[derive(Debug, Default)]
+pub struct Workspace {
+    per_cell: Vec<[f64; MAX_LOCAL]>,
+    volumes: Vec<f64>,
+    mass: Vec<f64>,
+}
+
+const NO_ENTRY: usize = usize::MAX;
 
 /// A signal norm D_s(x) for one connectivity: the sparsity pattern, the
 /// Cholesky analysis and the incidence tables are built once, here; every
@@ -31,6 +44,9 @@ pub struct SignalNorm {
     /// into it, in increasing order: `slots[slot_ptr[e]..slot_ptr[e + 1]]`.
     slot_ptr: Vec<usize>,
     slots: Vec<usize>,
+    /// The inverse map: slot_entry[s] = the entry slot s sums into, or
+    /// `NO_ENTRY` (the upper half of a local matrix, off-diagonal lumped).
+    slot_entry: Vec<usize>,
     /// For each vertex, its (cell·3 + corner) incidences in increasing order.
     inc_ptr: Vec<usize>,
     inc: Vec<usize>,
@@ -57,7 +73,14 @@ impl SignalNorm {
         let Pattern { col_ptr, row_idx, slot_ptr, slots } = lower_pattern(&cells, corners, &inc_ptr, &inc, lumped);
         let pattern = SymbolicSparseColMat::new_checked(n_vertices, n_vertices, col_ptr, None, row_idx);
         let symbolic = OnceLock::new();
+        let mut slot_entry = vec![NO_ENTRY; cells.len() / corners * MAX_LOCAL];
+        for e in 0..slot_ptr.len() - 1 {
+            for &s in &slots[slot_ptr[e]..slot_ptr[e + 1]] {
+                slot_entry[s] = e;
+            }
+        }
         Ok(SignalNorm {
+            slot_entry,
             norm,
             kind,
             dim,
@@ -134,27 +157,26 @@ impl SignalNorm {
     /// validator's rule, ZERO_VOLUME_REL × diag^d of x's bounding box.
     fn zero_volume_tolerance(&self, x: &[f64]) -> f64 {
         let n = self.dim;
-        let mut lo = vec![f64::INFINITY; n];
-        let mut hi = vec![f64::NEG_INFINITY; n];
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         for p in x.chunks_exact(n) {
             for k in 0..n {
                 lo[k] = lo[k].min(p[k]);
                 hi[k] = hi[k].max(p[k]);
             }
         }
-        let diag = lo.iter().zip(&hi).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt();
+        let diag = lo[..n].iter().zip(&hi[..n]).map(|(a, b)| (b - a) * (b - a)).sum::<f64>().sqrt();
         ZERO_VOLUME_REL * diag.powi(self.kind.dim() as i32)
     }
 
     /// Refuses zero-volume cells where `what` needs a positive volume.
-    fn check_volumes(&self, x: &[f64], what: &'static str) -> Result<(), FemError> {
+    fn check_volumes(&self, x: &[f64], what: &'static str, ws: &mut Workspace) -> Result<(), FemError> {
         let tol = self.zero_volume_tolerance(x);
-        let volumes = self.map_cells(|_, c| {
+        self.fill_cells(&mut ws.volumes, |_, c| {
             let mut buf = [0.0; MAX_LOCAL];
             volume(self.kind, self.dim, self.gather_coords(x, c, &mut buf))
         });
-        match volumes.iter().position(|v| !exceeds(*v, tol)) {
-            Some(cell) => Err(FemError::ZeroVolumeCell { cell, volume: volumes[cell], what }),
+        match ws.volumes.iter().position(|v| !exceeds(*v, tol)) {
+            Some(cell) => Err(FemError::ZeroVolumeCell { cell, volume: ws.volumes[cell], what }),
             None => Ok(()),
         }
     }
@@ -178,10 +200,24 @@ impl SignalNorm {
         }
     }
 
+    /// Like [`Self::map_cells`], into `out` (resized to the number of
+    /// cells; no allocation once it has the capacity).
+    fn fill_cells<T: Send + Copy + Default>(&self, out: &mut Vec<T>, f: impl Fn(usize, &[usize]) -> T + Sync + Send) {
+        let k = self.corners();
+        out.clear();
+        out.resize(self.cells.len() / k, T::default());
+        if self.parallel {
+            out.par_iter_mut().zip(self.cells.par_chunks_exact(k)).enumerate().for_each(|(t, (o, c))| *o = f(t, c));
+        } else {
+            out.iter_mut().zip(self.cells.chunks_exact(k)).enumerate().for_each(|(t, (o, c))| *o = f(t, c));
+        }
+    }
+
     /// out[v·w + k] = Σ over v's incidences (t, i) of per_cell[t][i·w + k],
     /// summed in incidence order (deterministic, serial = parallel).
-    fn gather_vertices(&self, per_cell: &[[f64; MAX_LOCAL]], w: usize) -> Vec<f64> {
+    fn gather_vertices(&self, per_cell: &[[f64; MAX_LOCAL]], w: usize, out: &mut [f64]) {
         let one = |v: usize, out: &mut [f64]| {
+            out.fill(0.0);
             for &ti in &self.inc[self.inc_ptr[v]..self.inc_ptr[v + 1]] {
                 let (t, i) = (ti / 3, ti % 3);
                 for k in 0..w {
@@ -189,24 +225,11 @@ impl SignalNorm {
                 }
             }
         };
-        let mut out = vec![0.0; self.n_vertices * w];
         if self.parallel {
             out.par_chunks_mut(w.max(1)).enumerate().for_each(|(v, o)| one(v, o));
         } else {
             out.chunks_mut(w.max(1)).enumerate().for_each(|(v, o)| one(v, o));
         }
-        out
-    }
-
-    /// The local matrices of every cell at x, and the cells' volumes (which
-    /// the local formula computes anyway).
-    fn locals_and_volumes(&self, x: &[f64], norm: Norm) -> (Vec<Local<f64>>, Vec<f64>) {
-        self.map_cells(|_, c| {
-            let mut buf = [0.0; MAX_LOCAL];
-            local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), norm)
-        })
-        .into_iter()
-        .unzip()
     }
 
     /// The values of the lower triangle of D_s(x), in the order of
@@ -221,17 +244,53 @@ impl SignalNorm {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn assemble(&self, x: &[f64]) -> Result<Vec<f64>, FemError> {
+        let mut out = Vec::new();
+        self.assemble_into(x, &mut Workspace::default(), &mut out)?;
+        Ok(out)
+    }
+
+    /// [`SignalNorm::assemble`] into `out` (resized to
+    /// [`SignalNorm::nnz_lower`]), with scratch memory from `ws`: no
+    /// allocation once `ws` and `out` have been used on this mesh.
+    pub fn assemble_into(&self, x: &[f64], ws: &mut Workspace, out: &mut Vec<f64>) -> Result<(), FemError> {
         self.check_x(x)?;
-        let (locals, volumes) = self.locals_and_volumes(x, self.norm);
-        // One pass over the cells: the stiffness of a degenerate cell is not
-        // finite, so refuse it before gathering.
-        if matches!(self.norm, Norm::H1 { .. }) {
-            let tol = self.zero_volume_tolerance(x);
-            if let Some(cell) = volumes.iter().position(|v| !exceeds(*v, tol)) {
-                return Err(FemError::ZeroVolumeCell { cell, volume: volumes[cell], what: "stiffness matrix" });
+        let k = self.corners();
+        let tol = self.zero_volume_tolerance(x);
+        let check = matches!(self.norm, Norm::H1 { .. });
+        out.clear();
+        out.resize(self.nnz_lower(), 0.0);
+        // One serial pass over the cells, scattering each local matrix into
+        // the entries it belongs to. Cells are visited in increasing order,
+        // so every entry is summed in the order of its slots, whatever the
+        // threads elsewhere. Measured against parallel local matrices
+        // followed by a parallel gather per entry: on two cores the single
+        // pass is faster (no intermediate per-cell buffer, no wake-up of
+        // the pool), which is what the per-step refactorisation needs.
+        // The vertex masses (Σ of incident cell volumes: the lumped mass up
+        // to a factor) come along for [`Self::check_mass`].
+        ws.mass.clear();
+        ws.mass.resize(self.n_vertices, 0.0);
+        for (t, c) in self.cells.chunks_exact(k).enumerate() {
+            let mut buf = [0.0; MAX_LOCAL];
+            let (m, vol) = local_matrix_f64(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
+            // The stiffness of a degenerate cell is not finite: refuse it.
+            if check && !exceeds(vol, tol) {
+                return Err(FemError::ZeroVolumeCell { cell: t, volume: vol, what: "stiffness matrix" });
+            }
+            for &v in c {
+                ws.mass[v] += vol;
+            }
+            let se = &self.slot_entry[t * MAX_LOCAL..(t + 1) * MAX_LOCAL];
+            for i in 0..k {
+                for j in 0..k {
+                    let e = se[3 * i + j];
+                    if e != NO_ENTRY {
+                        out[e] += m[i][j];
+                    }
+                }
             }
         }
-        Ok(self.gather_entries(&locals))
+        Ok(())
     }
 
     /// The P1 mass and P1 stiffness values separately, on this norm's
@@ -262,34 +321,33 @@ impl SignalNorm {
         Ok(both.into_iter().unzip())
     }
 
-    /// values[e] = Σ of the local slots of entry e, in slot order.
-    fn gather_entries(&self, locals: &[Local<f64>]) -> Vec<f64> {
-        let entry = |e: usize| {
-            self.slots[self.slot_ptr[e]..self.slot_ptr[e + 1]]
-                .iter()
-                .fold(0.0, |acc, &s| acc + locals[s / MAX_LOCAL][(s % MAX_LOCAL) / 3][s % 3])
-        };
-        let n = self.nnz_lower();
-        if self.parallel { (0..n).into_par_iter().map(entry).collect() } else { (0..n).map(entry).collect() }
-    }
-
     /// D_s(x) h, computed cell by cell.
     pub fn matvec(&self, x: &[f64], h: &[f64]) -> Result<Vec<f64>, FemError> {
+        let mut out = vec![0.0; self.n_vertices];
+        self.matvec_into(x, h, &mut Workspace::default(), &mut out)?;
+        Ok(out)
+    }
+
+    /// [`SignalNorm::matvec`] into `out` (P values), with scratch memory
+    /// from `ws`.
+    pub fn matvec_into(&self, x: &[f64], h: &[f64], ws: &mut Workspace, out: &mut [f64]) -> Result<(), FemError> {
         self.check_x(x)?;
         self.check_len("h", h, self.n_vertices)?;
+        self.check_len("output", out, self.n_vertices)?;
         if matches!(self.norm, Norm::H1 { .. }) {
-            self.check_volumes(x, "stiffness matrix")?;
+            self.check_volumes(x, "stiffness matrix", ws)?;
         }
-        let per_cell = self.map_cells(|_, c| {
+        self.fill_cells(&mut ws.per_cell, |_, c| {
             let mut buf = [0.0; MAX_LOCAL];
-            let (m, _) = local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
+            let (m, _) = local_matrix_f64(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
             let mut out = [0.0; MAX_LOCAL];
             for i in 0..c.len() {
                 out[i] = (0..c.len()).map(|j| m[i][j] * h[c[j]]).sum();
             }
             out
         });
-        Ok(self.gather_vertices(&per_cell, 1))
+        self.gather_vertices(&ws.per_cell, 1, out);
+        Ok(())
     }
 
     /// The quadratic form fᵀ D_s(x) f = ‖f‖²_{H^s(x)}.
@@ -297,11 +355,11 @@ impl SignalNorm {
         self.check_x(x)?;
         self.check_len("f", f, self.n_vertices)?;
         if matches!(self.norm, Norm::H1 { .. }) {
-            self.check_volumes(x, "stiffness matrix")?;
+            self.check_volumes(x, "stiffness matrix", &mut Workspace::default())?;
         }
         let per_cell = self.map_cells(|_, c| {
             let mut buf = [0.0; MAX_LOCAL];
-            let (m, _) = local_matrix(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
+            let (m, _) = local_matrix_f64(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
             bilinear(&m, c, f, f)
         });
         Ok(per_cell.iter().sum())
@@ -312,12 +370,28 @@ impl SignalNorm {
     /// ∂_x(hᵀ D_s(x) h), the signal term of the metamorphosis momentum
     /// equation.
     pub fn grad(&self, x: &[f64], a: &[f64], b: &[f64]) -> Result<Vec<f64>, FemError> {
+        let mut out = vec![0.0; x.len()];
+        self.grad_into(x, a, b, &mut Workspace::default(), &mut out)?;
+        Ok(out)
+    }
+
+    /// [`SignalNorm::grad`] into `out` (P·n values), with scratch memory
+    /// from `ws`.
+    pub fn grad_into(
+        &self,
+        x: &[f64],
+        a: &[f64],
+        b: &[f64],
+        ws: &mut Workspace,
+        out: &mut [f64],
+    ) -> Result<(), FemError> {
         self.check_x(x)?;
         self.check_len("a", a, self.n_vertices)?;
         self.check_len("b", b, self.n_vertices)?;
-        self.check_volumes(x, "x-derivative of the norm")?;
+        self.check_len("output", out, x.len())?;
+        self.check_volumes(x, "x-derivative of the norm", ws)?;
         let n = self.dim;
-        let per_cell = self.map_cells(|_, c| {
+        self.fill_cells(&mut ws.per_cell, |_, c| {
             let mut buf = [0.0; MAX_LOCAL];
             let coords = self.gather_coords(x, c, &mut buf);
             let (mut al, mut bl) = ([0.0; 3], [0.0; 3]);
@@ -329,20 +403,39 @@ impl SignalNorm {
             local_grad(self.kind, n, coords, &al, &bl, self.norm, &mut out);
             out
         });
-        Ok(self.gather_vertices(&per_cell, n))
+        self.gather_vertices(&ws.per_cell, n, out);
+        Ok(())
     }
 
     /// The directional derivative of [`SignalNorm::grad`] in the direction
     /// `dx`: (∂²_x (aᵀ D_s(x) b)) dx, a Hessian–vector product (forward mode
     /// over forward mode).
     pub fn hvp(&self, x: &[f64], a: &[f64], b: &[f64], dx: &[f64]) -> Result<Vec<f64>, FemError> {
+        let mut out = vec![0.0; x.len()];
+        self.hvp_into(x, a, b, dx, &mut Workspace::default(), &mut out)?;
+        Ok(out)
+    }
+
+    /// [`SignalNorm::hvp`] into `out` (P·n values), with scratch memory
+    /// from `ws`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn hvp_into(
+        &self,
+        x: &[f64],
+        a: &[f64],
+        b: &[f64],
+        dx: &[f64],
+        ws: &mut Workspace,
+        out: &mut [f64],
+    ) -> Result<(), FemError> {
         self.check_x(x)?;
         self.check_len("a", a, self.n_vertices)?;
         self.check_len("b", b, self.n_vertices)?;
         self.check_len("dx", dx, x.len())?;
-        self.check_volumes(x, "x-derivative of the norm")?;
+        self.check_len("output", out, x.len())?;
+        self.check_volumes(x, "x-derivative of the norm", ws)?;
         let n = self.dim;
-        let per_cell = self.map_cells(|_, c| {
+        self.fill_cells(&mut ws.per_cell, |_, c| {
             let m = c.len() * n;
             let zero = Dual::new(DualSVec64::<MAX_LOCAL>::from(0.0), DualSVec64::from(0.0));
             let mut xd = [zero; MAX_LOCAL];
@@ -360,17 +453,34 @@ impl SignalNorm {
             }
             out
         });
-        Ok(self.gather_vertices(&per_cell, n))
+        self.gather_vertices(&ws.per_cell, n, out);
+        Ok(())
     }
 
     /// (∂_x D_s · dx) h = d/dε D_s(x + ε dx) h at ε = 0.
     pub fn dmatvec(&self, x: &[f64], dx: &[f64], h: &[f64]) -> Result<Vec<f64>, FemError> {
+        let mut out = vec![0.0; self.n_vertices];
+        self.dmatvec_into(x, dx, h, &mut Workspace::default(), &mut out)?;
+        Ok(out)
+    }
+
+    /// [`SignalNorm::dmatvec`] into `out` (P values), with scratch memory
+    /// from `ws`.
+    pub fn dmatvec_into(
+        &self,
+        x: &[f64],
+        dx: &[f64],
+        h: &[f64],
+        ws: &mut Workspace,
+        out: &mut [f64],
+    ) -> Result<(), FemError> {
         self.check_x(x)?;
         self.check_len("dx", dx, x.len())?;
         self.check_len("h", h, self.n_vertices)?;
-        self.check_volumes(x, "x-derivative of the norm")?;
+        self.check_len("output", out, self.n_vertices)?;
+        self.check_volumes(x, "x-derivative of the norm", ws)?;
         let n = self.dim;
-        let per_cell = self.map_cells(|_, c| {
+        self.fill_cells(&mut ws.per_cell, |_, c| {
             let mut xd = [Dual64::from(0.0); MAX_LOCAL];
             for (i, &v) in c.iter().enumerate() {
                 for k in 0..n {
@@ -384,26 +494,15 @@ impl SignalNorm {
             }
             out
         });
-        Ok(self.gather_vertices(&per_cell, 1))
+        self.gather_vertices(&ws.per_cell, 1, out);
+        Ok(())
     }
 
     /// Refuses a singular matrix: a vertex whose row of D sums to zero
-    /// carries no mass. The row sums of the assembled lower-triangle
-    /// `values` are the lumped vertex masses (stiffness rows sum to zero),
-    /// so no cell is visited again.
-    pub(crate) fn check_mass(&self, values: &[f64]) -> Result<(), FemError> {
-        let (col_ptr, row_idx) = (self.pattern.col_ptr(), self.pattern.row_idx());
-        let mut mass = vec![0.0; self.n_vertices];
-        for c in 0..self.n_vertices {
-            for e in col_ptr[c]..col_ptr[c + 1] {
-                let r = row_idx[e];
-                mass[r] += values[e];
-                if r != c {
-                    mass[c] += values[e];
-                }
-            }
-        }
-        match mass.iter().position(|&m| !exceeds(m, 0.0)) {
+    /// carries no mass: the summed volume of its cells, recorded in `ws` by
+    /// the last [`Self::assemble_into`], is zero (or NaN).
+    pub(crate) fn check_mass(&self, ws: &Workspace) -> Result<(), FemError> {
+        match ws.mass.iter().position(|&m| !exceeds(m, 0.0)) {
             Some(vertex) => Err(FemError::Singular { vertex }),
             None => Ok(()),
         }

@@ -6,13 +6,14 @@ use faer::sparse::SparseColMatRef;
 use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky};
 use faer::{Conj, MatMut, Par, Side};
 
-use crate::norm::SignalNorm;
+use crate::norm::{SignalNorm, Workspace};
 use crate::{FemError, Norm};
 
 /// A workspace that factors D_s(x) for successive x (same connectivity) and
 /// solves with it. The symbolic analysis lives in the [`SignalNorm`]; the
-/// numeric factor and the scratch memory are allocated once, here, so
-/// `factor` and `solve` do not allocate per call beyond the assembly.
+/// numeric factor, the assembled values and the scratch memory are
+/// allocated by the first `factor`, so later `factor` and `solve_in_place`
+/// calls do not allocate.
 ///
 /// ```
 /// use fshape_fem::{Norm, SignalNorm};
@@ -29,6 +30,7 @@ pub struct Solver<'a> {
     norm: &'a SignalNorm,
     symbolic: Option<&'a SymbolicCholesky<usize>>,
     values: Vec<f64>,
+    ws: Workspace,
     l_values: Vec<f64>,
     mem: MemBuffer,
     factored: bool,
@@ -54,6 +56,7 @@ impl SignalNorm {
             norm: self,
             symbolic,
             values: Vec::new(),
+            ws: Workspace::default(),
             l_values: vec![0.0; l_len],
             mem: MemBuffer::new(req),
             factored: false,
@@ -66,8 +69,8 @@ impl Solver<'_> {
     /// ordering and elimination tree are reused).
     pub fn factor(&mut self, x: &[f64]) -> Result<(), FemError> {
         self.factored = false;
-        self.values = self.norm.assemble(x)?;
-        self.norm.check_mass(&self.values)?;
+        self.norm.assemble_into(x, &mut self.ws, &mut self.values)?;
+        self.norm.check_mass(&self.ws)?;
         if let Some(symbolic) = self.symbolic {
             let a = SparseColMatRef::new(self.norm.pattern.as_ref(), &self.values);
             symbolic

@@ -64,3 +64,39 @@ fn serial_and_parallel_results_are_bitwise_equal() {
         assert_eq!(par.dmatvec(x, &dx, &a).unwrap(), ser.dmatvec(x, &dx, &a).unwrap());
     }
 }
+
+/// The `_into` forms with one workspace reused across operations and
+/// positions give what fresh calls give, bit for bit (no stale scratch),
+/// and refuse an output of the wrong length by name.
+#[test]
+fn a_reused_workspace_gives_the_results_of_fresh_calls() {
+    use fshape_fem::{FemError, Workspace};
+    let s = fshape_mesh::test_support::perturbed_icosphere(3, 0.1, 11);
+    let mut rng = SplitMix64(9);
+    let a = random_direction(s.n_vertices(), &mut rng);
+    let b = random_direction(s.n_vertices(), &mut rng);
+    let dx = random_direction(s.points().len(), &mut rng);
+    let moved: Vec<f64> = s.points().iter().zip(&dx).map(|(p, d)| p + 0.05 * d).collect();
+    for norm in crate::NORMS {
+        let d = SignalNorm::try_new(&s, norm).unwrap();
+        let mut ws = Workspace::default();
+        let (mut vals, mut g, mut v) = (Vec::new(), vec![0.0; dx.len()], vec![0.0; a.len()]);
+        for x in [s.points(), &moved[..], s.points()] {
+            d.assemble_into(x, &mut ws, &mut vals).unwrap();
+            assert_eq!(vals, d.assemble(x).unwrap());
+            d.grad_into(x, &a, &b, &mut ws, &mut g).unwrap();
+            assert_eq!(g, d.grad(x, &a, &b).unwrap());
+            d.hvp_into(x, &a, &b, &dx, &mut ws, &mut g).unwrap();
+            assert_eq!(g, d.hvp(x, &a, &b, &dx).unwrap());
+            d.dmatvec_into(x, &dx, &a, &mut ws, &mut v).unwrap();
+            assert_eq!(v, d.dmatvec(x, &dx, &a).unwrap());
+            d.matvec_into(x, &a, &mut ws, &mut v).unwrap();
+            assert_eq!(v, d.matvec(x, &a).unwrap());
+        }
+        let mut short = vec![0.0; 2];
+        assert_eq!(
+            d.grad_into(s.points(), &a, &b, &mut ws, &mut short),
+            Err(FemError::Dimension { what: "output", expected: dx.len(), found: 2 })
+        );
+    }
+}
