@@ -375,35 +375,73 @@ impl<const D: usize, const BD: usize, const MODE: u8> Block<'_, D, BD, MODE> {
     }
 }
 
-/// Runs `MODE` for every target, for a sum of Gaussians (exact or
-/// truncated), points in 2-D or 3-D and weights of 1 to 3 components
-/// (`None` otherwise: the caller uses the general path). The output has
-/// `rows(MODE)` values per target.
-pub(crate) fn gaussian_sum<const MODE: u8>(
+/// Memory reused by the vectorised sums from call to call: the blocks, the
+/// sources and weights gathered into block order, and the rows of the
+/// targets in block order. After a first call on as many points, a call
+/// allocates nothing (the shooting calls these at every stage).
+#[derive(Default)]
+pub(crate) struct FastWorkspace {
+    pairs: BlockPairs,
+    ys: Vec<f64>,
+    bs: Vec<f64>,
+    dys: Vec<f64>,
+    dbs: Vec<f64>,
+    rows: Vec<f64>,
+}
+
+/// Computes the sum `MODE` for Gaussian sums in 2 or 3 dimensions with
+/// 1 to 3 weight components, writing each target's first `split` output
+/// values into `out1` and the rest into `out2` (`rows(MODE)` values per
+/// target in all). Returns `false` for other dimensions (the caller uses
+/// the general path). Inputs and output lengths were checked by the caller.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn gaussian_sum_into<const MODE: u8>(
     terms: &GaussTerms,
     taper: Option<Taper>,
     inp: Inputs<'_>,
     dim: usize,
     bdim: usize,
     parallel: bool,
-) -> Option<Vec<f64>> {
-    Some(match (dim, bdim) {
-        (2, 1) => run::<2, 1, MODE>(terms, taper, inp, parallel),
-        (2, 2) => run::<2, 2, MODE>(terms, taper, inp, parallel),
-        (2, 3) => run::<2, 3, MODE>(terms, taper, inp, parallel),
-        (3, 1) => run::<3, 1, MODE>(terms, taper, inp, parallel),
-        (3, 2) => run::<3, 2, MODE>(terms, taper, inp, parallel),
-        (3, 3) => run::<3, 3, MODE>(terms, taper, inp, parallel),
-        _ => return None,
-    })
+    ws: &mut FastWorkspace,
+    split: usize,
+    out1: &mut [f64],
+    out2: &mut [f64],
+) -> bool {
+    let outs = Outs { split, out1, out2 };
+    match (dim, bdim) {
+        (2, 1) => run::<2, 1, MODE>(terms, taper, inp, parallel, ws, outs),
+        (2, 2) => run::<2, 2, MODE>(terms, taper, inp, parallel, ws, outs),
+        (2, 3) => run::<2, 3, MODE>(terms, taper, inp, parallel, ws, outs),
+        (3, 1) => run::<3, 1, MODE>(terms, taper, inp, parallel, ws, outs),
+        (3, 2) => run::<3, 2, MODE>(terms, taper, inp, parallel, ws, outs),
+        (3, 3) => run::<3, 3, MODE>(terms, taper, inp, parallel, ws, outs),
+        _ => return false,
+    }
+    true
 }
 
-/// `v` (rows of `W`) gathered into the sorted source order, or empty.
-fn gather<const W: usize>(v: &[f64], order: &[usize]) -> Vec<[f64; W]> {
+/// The number of output values per target of `MODE` (`None` outside the
+/// dimensions of the vectorised path).
+pub(crate) fn out_rows<const MODE: u8>(dim: usize, bdim: usize) -> Option<usize> {
+    ((dim == 2 || dim == 3) && (1..=3).contains(&bdim)).then(|| rows(MODE, dim, bdim))
+}
+
+/// Where the rows go: values 0..split of each row to `out1`, the rest to
+/// `out2`.
+struct Outs<'o> {
+    split: usize,
+    out1: &'o mut [f64],
+    out2: &'o mut [f64],
+}
+
+/// `v` (rows of `W`) gathered into the sorted source order, into `out`
+/// (left empty if `v` is).
+fn gather<const W: usize>(v: &[f64], order: &[usize], out: &mut Vec<f64>) {
+    out.clear();
     if v.is_empty() {
-        return Vec::new();
+        return;
     }
-    order.iter().map(|&j| std::array::from_fn(|c| v[j * W + c])).collect()
+    out.extend(order.iter().flat_map(|&j| &v[j * W..(j + 1) * W]));
 }
 
 /// `v[range]`, or `v` itself if it is empty (an unused input).
@@ -416,19 +454,27 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
     taper: Option<Taper>,
     inp: Inputs<'_>,
     parallel: bool,
-) -> Vec<f64> {
+    ws: &mut FastWorkspace,
+    outs: Outs<'_>,
+) {
     let w_out = rows(MODE, D, BD);
     let uses_a = matches!(MODE, GRAD | GRAD_JVP | CONV_GRAD | BOTH_JVP);
     let uses_d = matches!(MODE, CONV_JVP | GRAD_JVP | BOTH_JVP);
     // Inputs were validated by the caller; the taper only decides which
     // runs BlockPairs hands out.
-    let pairs = BlockPairs::with_taper(inp.x, inp.y, D, taper);
+    let FastWorkspace { pairs, ys, bs, dys, dbs, rows } = ws;
+    pairs.rebuild(inp.x, inp.y, D, taper);
     let order = pairs.source_order();
-    let (ys, bs) = (gather::<D>(inp.y, order), gather::<BD>(inp.b, order));
-    let (dys, dbs) =
-        if uses_d { (gather::<D>(inp.dy, order), gather::<BD>(inp.db, order)) } else { (Vec::new(), Vec::new()) };
+    gather::<D>(inp.y, order, ys);
+    gather::<BD>(inp.b, order, bs);
+    gather::<D>(if uses_d { inp.dy } else { &[] }, order, dys);
+    gather::<BD>(if uses_d { inp.db } else { &[] }, order, dbs);
+    let all = Run { y: ys.as_chunks().0, dy: dys.as_chunks().0, b: bs.as_chunks().0, db: dbs.as_chunks().0 };
+    let n = inp.x.len() / D;
+    rows.clear();
+    rows.resize(n * w_out, 0.0);
     let arch = Arch::new();
-    let blocks = pairs.map_blocks(parallel, |targets, runs| {
+    pairs.for_each_block(parallel, rows, w_out, |targets, runs, out| {
         let lanes = targets.len();
         // Unused lanes repeat the last target.
         let lane = |l: usize| targets[l.min(lanes - 1)];
@@ -439,15 +485,20 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
             a: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.a, BD, uses_a, c, l))),
             da: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.da, BD, uses_a && uses_d, c, l))),
         };
-        let all = Run { y: &ys, dy: &dys, b: &bs, db: &dbs };
         let acc = arch.dispatch(Block::<D, BD, MODE> { terms, taper, t: &t, all, runs });
-        (0..lanes).map(|l| (targets[l], std::array::from_fn::<f64, 6, _>(|c| acc[c][l]))).collect::<Vec<_>>()
+        for (l, row) in out.chunks_exact_mut(w_out).enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v = acc[c][l];
+            }
+        }
     });
-    let mut out = vec![0.0; inp.x.len() / D * w_out];
-    for (i, row) in blocks.into_iter().flatten() {
-        out[i * w_out..(i + 1) * w_out].copy_from_slice(&row[..w_out]);
+    // Back to the caller's order and split.
+    let Outs { split, out1, out2 } = outs;
+    let w2 = w_out - split;
+    for (row, &i) in rows.chunks_exact(w_out).zip(pairs.target_order()) {
+        out1[i * split..(i + 1) * split].copy_from_slice(&row[..split]);
+        out2[i * w2..(i + 1) * w2].copy_from_slice(&row[split..]);
     }
-    out
 }
 
 #[cfg(test)]

@@ -41,7 +41,7 @@ mod sums;
 
 pub use blocks::{BlockPairs, SourceRun};
 pub use profile::{Kernel, Profile, TAPER_WIDTH, Taper};
-pub use sums::{KernelSums, Pair, SpatialIndex};
+pub use sums::{KernelSums, Pair, SpatialIndex, SumWorkspace};
 
 /// Lane-wise building blocks for vectorised kernels in other crates: a
 /// block of [`L`] targets is held as `[f64; L]` arrays, and plain loops over

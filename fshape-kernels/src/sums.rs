@@ -57,6 +57,13 @@ pub struct KernelSums<'a> {
     parallel: bool,
 }
 
+/// Memory the `*_into` sums reuse from call to call (blocks, sources in
+/// block order, per-target rows), so that a time-stepping loop allocates
+/// nothing once the first call has sized it. `SumWorkspace::default()` is
+/// empty; one per thread of work.
+#[derive(Default)]
+pub struct SumWorkspace(fast::FastWorkspace);
+
 /// A pair's geometry handed to per-pair closures.
 pub struct Pair<'p> {
     /// Source index j.
@@ -231,19 +238,39 @@ impl<'a> KernelSums<'a> {
     /// The vectorised path for sums of Gaussians (exact or truncated), or
     /// `None` for other kernels and dimensions.
     fn fast<const MODE: u8>(&self, inp: Inputs<'_>, bdim: usize) -> Result<Option<Vec<f64>>, KernelError> {
-        let Some(terms) = self.kernel.gaussian_terms() else { return Ok(None) };
-        self.check_targets(inp.x)?;
-        Ok(fast::gaussian_sum::<MODE>(&terms, self.kernel.taper(), inp, self.dim, bdim, self.parallel))
+        let Some(w) = fast::out_rows::<MODE>(self.dim, bdim) else { return Ok(None) };
+        let mut out = vec![0.0; inp.x.len() / self.dim * w];
+        let done = self.fast_into::<MODE>(&mut SumWorkspace::default(), inp, bdim, w, &mut out, &mut [])?;
+        Ok(done.then_some(out))
     }
 
-    /// Splits fused rows (first `w1` values, then `w2`, per target).
-    fn split(rows: &[f64], w1: usize, w2: usize) -> (Vec<f64>, Vec<f64>) {
-        let (mut a, mut b) = (Vec::with_capacity(rows.len() / (w1 + w2) * w1), Vec::new());
-        for r in rows.chunks_exact(w1 + w2) {
-            a.extend_from_slice(&r[..w1]);
-            b.extend_from_slice(&r[w1..]);
-        }
-        (a, b)
+    /// The vectorised path into `out1` (the first `split` values of each
+    /// target's row) and `out2` (the rest), with `ws`'s memory; `false` for
+    /// other kernels and dimensions (nothing written).
+    fn fast_into<const MODE: u8>(
+        &self,
+        ws: &mut SumWorkspace,
+        inp: Inputs<'_>,
+        bdim: usize,
+        split: usize,
+        out1: &mut [f64],
+        out2: &mut [f64],
+    ) -> Result<bool, KernelError> {
+        let Some(terms) = self.kernel.gaussian_terms() else { return Ok(false) };
+        self.check_targets(inp.x)?;
+        let taper = self.kernel.taper();
+        Ok(fast::gaussian_sum_into::<MODE>(
+            &terms,
+            taper,
+            inp,
+            self.dim,
+            bdim,
+            self.parallel,
+            &mut ws.0,
+            split,
+            out1,
+            out2,
+        ))
     }
 
     /// [`KernelSums::conv`] of b and [`KernelSums::grad_cross`] of (a, b)
@@ -256,12 +283,38 @@ impl<'a> KernelSums<'a> {
         b: &[f64],
         bdim: usize,
     ) -> Result<(Vec<f64>, Vec<f64>), KernelError> {
-        self.check_len("a", a, x.len() / self.dim * bdim)?;
+        let nx = x.len() / self.dim;
+        let (mut conv, mut grad) = (vec![0.0; nx * bdim], vec![0.0; nx * self.dim]);
+        self.conv_and_grad_into(&mut SumWorkspace::default(), x, a, b, bdim, &mut conv, &mut grad)?;
+        Ok((conv, grad))
+    }
+
+    /// [`KernelSums::conv_and_grad`] into `conv` (N × bdim) and `grad`
+    /// (N × dim), with `ws`'s memory: for sums of up to four Gaussians,
+    /// no allocation once `ws` has served as many points (the other
+    /// kernels compute into temporaries and copy).
+    #[allow(clippy::too_many_arguments)]
+    pub fn conv_and_grad_into(
+        &self,
+        ws: &mut SumWorkspace,
+        x: &[f64],
+        a: &[f64],
+        b: &[f64],
+        bdim: usize,
+        conv: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), KernelError> {
+        let nx = x.len() / self.dim;
+        self.check_len("a", a, nx * bdim)?;
         self.check_len("b", b, self.n_sources() * bdim)?;
-        if let Some(rows) = self.fast::<{ fast::CONV_GRAD }>(Inputs { x, y: self.y, a, b, ..self.no_inputs() }, bdim)? {
-            return Ok(Self::split(&rows, bdim, self.dim));
+        self.check_len("conv output", conv, nx * bdim)?;
+        self.check_len("gradient output", grad, nx * self.dim)?;
+        let inp = Inputs { x, y: self.y, a, b, ..self.no_inputs() };
+        if !self.fast_into::<{ fast::CONV_GRAD }>(ws, inp, bdim, bdim, conv, grad)? {
+            conv.copy_from_slice(&self.conv(x, b, bdim)?);
+            grad.copy_from_slice(&self.grad_cross(x, a, b, bdim)?);
         }
-        Ok((self.conv(x, b, bdim)?, self.grad_cross(x, a, b, bdim)?))
+        Ok(())
     }
 
     /// [`KernelSums::conv_jvp`] and [`KernelSums::grad_cross_jvp`] together
@@ -279,6 +332,31 @@ impl<'a> KernelSums<'a> {
         bdim: usize,
     ) -> Result<(Vec<f64>, Vec<f64>), KernelError> {
         let nx = x.len() / self.dim;
+        let (mut conv, mut grad) = (vec![0.0; nx * bdim], vec![0.0; nx * self.dim]);
+        let mut ws = SumWorkspace::default();
+        self.conv_and_grad_jvp_into(&mut ws, x, dx, dy, a, da, b, db, bdim, &mut conv, &mut grad)?;
+        Ok((conv, grad))
+    }
+
+    /// [`KernelSums::conv_and_grad_jvp`] into `conv` (N × bdim) and `grad`
+    /// (N × dim), with `ws`'s memory (allocation-free as
+    /// [`KernelSums::conv_and_grad_into`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn conv_and_grad_jvp_into(
+        &self,
+        ws: &mut SumWorkspace,
+        x: &[f64],
+        dx: &[f64],
+        dy: &[f64],
+        a: &[f64],
+        da: &[f64],
+        b: &[f64],
+        db: &[f64],
+        bdim: usize,
+        conv: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), KernelError> {
+        let nx = x.len() / self.dim;
         for (what, v, len) in [
             ("dx", dx, x.len()),
             ("dy", dy, self.y.len()),
@@ -286,13 +364,17 @@ impl<'a> KernelSums<'a> {
             ("da", da, nx * bdim),
             ("b", b, self.n_sources() * bdim),
             ("db", db, self.n_sources() * bdim),
+            ("conv output", conv, nx * bdim),
+            ("gradient output", grad, nx * self.dim),
         ] {
             self.check_len(what, v, len)?;
         }
-        if let Some(rows) = self.fast::<{ fast::BOTH_JVP }>(Inputs { x, dx, y: self.y, dy, a, da, b, db }, bdim)? {
-            return Ok(Self::split(&rows, bdim, self.dim));
+        let inp = Inputs { x, dx, y: self.y, dy, a, da, b, db };
+        if !self.fast_into::<{ fast::BOTH_JVP }>(ws, inp, bdim, bdim, conv, grad)? {
+            conv.copy_from_slice(&self.conv_jvp(x, dx, dy, b, db, bdim)?);
+            grad.copy_from_slice(&self.grad_cross_jvp(x, dx, dy, a, da, b, db, bdim)?);
         }
-        Ok((self.conv_jvp(x, dx, dy, b, db, bdim)?, self.grad_cross_jvp(x, dx, dy, a, da, b, db, bdim)?))
+        Ok(())
     }
 
     fn check_targets(&self, x: &[f64]) -> Result<(), KernelError> {

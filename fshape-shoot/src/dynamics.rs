@@ -14,8 +14,8 @@
 //! a_pf) = (a_p, a_pf, −a_x, −a_f), so dFᵀv = 𝕁 dF(𝕁v): one directional
 //! derivative per transposed product.
 
-use fshape_fem::{SignalNorm, Solver};
-use fshape_kernels::{Kernel, KernelSums};
+use fshape_fem::{SignalNorm, Solver, Workspace};
+use fshape_kernels::{Kernel, KernelSums, SumWorkspace};
 
 use crate::ShootError;
 
@@ -46,9 +46,8 @@ impl Layout {
     pub(crate) fn pf(&self) -> std::ops::Range<usize> {
         2 * self.pn + self.p..self.len()
     }
-    /// 𝕁 v.
-    pub(crate) fn symplectic(&self, v: &[f64]) -> Vec<f64> {
-        let mut out = vec![0.0; self.len()];
+    /// out = 𝕁 v.
+    pub(crate) fn symplectic(&self, v: &[f64], out: &mut [f64]) {
         out[self.x()].copy_from_slice(&v[self.mom()]);
         out[self.f()].copy_from_slice(&v[self.pf()]);
         for (o, a) in out[self.mom()].iter_mut().zip(&v[self.x()]) {
@@ -57,7 +56,6 @@ impl Layout {
         for (o, a) in out[self.pf()].iter_mut().zip(&v[self.f()]) {
             *o = -a;
         }
-        out
     }
 }
 
@@ -70,6 +68,8 @@ pub(crate) struct Dynamics<'a> {
     pub(crate) gamma_v: f64,
     pub(crate) gamma_f: f64,
     pub(crate) layout: Layout,
+    /// Kernel sums in parallel (the FEM norm carries its own setting).
+    pub(crate) parallel: bool,
 }
 
 /// Time spent in each part of the computation (seconds).
@@ -90,103 +90,170 @@ fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
     out
 }
 
+/// The memory one shooting (or adjoint) pass reuses at every evaluation
+/// of the field: the kernel and FEM workspaces, the factorisation, and the
+/// intermediate vectors. Sized on first use; after that the time-stepping
+/// loops allocate nothing (tested with a counting allocator).
+pub(crate) struct Scratch<'s> {
+    sums: SumWorkspace,
+    fem: Workspace,
+    pub(crate) solver: Option<Solver<'s>>,
+    /// P·n: K p and ∂_x(pᵀKp) (or their JVPs), the FEM x-derivatives.
+    kp: Vec<f64>,
+    gk: Vec<f64>,
+    gd: Vec<f64>,
+    hv: Vec<f64>,
+    /// P: (∂D·δx)h, then δh.
+    dd: Vec<f64>,
+    /// The state length: 𝕁v and dF(𝕁v).
+    jv: Vec<f64>,
+    jw: Vec<f64>,
+}
+
+impl<'s> Scratch<'s> {
+    pub(crate) fn new(layout: Layout, fem: Option<&'s SignalNorm>) -> Result<Self, ShootError> {
+        let (pn, p, len) = (layout.pn, layout.p, layout.len());
+        Ok(Scratch {
+            sums: SumWorkspace::default(),
+            fem: Workspace::default(),
+            solver: match fem {
+                Some(fem) => Some(fem.solver()?),
+                None => None,
+            },
+            kp: vec![0.0; pn],
+            gk: vec![0.0; pn],
+            gd: vec![0.0; pn],
+            hv: vec![0.0; pn],
+            dd: vec![0.0; p],
+            jv: vec![0.0; len],
+            jw: vec![0.0; len],
+        })
+    }
+
+    /// Refactors D at `x` and solves D h = pf into `h`.
+    pub(crate) fn solve_at(&mut self, x: &[f64], pf: &[f64], h: &mut [f64]) -> Result<(), ShootError> {
+        if let Some(solver) = self.solver.as_mut() {
+            solver.factor(x)?;
+            h.copy_from_slice(pf);
+            solver.solve_in_place(h)?;
+        }
+        Ok(())
+    }
+}
+
 impl Dynamics<'_> {
-    /// F(z), and h = D⁻¹p^f (empty without signal dynamics). `solver` is
-    /// refactored at z's x.
+    /// out = F(z), and h = D⁻¹p^f (untouched without signal dynamics). The
+    /// solver in `s` is refactored at z's x.
     pub(crate) fn field(
         &self,
         z: &[f64],
-        solver: &mut Option<Solver<'_>>,
+        h: &mut [f64],
+        out: &mut [f64],
+        s: &mut Scratch<'_>,
         t: &mut Timings,
-    ) -> Result<(Vec<f64>, Vec<f64>), ShootError> {
+    ) -> Result<(), ShootError> {
         let l = self.layout;
         let (x, p) = (&z[l.x()], &z[l.mom()]);
-        let mut out = vec![0.0; l.len()];
-        let (kp, gk) = timed(&mut t.kernels, || -> Result<_, ShootError> {
-            let sums = KernelSums::try_new(self.kernel, x, l.dim)?;
-            Ok(sums.conv_and_grad(x, p, p, l.dim)?)
+        timed(&mut t.kernels, || -> Result<_, ShootError> {
+            let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
+            Ok(sums.conv_and_grad_into(&mut s.sums, x, p, p, l.dim, &mut s.kp, &mut s.gk)?)
         })?;
-        for (o, v) in out[l.x()].iter_mut().zip(&kp) {
+        for (o, v) in out[l.x()].iter_mut().zip(&s.kp) {
             *o = v / self.gamma_v;
         }
         // ∂_x(pᵀKp) = 2·grad_cross (the self term counts each pair twice).
-        for (o, v) in out[l.mom()].iter_mut().zip(&gk) {
+        for (o, v) in out[l.mom()].iter_mut().zip(&s.gk) {
             *o = -v / self.gamma_v;
         }
-        let mut h = Vec::new();
-        if let (Some(fem), Some(solver)) = (self.fem, solver.as_mut()) {
-            timed(&mut t.fem, || -> Result<(), ShootError> {
-                solver.factor(x)?;
-                h = solver.solve(&z[l.pf()])?;
-                let gd = fem.grad(x, &h, &h)?;
-                for (o, v) in out[l.mom()].iter_mut().zip(&gd) {
-                    *o += v / (2.0 * self.gamma_f);
+        out[l.pf()].fill(0.0);
+        match self.fem {
+            Some(fem) if s.solver.is_some() => {
+                timed(&mut t.fem, || -> Result<(), ShootError> {
+                    s.solve_at(x, &z[l.pf()], h)?;
+                    fem.grad_into(x, h, h, &mut s.fem, &mut s.gd)?;
+                    for (o, v) in out[l.mom()].iter_mut().zip(&s.gd) {
+                        *o += v / (2.0 * self.gamma_f);
+                    }
+                    Ok(())
+                })?;
+                for (o, v) in out[l.f()].iter_mut().zip(h.iter()) {
+                    *o = v / self.gamma_f;
                 }
-                Ok(())
-            })?;
-            for (o, v) in out[l.f()].iter_mut().zip(&h) {
-                *o = v / self.gamma_f;
             }
+            _ => out[l.f()].fill(0.0),
         }
-        Ok((out, h))
+        Ok(())
     }
 
-    /// dF(z)·w, exact. `solver` must be factored at z's x and `h` be
-    /// D⁻¹p^f there (both as left by [`Dynamics::field`]).
+    /// out = dF(z)·w, exact. The solver in `s` must be factored at z's x
+    /// and `h` be D⁻¹p^f there (both as left by [`Dynamics::field`] or
+    /// [`Scratch::solve_at`]).
     pub(crate) fn jvp(
         &self,
         z: &[f64],
         h: &[f64],
         w: &[f64],
-        solver: &mut Option<Solver<'_>>,
+        out: &mut [f64],
+        s: &mut Scratch<'_>,
         t: &mut Timings,
-    ) -> Result<Vec<f64>, ShootError> {
+    ) -> Result<(), ShootError> {
         let l = self.layout;
         let (x, p) = (&z[l.x()], &z[l.mom()]);
         let (dx, dp) = (&w[l.x()], &w[l.mom()]);
-        let mut out = vec![0.0; l.len()];
-        let (dkp, dgk) = timed(&mut t.kernels, || -> Result<_, ShootError> {
-            let sums = KernelSums::try_new(self.kernel, x, l.dim)?;
-            Ok(sums.conv_and_grad_jvp(x, dx, dx, p, dp, p, dp, l.dim)?)
+        timed(&mut t.kernels, || -> Result<_, ShootError> {
+            let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
+            Ok(sums.conv_and_grad_jvp_into(&mut s.sums, x, dx, dx, p, dp, p, dp, l.dim, &mut s.kp, &mut s.gk)?)
         })?;
-        for (o, v) in out[l.x()].iter_mut().zip(&dkp) {
+        for (o, v) in out[l.x()].iter_mut().zip(&s.kp) {
             *o = v / self.gamma_v;
         }
-        for (o, v) in out[l.mom()].iter_mut().zip(&dgk) {
+        for (o, v) in out[l.mom()].iter_mut().zip(&s.gk) {
             *o = -v / self.gamma_v;
         }
-        if let (Some(fem), Some(solver)) = (self.fem, solver.as_mut()) {
-            let dh = timed(&mut t.fem, || -> Result<Vec<f64>, ShootError> {
-                // δh = D⁻¹(δp^f − (∂D·δx) h).
-                let dd = fem.dmatvec(x, dx, h)?;
-                let rhs: Vec<f64> = w[l.pf()].iter().zip(&dd).map(|(a, b)| a - b).collect();
-                let dh = solver.solve(&rhs)?;
-                // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
-                let hv = fem.hvp(x, h, h, dx)?;
-                let g = fem.grad(x, &dh, h)?;
-                for ((o, a), b) in out[l.mom()].iter_mut().zip(&hv).zip(&g) {
-                    *o += (a + 2.0 * b) / (2.0 * self.gamma_f);
+        out[l.pf()].fill(0.0);
+        match (self.fem, s.solver.as_mut()) {
+            (Some(fem), Some(solver)) => {
+                timed(&mut t.fem, || -> Result<(), ShootError> {
+                    // δh = D⁻¹(δp^f − (∂D·δx) h).
+                    fem.dmatvec_into(x, dx, h, &mut s.fem, &mut s.dd)?;
+                    for (d, a) in s.dd.iter_mut().zip(&w[l.pf()]) {
+                        *d = a - *d;
+                    }
+                    solver.solve_in_place(&mut s.dd)?;
+                    // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
+                    fem.hvp_into(x, h, h, dx, &mut s.fem, &mut s.hv)?;
+                    fem.grad_into(x, &s.dd, h, &mut s.fem, &mut s.gd)?;
+                    for ((o, a), b) in out[l.mom()].iter_mut().zip(&s.hv).zip(&s.gd) {
+                        *o += (a + 2.0 * b) / (2.0 * self.gamma_f);
+                    }
+                    Ok(())
+                })?;
+                for (o, v) in out[l.f()].iter_mut().zip(&s.dd) {
+                    *o = v / self.gamma_f;
                 }
-                Ok(dh)
-            })?;
-            for (o, v) in out[l.f()].iter_mut().zip(&dh) {
-                *o = v / self.gamma_f;
             }
+            _ => out[l.f()].fill(0.0),
         }
-        Ok(out)
+        Ok(())
     }
 
-    /// dF(z)ᵀ·v = 𝕁 dF(z)(𝕁 v).
+    /// out = dF(z)ᵀ·v = 𝕁 dF(z)(𝕁 v).
     pub(crate) fn vjp(
         &self,
         z: &[f64],
         h: &[f64],
         v: &[f64],
-        solver: &mut Option<Solver<'_>>,
+        out: &mut [f64],
+        s: &mut Scratch<'_>,
         t: &mut Timings,
-    ) -> Result<Vec<f64>, ShootError> {
+    ) -> Result<(), ShootError> {
         let l = self.layout;
-        let jv = self.jvp(z, h, &l.symplectic(v), solver, t)?;
-        Ok(l.symplectic(&jv))
+        // Moved out of `s` for the call (no allocation) and back.
+        let (mut jv, mut jw) = (std::mem::take(&mut s.jv), std::mem::take(&mut s.jw));
+        l.symplectic(v, &mut jv);
+        let r = self.jvp(z, h, &jv, &mut jw, s, t);
+        l.symplectic(&jw, out);
+        (s.jv, s.jw) = (jv, jw);
+        r
     }
 }

@@ -5,7 +5,7 @@ use fshape_fem::SignalNorm;
 use fshape_mesh::FShape;
 use fshape_varifold::{Attachment, VarifoldKernel};
 
-use crate::dynamics::{Dynamics, Layout, Timings};
+use crate::dynamics::{Dynamics, Layout, Scratch, Timings};
 use crate::{Integrator, Model, ModelKind, ShootError};
 
 impl Integrator {
@@ -26,12 +26,14 @@ impl Integrator {
 #[derive(Clone, Debug)]
 pub struct Trajectory {
     layout: Layout,
-    /// z at t_0..t_N.
-    nodes: Vec<Vec<f64>>,
+    /// Stages per step.
+    n_stages: usize,
+    /// z at t_0..t_N, one state after another (allocated once).
+    nodes: Vec<f64>,
     /// F(z) at the nodes (for interpolation).
-    slopes: Vec<Vec<f64>>,
-    /// Stage states of each step.
-    stages: Vec<Vec<Vec<f64>>>,
+    slopes: Vec<f64>,
+    /// Stage states: step k's stage i at (k·n_stages + i)·len.
+    stages: Vec<f64>,
     /// H(z_k) at every node.
     pub hamiltonian: Vec<f64>,
     /// Where the forward time went.
@@ -41,27 +43,46 @@ pub struct Trajectory {
 impl Trajectory {
     /// Number of time steps N.
     pub fn steps(&self) -> usize {
-        self.nodes.len() - 1
+        self.nodes.len() / self.layout.len() - 1
+    }
+
+    /// z at step k.
+    fn node(&self, k: usize) -> &[f64] {
+        let len = self.layout.len();
+        &self.nodes[k * len..(k + 1) * len]
+    }
+
+    /// F(z) at step k.
+    fn slope(&self, k: usize) -> &[f64] {
+        let len = self.layout.len();
+        &self.slopes[k * len..(k + 1) * len]
+    }
+
+    /// Stage i of step k.
+    fn stage(&self, k: usize, i: usize) -> &[f64] {
+        let len = self.layout.len();
+        let at = (k * self.n_stages + i) * len;
+        &self.stages[at..at + len]
     }
 
     /// Vertex positions at step k (flat).
     pub fn points(&self, k: usize) -> &[f64] {
-        &self.nodes[k][self.layout.x()]
+        &self.node(k)[self.layout.x()]
     }
 
     /// Signal at step k.
     pub fn signal(&self, k: usize) -> &[f64] {
-        &self.nodes[k][self.layout.f()]
+        &self.node(k)[self.layout.f()]
     }
 
     /// Momenta p at step k.
     pub fn momenta(&self, k: usize) -> &[f64] {
-        &self.nodes[k][self.layout.mom()]
+        &self.node(k)[self.layout.mom()]
     }
 
     /// Signal momentum p^f at step k.
     pub fn signal_momentum(&self, k: usize) -> &[f64] {
-        &self.nodes[k][self.layout.pf()]
+        &self.node(k)[self.layout.pf()]
     }
 
     /// (x, f) at any t ∈ [0, 1]: cubic Hermite interpolation between the
@@ -78,7 +99,7 @@ impl Trajectory {
             -2.0 * u.powi(3) + 3.0 * u * u,
             u.powi(3) - u * u,
         );
-        let (z0, z1, d0, d1) = (&self.nodes[k], &self.nodes[k + 1], &self.slopes[k], &self.slopes[k + 1]);
+        let (z0, z1, d0, d1) = (self.node(k), self.node(k + 1), self.slope(k), self.slope(k + 1));
         let interp = |r: std::ops::Range<usize>| -> Vec<f64> {
             r.map(|i| h00 * z0[i] + h10 * dt * d0[i] + h01 * z1[i] + h11 * dt * d1[i]).collect()
         };
@@ -107,6 +128,7 @@ pub struct Problem {
     fem: Option<SignalNorm>,
     attachment: Option<Attachment>,
     layout: Layout,
+    parallel: bool,
 }
 
 impl Problem {
@@ -125,13 +147,29 @@ impl Problem {
         if template.signal().is_none() {
             template = template.with_signal(Some(vec![0.0; n]))?;
         }
-        Ok(Problem { template, model, fem, attachment: None, layout: Layout { pn: n * dim, p: n, dim } })
+        Ok(Problem {
+            template,
+            model,
+            fem,
+            attachment: None,
+            layout: Layout { pn: n * dim, p: n, dim },
+            parallel: true,
+        })
     }
 
     /// With a target and data attachment kernel (⟨Y,Y⟩ computed here, once).
     pub fn with_target(mut self, target: &FShape, kernel: VarifoldKernel) -> Result<Self, ShootError> {
         self.attachment = Some(Attachment::new(target, kernel)?);
         Ok(self)
+    }
+
+    /// Parallel (default) or serial kernel sums and FEM operations in the
+    /// shooting and its adjoint (serial for running many problems at once,
+    /// one per thread). The results are identical bit for bit.
+    pub fn with_parallel(mut self, parallel: bool) -> Self {
+        self.parallel = parallel;
+        self.fem = self.fem.map(|f| f.with_parallel(parallel));
+        self
     }
 
     /// The model.
@@ -152,6 +190,7 @@ impl Problem {
             gamma_v: self.model.gamma_v,
             gamma_f: self.model.gamma_f,
             layout: self.layout,
+            parallel: self.parallel,
         }
     }
 
@@ -195,55 +234,61 @@ impl Problem {
         self.shoot_from(self.initial(p0, pf))
     }
 
-    fn shoot_from(&self, mut z: Vec<f64>) -> Result<Trajectory, ShootError> {
+    /// The forward pass. Every buffer is allocated here, before the first
+    /// step: the loop over steps allocates nothing.
+    fn shoot_from(&self, z0: Vec<f64>) -> Result<Trajectory, ShootError> {
         let dynamics = self.dynamics();
-        let mut solver = match dynamics.fem {
-            Some(fem) => Some(fem.solver()?),
-            None => None,
-        };
+        let mut scratch = Scratch::new(self.layout, dynamics.fem)?;
         let (a, b) = self.model.integrator.tableau();
         let n = self.model.steps;
         let dt = 1.0 / n as f64;
         let mut t = Timings::default();
         let l = self.layout;
-        let (mut nodes, mut slopes, mut stages, mut ham) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (len, s) = (l.len(), b.len());
+        let mut nodes = vec![0.0; (n + 1) * len];
+        let mut slopes = vec![0.0; (n + 1) * len];
+        let mut stages = vec![0.0; n * s * len];
+        let mut ham = Vec::with_capacity(n + 1);
+        // Stage slopes k_i, and h = D⁻¹p^f (not kept).
+        let mut ks = vec![0.0; s * len];
+        let mut h = vec![0.0; l.p];
+        nodes[..len].copy_from_slice(&z0);
         for step in 0..=n {
-            let (k0, _) = dynamics.field(&z, &mut solver, &mut t)?;
+            let (done, rest) = nodes.split_at_mut((step + 1) * len);
+            let z = &done[step * len..];
+            let k0 = &mut slopes[step * len..(step + 1) * len];
+            dynamics.field(z, &mut h, k0, &mut scratch, &mut t)?;
             let energy = 0.5 * (dot(&z[l.mom()], &k0[l.x()]) + dot(&z[l.pf()], &k0[l.f()]));
             if !energy.is_finite() || z.iter().any(|v| !v.is_finite()) {
                 return Err(ShootError::Diverged { step });
             }
             ham.push(energy);
             if step == n {
-                nodes.push(z);
-                slopes.push(k0);
                 break;
             }
-            let mut ks: Vec<Vec<f64>> = vec![k0.clone()];
-            let mut zs: Vec<Vec<f64>> = vec![z.clone()];
-            for row in a.iter().skip(1) {
-                let mut zi = z.clone();
-                for (aij, kj) in row.iter().zip(&ks) {
+            ks[..len].copy_from_slice(k0);
+            let zs = &mut stages[step * s * len..(step + 1) * s * len];
+            zs[..len].copy_from_slice(z);
+            for i in 1..s {
+                let (prev, cur) = ks.split_at_mut(i * len);
+                let zi = &mut zs[i * len..(i + 1) * len];
+                zi.copy_from_slice(z);
+                for (j, aij) in a[i].iter().enumerate() {
                     if *aij != 0.0 {
-                        axpy(&mut zi, dt * aij, kj);
+                        axpy(zi, dt * aij, &prev[j * len..(j + 1) * len]);
                     }
                 }
-                let (ki, _) = dynamics.field(&zi, &mut solver, &mut t)?;
-                ks.push(ki);
-                zs.push(zi);
+                dynamics.field(zi, &mut h, &mut cur[..len], &mut scratch, &mut t)?;
             }
-            let mut next = z.clone();
-            for (bi, ki) in b.iter().zip(&ks) {
+            let next = &mut rest[..len];
+            next.copy_from_slice(z);
+            for (i, bi) in b.iter().enumerate() {
                 if *bi != 0.0 {
-                    axpy(&mut next, dt * bi, ki);
+                    axpy(next, dt * bi, &ks[i * len..(i + 1) * len]);
                 }
             }
-            nodes.push(z);
-            slopes.push(k0);
-            stages.push(zs);
-            z = next;
         }
-        Ok(Trajectory { layout: l, nodes, slopes, stages, hamiltonian: ham, timings: t })
+        Ok(Trajectory { layout: l, n_stages: s, nodes, slopes, stages, hamiltonian: ham, timings: t })
     }
 
     fn attachment(&self) -> Result<&Attachment, ShootError> {
@@ -286,7 +331,7 @@ impl Problem {
         };
         let h0 = traj.hamiltonian[0];
         let metamorphosis_signal = if self.model.kind == ModelKind::Metamorphosis {
-            0.5 * dot(&traj.nodes[0][self.layout.pf()], &traj.slopes[0][self.layout.f()])
+            0.5 * dot(&traj.node(0)[self.layout.pf()], &traj.slope(0)[self.layout.f()])
         } else {
             0.0
         };
@@ -328,47 +373,45 @@ impl Problem {
             *o = gw * v;
         }
         let dynamics = self.dynamics();
-        let mut solver = match dynamics.fem {
-            Some(fem) => Some(fem.solver()?),
-            None => None,
-        };
+        let mut scratch = Scratch::new(l, dynamics.fem)?;
         let (a, b) = self.model.integrator.tableau();
         let dt = 1.0 / last as f64;
+        let (len, s) = (l.len(), b.len());
+        // ∂J/∂Z_i for the stages of one step, ∂J/∂k_i, and h at a stage.
+        let mut gz = vec![0.0; s * len];
+        let mut gk = vec![0.0; len];
+        let mut h = vec![0.0; l.p];
         for step in (0..last).rev() {
-            let zs = &traj.stages[step];
-            let s = zs.len();
-            let mut gz: Vec<Vec<f64>> = vec![Vec::new(); s];
             for i in (0..s).rev() {
                 // ∂J/∂k_i = dt b_i λ + Σ_{j>i} dt a_ji ∂J/∂Z_j.
-                let mut gk: Vec<f64> = lam.iter().map(|v| dt * b[i] * v).collect();
+                for (g, v) in gk.iter_mut().zip(&lam) {
+                    *g = dt * b[i] * v;
+                }
+                let (mine, later) = gz.split_at_mut((i + 1) * len);
                 for j in i + 1..s {
                     let aji = a[j].get(i).copied().unwrap_or(0.0);
                     if aji != 0.0 {
-                        axpy(&mut gk, dt * aji, &gz[j]);
+                        axpy(&mut gk, dt * aji, &later[(j - i - 1) * len..(j - i) * len]);
                     }
                 }
+                let gzi = &mut mine[i * len..];
                 if gk.iter().all(|v| *v == 0.0) {
-                    gz[i] = vec![0.0; l.len()];
+                    gzi.fill(0.0);
                     continue;
                 }
                 // Refactor at Z_i and recover h there.
-                let h = match (&mut solver, dynamics.fem) {
-                    (Some(sv), Some(_)) => timed(&mut t.fem, || -> Result<Vec<f64>, ShootError> {
-                        sv.factor(&zs[i][l.x()])?;
-                        Ok(sv.solve(&zs[i][l.pf()])?)
-                    })?,
-                    _ => Vec::new(),
-                };
-                gz[i] = dynamics.vjp(&zs[i], &h, &gk, &mut solver, &mut t)?;
+                let zi = traj.stage(step, i);
+                timed(&mut t.fem, || scratch.solve_at(&zi[l.x()], &zi[l.pf()], &mut h))?;
+                dynamics.vjp(zi, &h, &gk, gzi, &mut scratch, &mut t)?;
             }
-            for g in &gz {
+            for g in gz.chunks_exact(len) {
                 axpy(&mut lam, 1.0, g);
             }
         }
         let backward = back.elapsed().as_secs_f64();
         // ∂J/∂p_0 = ∂H_0/∂p + λ_p; ∂J/∂p^f = ∂H_0/∂p^f + λ_pf (metamorphosis),
         // or the signal energy's gradient + λ_f (tangential: f_0 = f + ζ).
-        let k0 = &traj.slopes[0];
+        let k0 = traj.slope(0);
         let grad_p: Vec<f64> = lam[l.mom()].iter().zip(&k0[l.x()]).map(|(a, b)| a + b).collect();
         let grad_pf: Vec<f64> = match self.model.kind {
             ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
@@ -398,14 +441,14 @@ impl Problem {
         };
         let mut y = y0.to_vec();
         let mut out = vec![y.clone()];
-        for zs in &traj.stages {
+        for step in 0..traj.steps() {
             let mut ks: Vec<Vec<f64>> = Vec::new();
-            for (i, zi) in zs.iter().enumerate() {
+            for (i, ai) in a.iter().enumerate() {
                 let mut yi = y.clone();
-                for (aij, kj) in a[i].iter().zip(&ks) {
+                for (aij, kj) in ai.iter().zip(&ks) {
                     axpy(&mut yi, dt * aij, kj);
                 }
-                ks.push(field(&yi, zi)?);
+                ks.push(field(&yi, traj.stage(step, i))?);
             }
             for (bi, ki) in b.iter().zip(&ks) {
                 axpy(&mut y, dt * bi, ki);
