@@ -28,6 +28,7 @@
 
 mod config;
 mod dynamics;
+pub mod optimize;
 pub mod paper;
 mod shoot;
 

@@ -6,6 +6,8 @@ mod config;
 mod dynamics;
 #[path = "shoot/gradient.rs"]
 mod gradient;
+#[path = "shoot/optimize.rs"]
+mod optimize;
 
 use fshape_mesh::FShape;
 use fshape_mesh::test_support::{perturbed_icosphere, random_curve, random_vector_field};
