@@ -23,6 +23,19 @@
 //! kernel_signal = "gaussian:0.5"    # omit for a purely geometric term
 //! kernel_grass = "binet"            # (default binet)
 //! tolerance = 1e-6                  # truncation of k_p (default: exact)
+//!
+//! [optimizer]                       # matching only; every key optional
+//! method = "lbfgs"                  # lbfgs | gradient-descent          (default lbfgs)
+//! memory = 10                       # L-BFGS correction pairs           (default 10)
+//! increase = 1.2                    # gradient descent: step growth     (default 1.2)
+//! max_iterations = 200              # per schedule stage                (default 200)
+//! gradient_tolerance = 1e-3         # stop at |∇J| ≤ tol·|∇J at start|  (default 1e-3)
+//! decrease_tolerance = 1e-6         # stop when J fell by ≤ tol·|J|...  (default 1e-6)
+//! decrease_window = 10              # ...over this many iterations      (default 10)
+//! signal_metric = "l2"              # l2 (L²(x_0), the paper's) | euclidean (default l2)
+//!
+//! [schedule]                        # coarse to fine (default: one stage, [attachment])
+//! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
 //! ```
 //!
 //! Unknown keys are refused by name; every value is checked before any work.
@@ -32,6 +45,8 @@ use fshape_kernels::{Kernel, Profile};
 use fshape_varifold::VarifoldKernel;
 use serde::Deserialize;
 
+use crate::matching::SignalMetric;
+use crate::optimize::{Method, Settings};
 use crate::{Integrator, Model, ModelKind, ShootError};
 
 /// The whole file.
@@ -48,6 +63,57 @@ pub struct Config {
     pub integrator: IntegratorSection,
     /// `[attachment]` (needed for matching, not for shooting).
     pub attachment: Option<AttachmentSection>,
+    /// `[optimizer]` (matching).
+    #[serde(default)]
+    pub optimizer: OptimizerSection,
+    /// `[schedule]` (matching).
+    pub schedule: Option<ScheduleSection>,
+}
+
+/// `[optimizer]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OptimizerSection {
+    /// lbfgs | gradient-descent.
+    pub method: String,
+    /// L-BFGS memory.
+    pub memory: usize,
+    /// Gradient descent step growth.
+    pub increase: f64,
+    /// Iterations per stage.
+    pub max_iterations: usize,
+    /// Relative gradient tolerance.
+    pub gradient_tolerance: f64,
+    /// Relative decrease tolerance.
+    pub decrease_tolerance: f64,
+    /// Window of the decrease test.
+    pub decrease_window: usize,
+    /// l2 | euclidean.
+    pub signal_metric: String,
+}
+
+impl Default for OptimizerSection {
+    fn default() -> Self {
+        let d = crate::optimize::Settings::default();
+        OptimizerSection {
+            method: "lbfgs".into(),
+            memory: 10,
+            increase: 1.2,
+            max_iterations: d.max_iterations,
+            gradient_tolerance: d.gradient_tolerance,
+            decrease_tolerance: d.decrease_tolerance,
+            decrease_window: d.decrease_window,
+            signal_metric: "l2".into(),
+        }
+    }
+}
+
+/// `[schedule]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduleSection {
+    /// The position kernel of each stage, coarse to fine.
+    pub kernel_geom: Vec<String>,
 }
 
 /// `[model]`.
@@ -203,11 +269,73 @@ impl Config {
     /// The data attachment kernel of `[attachment]`.
     pub fn attachment_kernel(&self) -> Result<VarifoldKernel, ShootError> {
         let a = self.attachment.as_ref().ok_or_else(|| ShootError::Config("missing section [attachment]".into()))?;
-        let bad = |e: fshape_varifold::VarifoldError| ShootError::Config(format!("attachment: {e}"));
-        let mut k = VarifoldKernel::parse(&a.kernel_geom, a.kernel_signal.as_deref(), &a.kernel_grass).map_err(bad)?;
+        self.attachment_with_geom(&a.kernel_geom, "attachment")
+    }
+
+    fn attachment_with_geom(&self, geom: &str, key: &str) -> Result<VarifoldKernel, ShootError> {
+        let a = self.attachment.as_ref().ok_or_else(|| ShootError::Config("missing section [attachment]".into()))?;
+        let bad = |e: fshape_varifold::VarifoldError| ShootError::Config(format!("{key}: {e}"));
+        let mut k = VarifoldKernel::parse(geom, a.kernel_signal.as_deref(), &a.kernel_grass).map_err(bad)?;
         if let Some(tol) = a.tolerance {
             k = k.truncated(tol).map_err(bad)?;
         }
         Ok(k)
+    }
+
+    /// The attachment kernel of each stage of the coarse-to-fine schedule
+    /// (`[schedule] kernel_geom` with the rest of `[attachment]`), or the
+    /// single `[attachment]` kernel.
+    pub fn schedule(&self) -> Result<Vec<(String, VarifoldKernel)>, ShootError> {
+        match &self.schedule {
+            None => {
+                let geom = self.attachment.as_ref().map(|a| a.kernel_geom.clone()).unwrap_or_default();
+                Ok(vec![(geom, self.attachment_kernel()?)])
+            }
+            Some(s) if s.kernel_geom.is_empty() => {
+                Err(ShootError::Config("schedule.kernel_geom: needs at least one kernel".into()))
+            }
+            Some(s) => s
+                .kernel_geom
+                .iter()
+                .enumerate()
+                .map(|(i, g)| Ok((g.clone(), self.attachment_with_geom(g, &format!("schedule.kernel_geom[{i}]"))?)))
+                .collect(),
+        }
+    }
+
+    /// The optimiser settings and the metric of the signal control.
+    pub fn optimizer(&self) -> Result<(Settings, SignalMetric), ShootError> {
+        let bad = |key: &str, why: String| ShootError::Config(format!("optimizer.{key}: {why}"));
+        let o = &self.optimizer;
+        let method = match o.method.as_str() {
+            "lbfgs" if o.memory >= 1 => Method::Lbfgs { memory: o.memory },
+            "lbfgs" => return Err(bad("memory", "must be at least 1".into())),
+            "gradient-descent" if o.increase > 1.0 && o.increase.is_finite() => {
+                Method::GradientDescent { increase: o.increase }
+            }
+            "gradient-descent" => {
+                return Err(bad("increase", format!("must be finite and above 1, got {}", o.increase)));
+            }
+            other => return Err(bad("method", format!("`{other}` (expected lbfgs or gradient-descent)"))),
+        };
+        for (key, v) in [("gradient_tolerance", o.gradient_tolerance), ("decrease_tolerance", o.decrease_tolerance)] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(bad(key, format!("must be finite and at least 0, got {v}")));
+            }
+        }
+        let metric = match o.signal_metric.as_str() {
+            "l2" => SignalMetric::L2,
+            "euclidean" => SignalMetric::Euclidean,
+            other => return Err(bad("signal_metric", format!("`{other}` (expected l2 or euclidean)"))),
+        };
+        let settings = Settings {
+            method,
+            max_iterations: o.max_iterations,
+            gradient_tolerance: o.gradient_tolerance,
+            decrease_tolerance: o.decrease_tolerance,
+            decrease_window: o.decrease_window,
+            ..Settings::default()
+        };
+        Ok((settings, metric))
     }
 }

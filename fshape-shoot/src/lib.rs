@@ -28,11 +28,14 @@
 
 mod config;
 mod dynamics;
+pub mod matching;
 pub mod optimize;
 pub mod paper;
 mod shoot;
 
-pub use config::{AttachmentSection, Config, DeformationSection, IntegratorSection, ModelSection};
+pub use config::{
+    AttachmentSection, Config, DeformationSection, IntegratorSection, ModelSection, OptimizerSection, ScheduleSection,
+};
 pub use dynamics::Timings;
 pub use shoot::{Gradient, Objective, Problem, Trajectory};
 

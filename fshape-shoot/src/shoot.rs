@@ -163,6 +163,13 @@ impl Problem {
         Ok(self)
     }
 
+    /// Replaces the target or its data attachment kernel (a coarse-to-fine
+    /// schedule changes the kernel between stages).
+    pub fn set_target(&mut self, target: &FShape, kernel: VarifoldKernel) -> Result<(), ShootError> {
+        self.attachment = Some(Attachment::new(target, kernel)?);
+        Ok(())
+    }
+
     /// Parallel (default) or serial kernel sums and FEM operations in the
     /// shooting and its adjoint (serial for running many problems at once,
     /// one per thread). The results are identical bit for bit.

@@ -6,6 +6,8 @@ mod config;
 mod dynamics;
 #[path = "shoot/gradient.rs"]
 mod gradient;
+#[path = "shoot/matching.rs"]
+mod matching;
 #[path = "shoot/optimize.rs"]
 mod optimize;
 

@@ -1,0 +1,158 @@
+//! Matching: J minimised over the initial momenta with [`crate::optimize`].
+//!
+//! The optimiser sees one flat vector of unknowns: p_0 (P × n), then, when
+//! the signal has a control (metamorphosis: p^f; tangential: ζ), P more
+//! values. The paper measures the signal control in the L²(x_0) metric;
+//! here that is a change of variables with the lumped mass D_0 of the
+//! template: p^f = D_0^{−1/2} q. A Euclidean step in q is then an L²(x_0)
+//! gradient step in p^f (q − t∂J/∂q ⇔ p^f − t D_0⁻¹∂J/∂p^f), so L-BFGS and
+//! its line search work in one consistent metric.
+
+use fshape_fem::{Norm, SignalNorm};
+
+use crate::optimize::{Settings, State, Stop};
+use crate::{ModelKind, Problem, ShootError};
+
+/// The metric of the signal control.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SignalMetric {
+    /// L²(x_0) with the lumped mass of the template (the paper's).
+    L2,
+    /// The Euclidean metric of the vertex values.
+    Euclidean,
+}
+
+/// The packing of (p_0, p^f) into the optimiser's unknowns.
+#[derive(Clone, Debug)]
+pub struct Unknowns {
+    /// P·n and P.
+    pn: usize,
+    p: usize,
+    /// p^f = scale ⊙ q (empty: no signal control, LDDMM).
+    scale: Vec<f64>,
+}
+
+impl Unknowns {
+    /// The packing for `problem` with the signal control in `metric`.
+    pub fn new(problem: &Problem, metric: SignalMetric) -> Result<Unknowns, ShootError> {
+        let t = problem.template();
+        let (p, pn) = (t.n_vertices(), t.n_vertices() * t.dim());
+        let scale = match (problem.model().kind, metric) {
+            (ModelKind::Lddmm, _) => Vec::new(),
+            (_, SignalMetric::Euclidean) => vec![1.0; p],
+            (_, SignalMetric::L2) => {
+                let masses = SignalNorm::try_new(t, Norm::L2Lumped)?.assemble(t.points())?;
+                if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
+                    return Err(fshape_fem::FemError::Singular { vertex: v }.into());
+                }
+                masses.iter().map(|m| 1.0 / m.sqrt()).collect()
+            }
+        };
+        Ok(Unknowns { pn, p, scale })
+    }
+
+    /// Number of unknowns.
+    pub fn len(&self) -> usize {
+        self.pn + self.scale.len()
+    }
+
+    /// Whether there are none (an empty template).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The unknowns of (p_0, p^f).
+    pub fn pack(&self, p0: &[f64], pf: &[f64]) -> Vec<f64> {
+        let mut x = p0.to_vec();
+        x.extend(pf.iter().zip(&self.scale).map(|(v, s)| v / s));
+        x
+    }
+
+    /// (p_0, p^f) of the unknowns (p^f all 0 without a signal control).
+    pub fn unpack(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let p0 = x[..self.pn].to_vec();
+        let pf = if self.scale.is_empty() {
+            vec![0.0; self.p]
+        } else {
+            x[self.pn..].iter().zip(&self.scale).map(|(q, s)| q * s).collect()
+        };
+        (p0, pf)
+    }
+}
+
+/// J and its gradient in the unknowns; the last evaluation's parts are
+/// kept for reports.
+pub struct MatchObjective<'p> {
+    problem: &'p Problem,
+    unknowns: Unknowns,
+    /// The parts of J at the last evaluation.
+    pub last: Option<crate::Objective>,
+}
+
+impl<'p> MatchObjective<'p> {
+    /// J of `problem` in `unknowns`.
+    pub fn new(problem: &'p Problem, unknowns: Unknowns) -> Self {
+        MatchObjective { problem, unknowns, last: None }
+    }
+
+    /// The packing.
+    pub fn unknowns(&self) -> &Unknowns {
+        &self.unknowns
+    }
+}
+
+impl crate::optimize::Objective for MatchObjective<'_> {
+    type Error = ShootError;
+
+    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
+        let (p0, pf) = self.unknowns.unpack(x);
+        let g = match self.problem.objective_grad(&p0, &pf) {
+            Ok(g) => g,
+            // A shooting that diverges is "too far" for the line search,
+            // not the end of the run.
+            Err(ShootError::Diverged { .. }) => return Ok((f64::NAN, vec![f64::NAN; x.len()])),
+            Err(e) => return Err(e),
+        };
+        self.last = Some(g.objective);
+        let mut grad = g.p0;
+        grad.extend(g.pf.iter().zip(&self.unknowns.scale).map(|(v, s)| v * s));
+        Ok((g.objective.value, grad))
+    }
+}
+
+/// Minimises J from (p_0, p^f) with `settings`; `each` sees the optimiser
+/// state and J's parts after every accepted step. Returns the final state
+/// (its `x` unpacks with [`Unknowns::unpack`]) and why it stopped.
+pub fn minimize(
+    problem: &Problem,
+    metric: SignalMetric,
+    p0: &[f64],
+    pf: &[f64],
+    settings: &Settings,
+    mut each: impl FnMut(&State, &crate::Objective),
+) -> Result<(State, Stop, Unknowns), ShootError> {
+    let unknowns = Unknowns::new(problem, metric)?;
+    let mut objective = MatchObjective::new(problem, unknowns.clone());
+    let mut state = State::start(unknowns.pack(p0, pf), &mut objective)?;
+    let stop = resume(&mut state, &mut objective, settings, &mut each)?;
+    Ok((state, stop, unknowns))
+}
+
+/// Continues a minimisation from a saved state.
+pub fn resume(
+    state: &mut State,
+    objective: &mut MatchObjective<'_>,
+    settings: &Settings,
+    mut each: impl FnMut(&State, &crate::Objective),
+) -> Result<Stop, ShootError> {
+    loop {
+        if let Some(stop) = state.iterate(settings, objective)? {
+            return Ok(stop);
+        }
+        // The accepted point is the last one evaluated in a search that
+        // ends on acceptance; report the objective there.
+        if let Some(parts) = objective.last {
+            each(state, &parts);
+        }
+    }
+}
