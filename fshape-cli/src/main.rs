@@ -13,6 +13,8 @@ use fshape_mesh::{FShape, Problem, Repairs, Severity};
 use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
+mod match_cmd;
+
 #[derive(Parser)]
 #[command(name = "fshape", version, about = "Functional shapes: meshes carrying a signal, and their metamorphoses")]
 struct Cli {
@@ -120,6 +122,36 @@ enum Command {
         #[arg(long)]
         signal_name: Option<String>,
     },
+    /// Register SOURCE onto TARGET: minimise J = H + γ_W·A over the initial
+    /// momenta (L-BFGS by default), stage by stage of the configuration's
+    /// coarse-to-fine schedule. Writes the geodesic (VTK + .pvd, PLY), the
+    /// momenta (p0.csv, pf.csv, momenta.vtk), summary.json and energy.svg.
+    /// A checkpoint is written after every iteration: after Ctrl-C or a
+    /// kill, `--resume` continues to the same result, bit for bit.
+    Match {
+        /// The template mesh (its signal, if any, is f_0; else 0).
+        source: PathBuf,
+        /// The target mesh.
+        target: PathBuf,
+        /// Model, attachment, optimizer and schedule (TOML; see fshape_shoot::Config).
+        #[arg(long)]
+        config: PathBuf,
+        /// Output directory (created if needed).
+        #[arg(long)]
+        out: PathBuf,
+        /// Continue from OUT/checkpoint.json.
+        #[arg(long)]
+        resume: bool,
+        /// Stop after this many iterations in this run, leaving the checkpoint.
+        #[arg(long)]
+        stop_after: Option<usize>,
+        /// Times in [0, 1] at which to write the geodesic.
+        #[arg(long, value_delimiter = ',', default_value = "0,0.25,0.5,0.75,1")]
+        times: Vec<f64>,
+        /// Vertex property of both meshes to read as the signal.
+        #[arg(long)]
+        signal_name: Option<String>,
+    },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
     /// optionally .gz), optionally attaching a signal from a CSV file.
     Convert {
@@ -176,6 +208,18 @@ fn main() -> ExitCode {
             times: &times,
             signal_name,
         }),
+        Command::Match { source, target, config, out, resume, stop_after, times, signal_name } => {
+            match_cmd::run(&match_cmd::MatchArgs {
+                source: &source,
+                target: &target,
+                config: &config,
+                out: &out,
+                resume,
+                stop_after,
+                signal_name,
+                times: &times,
+            })
+        }
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {
             convert(&input, &output, signal_name, signal.as_deref(), ascii, repair)
         }
@@ -529,6 +573,40 @@ struct Timing {
     fem: f64,
 }
 
+/// A file to write: its path and contents.
+type Output = (PathBuf, Vec<u8>);
+
+/// The states at `times` as VTK and PLY files, and a ParaView collection
+/// (contents and names; nothing is written here).
+fn trajectory_files(
+    template: &FShape,
+    traj: &fshape_shoot::Trajectory,
+    times: &[f64],
+    out: &Path,
+) -> Result<(Vec<Output>, Vec<String>)> {
+    let mut outputs: Vec<Output> = Vec::new();
+    let mut files = Vec::new();
+    let mut pvd =
+        String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
+    for (k, &t) in times.iter().enumerate() {
+        let (x, f) = traj.at(t);
+        let state = template.clone().with_points(x)?.with_signal(Some(f))?;
+        for ext in ["vtk", "ply"] {
+            let name = format!("state_{k:03}.{ext}");
+            let format = if ext == "vtk" { io::Format::Vtk } else { io::Format::Ply };
+            let mut bytes = Vec::new();
+            io::write_to(&mut bytes, &state, format, Encoding::Binary)?;
+            outputs.push((out.join(&name), bytes));
+            files.push(name);
+        }
+        pvd.push_str(&format!("    <DataSet timestep=\"{t}\" part=\"0\" file=\"state_{k:03}.vtk\"/>\n"));
+    }
+    pvd.push_str("  </Collection>\n</VTKFile>\n");
+    outputs.push((out.join("trajectory.pvd"), pvd.into_bytes()));
+    files.push("trajectory.pvd".into());
+    Ok((outputs, files))
+}
+
 fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     use fshape_shoot::{Config, Problem};
     let start = std::time::Instant::now();
@@ -559,26 +637,7 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     let traj = problem.shoot(&p0, &pf).with_context(|| format!("shooting from {}", a.source.display()))?;
     // Everything is computed before anything is written.
     let template = problem.template().clone();
-    let mut outputs: Vec<(PathBuf, Vec<u8>)> = Vec::new();
-    let mut files = Vec::new();
-    let mut pvd =
-        String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
-    for (k, &t) in a.times.iter().enumerate() {
-        let (x, f) = traj.at(t);
-        let state = template.clone().with_points(x)?.with_signal(Some(f))?;
-        for ext in ["vtk", "ply"] {
-            let name = format!("state_{k:03}.{ext}");
-            let format = if ext == "vtk" { io::Format::Vtk } else { io::Format::Ply };
-            let mut bytes = Vec::new();
-            io::write_to(&mut bytes, &state, format, Encoding::Binary)?;
-            outputs.push((a.out.join(&name), bytes));
-            files.push(name);
-        }
-        pvd.push_str(&format!("    <DataSet timestep=\"{t}\" part=\"0\" file=\"state_{k:03}.vtk\"/>\n"));
-    }
-    pvd.push_str("  </Collection>\n</VTKFile>\n");
-    outputs.push((a.out.join("trajectory.pvd"), pvd.into_bytes()));
-    files.push("trajectory.pvd".into());
+    let (mut outputs, files) = trajectory_files(&template, &traj, a.times, a.out)?;
     let h = traj.hamiltonian.clone();
     let drift = if h[0] == 0.0 { 0.0 } else { h.iter().map(|v| (v - h[0]).abs()).fold(0.0, f64::max) / h[0].abs() };
     let (x0, x1) = (template.points(), traj.points(steps));

@@ -348,3 +348,99 @@ fn shoot_refuses_bad_input_and_writes_nothing() {
         assert!(!out.exists(), "{all:?}: output written despite the error");
     }
 }
+
+/// A level-2 sphere and a stretched, re-textured copy as PLY files, and a
+/// two-stage matching config; returns their paths.
+fn match_inputs(tag: &str, max_iterations: usize) -> (String, String, String) {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    let sphere = fshape_mesh::generate::icosphere(2, 0.5);
+    let f: Vec<f64> = sphere.points().chunks_exact(3).map(|p| p[2]).collect();
+    let source = sphere.clone().with_signal(Some(f)).unwrap();
+    let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.3 * p[0], p[1], 0.8 * p[2]]).collect();
+    let g: Vec<f64> = sphere.points().chunks_exact(3).map(|p| p[2] + 0.5 * p[0]).collect();
+    let target = sphere.with_points(pts).unwrap().with_signal(Some(g)).unwrap();
+    let (s, t, c) = (tmp(&format!("{tag}_src.ply")), tmp(&format!("{tag}_tgt.ply")), tmp(&format!("{tag}.toml")));
+    write_mesh(&s, &source, Encoding::Binary).unwrap();
+    write_mesh(&t, &target, Encoding::Binary).unwrap();
+    std::fs::write(
+        &c,
+        format!(
+            "[model]\nnorm = \"h1\"\nlength = 0.2\ngamma_w = 50.0\n[deformation]\nwidths = [0.4, 0.2]\n\
+             [integrator]\nsteps = 5\n[attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+             [optimizer]\nmax_iterations = {max_iterations}\n[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.1\"]\n"
+        ),
+    )
+    .unwrap();
+    let p = |p: PathBuf| p.display().to_string();
+    (p(s), p(t), p(c))
+}
+
+#[test]
+fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
+    use fshape_mesh::io::{ReadOptions, read_mesh};
+    let (s, t, c) = match_inputs("match_ok", 15);
+    let out = tmp("match_out");
+    let o = fshape(&["match", &s, &t, "--config", &c, "--out", &out.display().to_string()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let stages = summary["stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 2);
+    assert_eq!(stages[1]["kernel_geom"], "gaussian:0.1");
+    // Within each stage J decreases at every iteration, and the data term
+    // of the last stage falls well below its start.
+    for st in stages {
+        let values: Vec<f64> =
+            st["iterations"].as_array().unwrap().iter().map(|i| i["value"].as_f64().unwrap()).collect();
+        assert!(values.windows(2).all(|w| w[1] <= w[0]), "{values:?}");
+    }
+    let (a0, a1) =
+        (stages[1]["initial"]["attachment"].as_f64().unwrap(), summary["final_attachment"].as_f64().unwrap());
+    let first = stages[0]["initial"]["attachment"].as_f64().unwrap();
+    assert!(a1 < 0.2 * first && a1 <= a0, "attachment {first} -> {a0} -> {a1}");
+    assert!(summary["geodesic_distance"].as_f64().unwrap() > 0.0);
+    // The end state reads back and is closer to the target than the start.
+    let target = read_mesh(t.as_ref(), &ReadOptions::default()).unwrap();
+    let end = read_mesh(&out.join("state_004.ply"), &ReadOptions::default()).unwrap();
+    let start = read_mesh(&out.join("state_000.ply"), &ReadOptions::default()).unwrap();
+    let dist = |a: &fshape_mesh::FShape| {
+        a.points().iter().zip(target.points()).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt()
+    };
+    assert!(dist(&end) < 0.5 * dist(&start), "{} vs {}", dist(&end), dist(&start));
+    let p0 = fshape_mesh::io::csv::read_vectors(&out.join("p0.csv"), 3).unwrap();
+    assert_eq!(p0.len(), 3 * target.n_vertices());
+    for f in ["momenta.vtk", "energy.svg", "trajectory.pvd", "checkpoint.json"] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+}
+
+#[test]
+fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
+    let (s, t, c) = match_inputs("match_resume", 8);
+    let (whole, parts) = (tmp("match_whole"), tmp("match_parts"));
+    let run = |out: &PathBuf, extra: &[&str]| {
+        let o = fshape(&[&["match", &s, &t, "--config", &c, "--out", &out.display().to_string()], extra].concat());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    run(&whole, &[]);
+    // Interrupted twice (once inside the first stage, once inside the
+    // second), resumed each time.
+    run(&parts, &["--stop-after", "5"]);
+    assert!(!parts.join("summary.json").exists(), "no result before the end");
+    run(&parts, &["--resume", "--stop-after", "6"]);
+    run(&parts, &["--resume"]);
+    for f in ["p0.csv", "pf.csv", "state_004.ply", "state_002.vtk", "momenta.vtk"] {
+        assert_eq!(std::fs::read(whole.join(f)).unwrap(), std::fs::read(parts.join(f)).unwrap(), "{f}");
+    }
+    let stages = |d: &PathBuf| {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap()).unwrap();
+        v["stages"].clone()
+    };
+    assert_eq!(stages(&whole), stages(&parts), "every iteration's energies");
+    // A checkpoint of other inputs is refused by name.
+    std::fs::write(&c, std::fs::read_to_string(&c).unwrap().replace("gamma_w = 50.0", "gamma_w = 5.0")).unwrap();
+    let o = fshape(&["match", &s, &t, "--config", &c, "--out", &parts.display().to_string(), "--resume"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("checkpoint.json: written for other inputs"));
+}
