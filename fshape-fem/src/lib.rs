@@ -137,6 +137,13 @@ pub enum FemError {
         /// faer's report.
         message: String,
     },
+    /// The matrix would have more stored entries than the assembly's
+    /// 32-bit entry index can address (a mesh of over a billion cells).
+    #[error("the signal norm matrix would have {entries} stored entries, more than the 4294967294 supported")]
+    TooLarge {
+        /// Stored entries of the lower triangle.
+        entries: usize,
+    },
     /// [`Solver::solve`] was called before a successful [`Solver::factor`].
     #[error("solve called before a successful factorisation")]
     NotFactored,

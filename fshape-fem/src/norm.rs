@@ -26,7 +26,7 @@ pub struct Workspace {
     mass: Vec<f64>,
 }
 
-const NO_ENTRY: usize = usize::MAX;
+const NO_ENTRY: u32 = u32::MAX;
 
 /// A signal norm D_s(x) for one connectivity: the sparsity pattern, the
 /// Cholesky analysis and the incidence tables are built once, here; every
@@ -46,7 +46,10 @@ pub struct SignalNorm {
     slots: Vec<usize>,
     /// The inverse map: slot_entry[s] = the entry slot s sums into, or
     /// `NO_ENTRY` (the upper half of a local matrix, off-diagonal lumped).
-    slot_entry: Vec<usize>,
+    /// Built on the first [`SignalNorm::assemble_into`] (the raw-array
+    /// assembly of mass and stiffness does not need it); u32 halves its
+    /// memory, and `try_new` refuses patterns with 2³² − 1 entries or more.
+    slot_entry: OnceLock<Vec<u32>>,
     /// For each vertex, its (cell·3 + corner) incidences in increasing order.
     inc_ptr: Vec<usize>,
     inc: Vec<usize>,
@@ -73,14 +76,12 @@ impl SignalNorm {
         let Pattern { col_ptr, row_idx, slot_ptr, slots } = lower_pattern(&cells, corners, &inc_ptr, &inc, lumped);
         let pattern = SymbolicSparseColMat::new_checked(n_vertices, n_vertices, col_ptr, None, row_idx);
         let symbolic = OnceLock::new();
-        let mut slot_entry = vec![NO_ENTRY; cells.len() / corners * MAX_LOCAL];
-        for e in 0..slot_ptr.len() - 1 {
-            for &s in &slots[slot_ptr[e]..slot_ptr[e + 1]] {
-                slot_entry[s] = e;
-            }
+        let entries = slot_ptr.len() - 1;
+        if u32::try_from(entries).map_or(true, |e| e == NO_ENTRY) {
+            return Err(FemError::TooLarge { entries });
         }
         Ok(SignalNorm {
-            slot_entry,
+            slot_entry: OnceLock::new(),
             norm,
             kind,
             dim,
@@ -270,6 +271,16 @@ impl SignalNorm {
         // to a factor) come along for [`Self::check_mass`].
         ws.mass.clear();
         ws.mass.resize(self.n_vertices, 0.0);
+        let slot_entry = self.slot_entry.get_or_init(|| {
+            let mut map = vec![NO_ENTRY; self.cells.len() / k * MAX_LOCAL];
+            for e in 0..self.slot_ptr.len() - 1 {
+                for &s in &self.slots[self.slot_ptr[e]..self.slot_ptr[e + 1]] {
+                    // Below NO_ENTRY: checked in try_new.
+                    map[s] = e as u32;
+                }
+            }
+            map
+        });
         for (t, c) in self.cells.chunks_exact(k).enumerate() {
             let mut buf = [0.0; MAX_LOCAL];
             let (m, vol) = local_matrix_f64(self.kind, self.dim, self.gather_coords(x, c, &mut buf), self.norm);
@@ -280,12 +291,12 @@ impl SignalNorm {
             for &v in c {
                 ws.mass[v] += vol;
             }
-            let se = &self.slot_entry[t * MAX_LOCAL..(t + 1) * MAX_LOCAL];
+            let se = &slot_entry[t * MAX_LOCAL..(t + 1) * MAX_LOCAL];
             for i in 0..k {
                 for j in 0..k {
                     let e = se[3 * i + j];
                     if e != NO_ENTRY {
-                        out[e] += m[i][j];
+                        out[e as usize] += m[i][j];
                     }
                 }
             }
