@@ -14,6 +14,7 @@ use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
 mod match_cmd;
+mod render;
 
 #[derive(Parser)]
 #[command(name = "fshape", version, about = "Functional shapes: meshes carrying a signal, and their metamorphoses")]
@@ -151,6 +152,9 @@ enum Command {
         /// Vertex property of both meshes to read as the signal.
         #[arg(long)]
         signal_name: Option<String>,
+        /// Camera of the PNG renders of surfaces in space: azimuth,elevation in degrees.
+        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [30.0, 20.0])]
+        view: Vec<f64>,
     },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
     /// optionally .gz), optionally attaching a signal from a CSV file.
@@ -208,7 +212,7 @@ fn main() -> ExitCode {
             times: &times,
             signal_name,
         }),
-        Command::Match { source, target, config, out, resume, stop_after, times, signal_name } => {
+        Command::Match { source, target, config, out, resume, stop_after, times, signal_name, view } => {
             match_cmd::run(&match_cmd::MatchArgs {
                 source: &source,
                 target: &target,
@@ -218,6 +222,7 @@ fn main() -> ExitCode {
                 stop_after,
                 signal_name,
                 times: &times,
+                view: (view[0], view[1]),
             })
         }
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {

@@ -24,6 +24,8 @@ pub struct MatchArgs<'a> {
     pub stop_after: Option<usize>,
     pub signal_name: Option<String>,
     pub times: &'a [f64],
+    /// Azimuth and elevation of the renders, degrees.
+    pub view: (f64, f64),
 }
 
 /// One accepted iteration.
@@ -242,6 +244,26 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     }
     outputs.push((a.out.join("momenta.vtk"), momenta_vtk(&template, &p0, &pf).into_bytes()));
     files.push("momenta.vtk".into());
+    // Renders of the geodesic at the chosen times and of the target, all
+    // with one camera, framing and colour range.
+    let frames: Vec<FShape> = a
+        .times
+        .iter()
+        .map(|&t| {
+            let (x, f) = traj.at(t);
+            template.clone().with_points(x)?.with_signal(Some(f))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut all: Vec<&FShape> = frames.iter().collect();
+    all.push(&target);
+    let view = crate::render::View::fit(&all, a.view.0, a.view.1);
+    for (k, frame) in frames.iter().enumerate() {
+        let name = format!("render_{k:03}.png");
+        outputs.push((a.out.join(&name), crate::render::png(&crate::render::rasterise(frame, &view))?));
+        files.push(name);
+    }
+    outputs.push((a.out.join("target.png"), crate::render::png(&crate::render::rasterise(&target, &view))?));
+    files.push("target.png".into());
     outputs.push((a.out.join("energy.svg"), energy_plot(&ck.done, gamma_w)?.into_bytes()));
     files.push("energy.svg".into());
     let iterations = ck.done.iter().map(|s| s.iterations.len()).sum();

@@ -412,6 +412,13 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     for f in ["momenta.vtk", "energy.svg", "trajectory.pvd", "checkpoint.json"] {
         assert!(out.join(f).exists(), "{f}");
     }
+    // The renders are PNG images that differ from frame to frame and end
+    // close to the target's.
+    let png = |f: &str| std::fs::read(out.join(f)).unwrap();
+    for f in ["render_000.png", "render_004.png", "target.png"] {
+        assert!(png(f).starts_with(b"\x89PNG\r\n\x1a\n"), "{f}");
+    }
+    assert_ne!(png("render_000.png"), png("render_004.png"));
 }
 
 #[test]
@@ -429,7 +436,7 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     assert!(!parts.join("summary.json").exists(), "no result before the end");
     run(&parts, &["--resume", "--stop-after", "6"]);
     run(&parts, &["--resume"]);
-    for f in ["p0.csv", "pf.csv", "state_004.ply", "state_002.vtk", "momenta.vtk"] {
+    for f in ["p0.csv", "pf.csv", "state_004.ply", "state_002.vtk", "momenta.vtk", "render_004.png"] {
         assert_eq!(std::fs::read(whole.join(f)).unwrap(), std::fs::read(parts.join(f)).unwrap(), "{f}");
     }
     let stages = |d: &PathBuf| {
