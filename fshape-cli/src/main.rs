@@ -13,6 +13,7 @@ use fshape_mesh::{FShape, Problem, Repairs, Severity};
 use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
+mod demo;
 mod match_cmd;
 mod render;
 
@@ -156,6 +157,28 @@ enum Command {
         #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [30.0, 20.0])]
         view: Vec<f64>,
     },
+    /// Run one of the paper's experiments on data shipped in the repository
+    /// (inputs, one config per run and `fshape match` outputs under OUT).
+    Demo {
+        /// Which experiment: digits.
+        #[arg(value_parser = ["digits"])]
+        name: String,
+        /// Output directory.
+        #[arg(long, default_value = "demo-output")]
+        out: PathBuf,
+        /// The repository's data directory.
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Iteration limit per schedule stage.
+        #[arg(long, default_value_t = 100)]
+        max_iterations: usize,
+        /// Digits: the ratios γ_V/γ_f to run.
+        #[arg(long, value_delimiter = ',', default_value = "1,20,100")]
+        ratios: Vec<f64>,
+        /// Weight γ_W of the data attachment.
+        #[arg(long, default_value_t = 100.0)]
+        gamma_w: f64,
+    },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
     /// optionally .gz), optionally attaching a signal from a CSV file.
     Convert {
@@ -225,6 +248,13 @@ fn main() -> ExitCode {
                 view: (view[0], view[1]),
             })
         }
+        Command::Demo { name: _, out, data, max_iterations, ratios, gamma_w } => demo::digits(&demo::DigitsArgs {
+            out: &out,
+            data: &data.unwrap_or_else(demo::default_data),
+            ratios: &ratios,
+            max_iterations,
+            gamma_w,
+        }),
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {
             convert(&input, &output, signal_name, signal.as_deref(), ascii, repair)
         }

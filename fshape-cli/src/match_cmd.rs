@@ -256,7 +256,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         .collect::<Result<_, _>>()?;
     let mut all: Vec<&FShape> = frames.iter().collect();
     all.push(&target);
-    let view = crate::render::View::fit(&all, a.view.0, a.view.1);
+    let view = crate::render::View::fit(&all, a.view.0, a.view.1).with_range_of(&[&frames[0], &target]);
     for (k, frame) in frames.iter().enumerate() {
         let name = format!("render_{k:03}.png");
         outputs.push((a.out.join(&name), crate::render::png(&crate::render::rasterise(frame, &view))?));

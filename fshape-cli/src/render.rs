@@ -59,6 +59,18 @@ impl View {
         View { rot, centre: [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])], scale, range }
     }
 
+    /// The same view with the colour map spanning the signals of `shapes`
+    /// only (e.g. the source and the target, so that overshoots along the
+    /// path saturate instead of washing the pictures out).
+    pub fn with_range_of(mut self, shapes: &[&FShape]) -> View {
+        let vals = shapes.iter().flat_map(|s| s.signal().unwrap_or(&[]).iter().copied());
+        let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        if lo < hi {
+            self.range = (lo, hi);
+        }
+        self
+    }
+
     /// Pixel coordinates (column, row, depth) of a point.
     fn pixel(&self, p: &[f64]) -> [f64; 3] {
         let c = camera(&self.rot, p);

@@ -87,12 +87,14 @@ pub struct MatchObjective<'p> {
     unknowns: Unknowns,
     /// The parts of J at the last evaluation.
     pub last: Option<crate::Objective>,
+    /// Evaluations so far (the first one's errors are always reported).
+    evaluations: usize,
 }
 
 impl<'p> MatchObjective<'p> {
     /// J of `problem` in `unknowns`.
     pub fn new(problem: &'p Problem, unknowns: Unknowns) -> Self {
-        MatchObjective { problem, unknowns, last: None }
+        MatchObjective { problem, unknowns, last: None, evaluations: 0 }
     }
 
     /// The packing.
@@ -106,11 +108,20 @@ impl crate::optimize::Objective for MatchObjective<'_> {
 
     fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
         let (p0, pf) = self.unknowns.unpack(x);
+        self.evaluations += 1;
         let g = match self.problem.objective_grad(&p0, &pf) {
             Ok(g) => g,
-            // A shooting that diverges is "too far" for the line search,
-            // not the end of the run.
-            Err(ShootError::Diverged { .. }) => return Ok((f64::NAN, vec![f64::NAN; x.len()])),
+            // After the first point, a shooting that diverges, or folds the
+            // mesh until a cell has no area, is a step that went too far:
+            // the line search steps back (a non-finite value), the run goes
+            // on. At the first point, and for errors of the setup itself,
+            // the error is the answer.
+            Err(e)
+                if self.evaluations > 1
+                    && !matches!(e, ShootError::Config(_) | ShootError::Dimension { .. } | ShootError::NoTarget) =>
+            {
+                return Ok((f64::NAN, vec![f64::NAN; x.len()]));
+            }
             Err(e) => return Err(e),
         };
         self.last = Some(g.objective);

@@ -190,6 +190,17 @@ impl State {
         None
     }
 
+    /// The first trial step along −∇J: the linear model's step to J = 0,
+    /// |J|/‖∇J‖² (matching objectives are ≥ 0 with minimum near 0), but at
+    /// most a move of length 1 (1/‖∇J‖) and at most 1. A step too long
+    /// (a shooting that folds the mesh) costs one halving per evaluation, a
+    /// step too short one doubling, so a scale-aware start saves both.
+    fn first_step(&self) -> f64 {
+        let g = norm(&self.grad);
+        let linear = if self.value != 0.0 { self.value.abs() / (g * g) } else { f64::INFINITY };
+        linear.min(1.0 / g).min(1.0)
+    }
+
     /// The L-BFGS direction −H∇J (two-loop recursion); −∇J without pairs.
     fn lbfgs_direction(&self) -> Vec<f64> {
         let mut q = self.grad.clone();
@@ -235,10 +246,10 @@ impl State {
                     d = self.grad.iter().map(|g| -g).collect();
                     slope = dot(&d, &self.grad);
                 }
-                // Without pairs the direction is −∇J, unscaled: try a step
-                // of length at most 1; afterwards the scaled direction's
-                // natural unit step.
-                let t0 = if self.s.is_empty() { (1.0 / norm(&self.grad)).min(1.0) } else { 1.0 };
+                // Without pairs the direction is −∇J, unscaled: see
+                // `first_step`; afterwards the scaled direction's natural
+                // unit step.
+                let t0 = if self.s.is_empty() { self.first_step() } else { 1.0 };
                 let found = wolfe_search(self, &d, slope, t0, settings, objective)?;
                 if let Some((t, _, _, grad)) = &found {
                     let s: Vec<f64> = d.iter().map(|v| t * v).collect();
@@ -259,7 +270,7 @@ impl State {
             Method::GradientDescent { increase } => {
                 let d: Vec<f64> = self.grad.iter().map(|g| -g).collect();
                 let slope = dot(&d, &self.grad);
-                let t0 = if self.step > 0.0 { self.step * increase } else { 1.0 / norm(&self.grad) };
+                let t0 = if self.step > 0.0 { self.step * increase } else { self.first_step() };
                 armijo_search(self, &d, slope, t0, settings, objective)?
             }
         };
