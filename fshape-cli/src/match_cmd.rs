@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use fshape_mesh::FShape;
 use fshape_mesh::io;
-use fshape_shoot::matching::{MatchObjective, SignalMetric, Unknowns};
+use fshape_shoot::matching::{MatchObjective, Metrics, Unknowns};
 use fshape_shoot::optimize::{State, Stop};
 use fshape_shoot::{Config, ModelKind, Problem};
 use serde::{Deserialize, Serialize};
@@ -94,7 +94,7 @@ struct Summary<'a> {
     gamma_f: f64,
     gamma_w: f64,
     steps: usize,
-    signal_metric: SignalMetric,
+    metrics: Metrics,
     stages: &'a [Stage],
     /// J's parts at the result.
     final_value: f64,
@@ -278,7 +278,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         gamma_f,
         gamma_w,
         steps,
-        signal_metric: metric,
+        metrics: metric,
         stages: &ck.done,
         final_value: objective.value,
         final_energy: objective.energy,

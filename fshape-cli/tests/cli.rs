@@ -397,7 +397,8 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     let (a0, a1) =
         (stages[1]["initial"]["attachment"].as_f64().unwrap(), summary["final_attachment"].as_f64().unwrap());
     let first = stages[0]["initial"]["attachment"].as_f64().unwrap();
-    assert!(a1 < 0.2 * first && a1 <= a0, "attachment {first} -> {a0} -> {a1}");
+    // (J falls within each stage; A alone may rise as H falls.)
+    assert!(a1 < 0.2 * first, "attachment {first} -> {a0} -> {a1}");
     assert!(summary["geodesic_distance"].as_f64().unwrap() > 0.0);
     // The end state reads back and is closer to the target than the start.
     let target = read_mesh(t.as_ref(), &ReadOptions::default()).unwrap();

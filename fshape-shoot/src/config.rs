@@ -32,7 +32,8 @@
 //! gradient_tolerance = 1e-3         # stop at |∇J| ≤ tol·|∇J at start|  (default 1e-3)
 //! decrease_tolerance = 1e-6         # stop when J fell by ≤ tol·|J|...  (default 1e-6)
 //! decrease_window = 10              # ...over this many iterations      (default 10)
-//! signal_metric = "l2"              # l2 (L²(x_0), the paper's) | euclidean (default l2)
+//! signal_metric = "l2"              # metric of p^f: l2 (L²(x_0), the paper's) | euclidean (default l2)
+//! momentum_metric = "euclidean"     # metric of p_0: euclidean | l2     (default euclidean)
 //!
 //! [schedule]                        # coarse to fine (default: one stage, [attachment])
 //! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
@@ -45,7 +46,7 @@ use fshape_kernels::{Kernel, Profile};
 use fshape_varifold::VarifoldKernel;
 use serde::Deserialize;
 
-use crate::matching::SignalMetric;
+use crate::matching::{Metrics, SignalMetric};
 use crate::optimize::{Method, Settings};
 use crate::{Integrator, Model, ModelKind, ShootError};
 
@@ -90,6 +91,8 @@ pub struct OptimizerSection {
     pub decrease_window: usize,
     /// l2 | euclidean.
     pub signal_metric: String,
+    /// euclidean | l2.
+    pub momentum_metric: String,
 }
 
 impl Default for OptimizerSection {
@@ -104,6 +107,7 @@ impl Default for OptimizerSection {
             decrease_tolerance: d.decrease_tolerance,
             decrease_window: d.decrease_window,
             signal_metric: "l2".into(),
+            momentum_metric: "euclidean".into(),
         }
     }
 }
@@ -303,8 +307,8 @@ impl Config {
         }
     }
 
-    /// The optimiser settings and the metric of the signal control.
-    pub fn optimizer(&self) -> Result<(Settings, SignalMetric), ShootError> {
+    /// The optimiser settings and the metrics of the unknowns.
+    pub fn optimizer(&self) -> Result<(Settings, Metrics), ShootError> {
         let bad = |key: &str, why: String| ShootError::Config(format!("optimizer.{key}: {why}"));
         let o = &self.optimizer;
         let method = match o.method.as_str() {
@@ -323,10 +327,14 @@ impl Config {
                 return Err(bad(key, format!("must be finite and at least 0, got {v}")));
             }
         }
-        let metric = match o.signal_metric.as_str() {
-            "l2" => SignalMetric::L2,
-            "euclidean" => SignalMetric::Euclidean,
-            other => return Err(bad("signal_metric", format!("`{other}` (expected l2 or euclidean)"))),
+        let parse = |key: &str, v: &str| match v {
+            "l2" => Ok(SignalMetric::L2),
+            "euclidean" => Ok(SignalMetric::Euclidean),
+            other => Err(bad(key, format!("`{other}` (expected l2 or euclidean)"))),
+        };
+        let metric = Metrics {
+            signal: parse("signal_metric", &o.signal_metric)?,
+            momentum: parse("momentum_metric", &o.momentum_metric)?,
         };
         let settings = Settings {
             method,

@@ -6,20 +6,47 @@
 //! here that is a change of variables with the lumped mass D_0 of the
 //! template: p^f = D_0^{−1/2} q. A Euclidean step in q is then an L²(x_0)
 //! gradient step in p^f (q − t∂J/∂q ⇔ p^f − t D_0⁻¹∂J/∂p^f), so L-BFGS and
-//! its line search work in one consistent metric.
+//! its line search work in one consistent metric. The same change of
+//! variables is offered for p_0 (`momentum`: p_0 = D_0^{−1/2} q per
+//! coordinate): both momenta are densities on the template, and measuring
+//! only one of them by the mass scales the two blocks of unknowns by
+//! 1/√(vertex mass) against each other (a factor ~35 on the digits' squares,
+//! where L-BFGS then moved the signal only; docs/experiments.md).
 
 use fshape_fem::{Norm, SignalNorm};
 
 use crate::optimize::{Settings, State, Stop};
 use crate::{ModelKind, Problem, ShootError};
 
-/// The metric of the signal control.
+/// The metric in which one block of unknowns is optimised.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SignalMetric {
-    /// L²(x_0) with the lumped mass of the template (the paper's).
+    /// L²(x_0) with the lumped mass of the template (the paper's, for p^f).
     L2,
     /// The Euclidean metric of the vertex values.
     Euclidean,
+}
+
+/// The metrics of the two blocks of unknowns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Metrics {
+    /// Of p_0 (default Euclidean).
+    pub momentum: SignalMetric,
+    /// Of p^f or ζ (default L², the paper's).
+    pub signal: SignalMetric,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        Metrics { momentum: SignalMetric::Euclidean, signal: SignalMetric::L2 }
+    }
+}
+
+impl From<SignalMetric> for Metrics {
+    /// `signal` for p^f, Euclidean for p_0.
+    fn from(signal: SignalMetric) -> Self {
+        Metrics { signal, ..Metrics::default() }
+    }
 }
 
 /// The packing of (p_0, p^f) into the optimiser's unknowns.
@@ -30,25 +57,34 @@ pub struct Unknowns {
     p: usize,
     /// p^f = scale ⊙ q (empty: no signal control, LDDMM).
     scale: Vec<f64>,
+    /// p_0 = scale_p ⊙ q_0 (P·n values).
+    scale_p: Vec<f64>,
 }
 
 impl Unknowns {
-    /// The packing for `problem` with the signal control in `metric`.
-    pub fn new(problem: &Problem, metric: SignalMetric) -> Result<Unknowns, ShootError> {
+    /// The packing for `problem` with its blocks in `metrics` (a
+    /// [`SignalMetric`] alone sets the signal block's).
+    pub fn new(problem: &Problem, metrics: impl Into<Metrics>) -> Result<Unknowns, ShootError> {
+        let metrics = metrics.into();
         let t = problem.template();
-        let (p, pn) = (t.n_vertices(), t.n_vertices() * t.dim());
-        let scale = match (problem.model().kind, metric) {
+        let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
+        let inv_sqrt_mass = || -> Result<Vec<f64>, ShootError> {
+            let masses = SignalNorm::try_new(t, Norm::L2Lumped)?.assemble(t.points())?;
+            if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
+                return Err(fshape_fem::FemError::Singular { vertex: v }.into());
+            }
+            Ok(masses.iter().map(|m| 1.0 / m.sqrt()).collect())
+        };
+        let scale = match (problem.model().kind, metrics.signal) {
             (ModelKind::Lddmm, _) => Vec::new(),
             (_, SignalMetric::Euclidean) => vec![1.0; p],
-            (_, SignalMetric::L2) => {
-                let masses = SignalNorm::try_new(t, Norm::L2Lumped)?.assemble(t.points())?;
-                if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
-                    return Err(fshape_fem::FemError::Singular { vertex: v }.into());
-                }
-                masses.iter().map(|m| 1.0 / m.sqrt()).collect()
-            }
+            (_, SignalMetric::L2) => inv_sqrt_mass()?,
         };
-        Ok(Unknowns { pn, p, scale })
+        let scale_p = match metrics.momentum {
+            SignalMetric::Euclidean => vec![1.0; pn],
+            SignalMetric::L2 => inv_sqrt_mass()?.iter().flat_map(|s| std::iter::repeat_n(*s, dim)).collect(),
+        };
+        Ok(Unknowns { pn, p, scale, scale_p })
     }
 
     /// Number of unknowns.
@@ -63,14 +99,14 @@ impl Unknowns {
 
     /// The unknowns of (p_0, p^f).
     pub fn pack(&self, p0: &[f64], pf: &[f64]) -> Vec<f64> {
-        let mut x = p0.to_vec();
+        let mut x: Vec<f64> = p0.iter().zip(&self.scale_p).map(|(v, s)| v / s).collect();
         x.extend(pf.iter().zip(&self.scale).map(|(v, s)| v / s));
         x
     }
 
     /// (p_0, p^f) of the unknowns (p^f all 0 without a signal control).
     pub fn unpack(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let p0 = x[..self.pn].to_vec();
+        let p0 = x[..self.pn].iter().zip(&self.scale_p).map(|(q, s)| q * s).collect();
         let pf = if self.scale.is_empty() {
             vec![0.0; self.p]
         } else {
@@ -125,7 +161,7 @@ impl crate::optimize::Objective for MatchObjective<'_> {
             Err(e) => return Err(e),
         };
         self.last = Some(g.objective);
-        let mut grad = g.p0;
+        let mut grad: Vec<f64> = g.p0.iter().zip(&self.unknowns.scale_p).map(|(v, s)| v * s).collect();
         grad.extend(g.pf.iter().zip(&self.unknowns.scale).map(|(v, s)| v * s));
         Ok((g.objective.value, grad))
     }
@@ -136,7 +172,7 @@ impl crate::optimize::Objective for MatchObjective<'_> {
 /// (its `x` unpacks with [`Unknowns::unpack`]) and why it stopped.
 pub fn minimize(
     problem: &Problem,
-    metric: SignalMetric,
+    metric: impl Into<Metrics>,
     p0: &[f64],
     pf: &[f64],
     settings: &Settings,

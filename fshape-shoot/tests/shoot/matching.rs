@@ -3,7 +3,7 @@
 //! configuration's optimiser and schedule sections are checked by name.
 
 use fshape_mesh::test_support::perturbed_icosphere;
-use fshape_shoot::matching::{SignalMetric, minimize};
+use fshape_shoot::matching::{Metrics, SignalMetric, minimize};
 use fshape_shoot::optimize::{Method, Settings};
 use fshape_shoot::{Config, Problem};
 use fshape_varifold::VarifoldKernel;
@@ -29,9 +29,14 @@ fn tight(max_iterations: usize) -> Settings {
 fn identical_source_and_target_are_matched_from_random_momenta() {
     let shape =
         perturbed_icosphere(1, 0.05, 3).with_signal(Some((0..42).map(|i| (i as f64 * 0.3).sin()).collect())).unwrap();
-    for (kind, metric) in
-        [("metamorphosis", SignalMetric::L2), ("metamorphosis", SignalMetric::Euclidean), ("lddmm", SignalMetric::L2)]
-    {
+    let both = Metrics { momentum: SignalMetric::L2, signal: SignalMetric::L2 };
+    for (kind, metric) in [
+        ("metamorphosis", Metrics::from(SignalMetric::L2)),
+        ("metamorphosis", Metrics::from(SignalMetric::Euclidean)),
+        ("metamorphosis", both),
+        ("lddmm", Metrics::from(SignalMetric::L2)),
+        ("lddmm", both),
+    ] {
         let m = model(&format!("kind = \"{kind}\""), "", "rk4", 5);
         let problem = Problem::new(&shape, m).unwrap().with_target(&shape, kernel(0.4)).unwrap();
         let (p0, pf) = momenta(&shape, 0.3, 7);
@@ -106,7 +111,8 @@ fn optimizer_and_schedule_errors_name_their_key() {
     let base = "[deformation]\nwidths = [0.5]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n";
     let c = Config::parse(base).unwrap();
     let (settings, metric) = c.optimizer().unwrap();
-    assert_eq!((settings, metric), (Settings::default(), SignalMetric::L2), "documented defaults");
+    let defaults = Metrics { momentum: SignalMetric::Euclidean, signal: SignalMetric::L2 };
+    assert_eq!((settings, metric), (Settings::default(), defaults), "documented defaults");
     assert_eq!(c.schedule().unwrap().len(), 1);
     let c = Config::parse(&format!("{base}[schedule]\nkernel_geom = [\"gaussian:0.4\", \"gaussian:0.1\"]\n")).unwrap();
     assert_eq!(
@@ -119,6 +125,7 @@ fn optimizer_and_schedule_errors_name_their_key() {
         ("[optimizer]\nmethod = \"gradient-descent\"\nincrease = 0.5\n", "optimizer.increase"),
         ("[optimizer]\ngradient_tolerance = -1.0\n", "optimizer.gradient_tolerance"),
         ("[optimizer]\nsignal_metric = \"h1\"\n", "optimizer.signal_metric"),
+        ("[optimizer]\nmomentum_metric = \"kernel\"\n", "optimizer.momentum_metric"),
         ("[schedule]\nkernel_geom = []\n", "schedule.kernel_geom"),
         ("[schedule]\nkernel_geom = [\"gaussian:0.4\", \"gaussian:-1\"]\n", "schedule.kernel_geom[1]"),
     ] {
