@@ -160,8 +160,8 @@ enum Command {
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo {
-        /// Which experiment: digits.
-        #[arg(value_parser = ["digits"])]
+        /// Which experiment: digits or bunny.
+        #[arg(value_parser = ["digits", "bunny"])]
         name: String,
         /// Output directory.
         #[arg(long, default_value = "demo-output")]
@@ -248,13 +248,14 @@ fn main() -> ExitCode {
                 view: (view[0], view[1]),
             })
         }
-        Command::Demo { name: _, out, data, max_iterations, ratios, gamma_w } => demo::digits(&demo::DigitsArgs {
-            out: &out,
-            data: &data.unwrap_or_else(demo::default_data),
-            ratios: &ratios,
-            max_iterations,
-            gamma_w,
-        }),
+        Command::Demo { name, out, data, max_iterations, ratios, gamma_w } => {
+            let data = data.unwrap_or_else(demo::default_data);
+            if name == "bunny" {
+                demo::bunny(&demo::BunnyArgs { out: &out, data: &data, max_iterations, gamma_w })
+            } else {
+                demo::digits(&demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w })
+            }
+        }
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {
             convert(&input, &output, signal_name, signal.as_deref(), ascii, repair)
         }
