@@ -21,6 +21,24 @@ pub fn default_data() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../data")
 }
 
+/// Writes `config` to RUN/config.toml and runs `fshape match` with it into
+/// RUN, writing the geodesic at t = 0, 0.2, …, 1 seen from +z.
+fn run_match(source: &Path, target: &Path, config: &str, run: &Path) -> Result<()> {
+    let cfg = run.join("config.toml");
+    io::write_atomic(&cfg, config.as_bytes(), false)?;
+    crate::match_cmd::run(&crate::match_cmd::MatchArgs {
+        source,
+        target,
+        config: &cfg,
+        out: run,
+        resume: false,
+        stop_after: None,
+        signal_name: None,
+        times: &[0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
+        view: (0.0, 90.0),
+    })
+}
+
 /// Settings shared by the digits runs.
 pub struct DigitsArgs<'a> {
     pub out: &'a Path,
@@ -70,21 +88,8 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
             gw = a.gamma_w,
             it = a.max_iterations,
         );
-        let cfg = run.join("config.toml");
-        io::write_atomic(&cfg, config.as_bytes(), false)?;
         eprintln!("digits: gamma_V/gamma_f = {ratio} -> {}", run.display());
-        crate::match_cmd::run(&crate::match_cmd::MatchArgs {
-            source: &sp,
-            target: &tp,
-            config: &cfg,
-            out: &run,
-            resume: false,
-            stop_after: None,
-            signal_name: None,
-            times: &[0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
-            view: (0.0, 90.0),
-        })
-        .with_context(|| format!("digits, gamma_V/gamma_f = {ratio}"))?;
+        run_match(&sp, &tp, &config, &run).with_context(|| format!("digits, gamma_V/gamma_f = {ratio}"))?;
     }
     Ok(())
 }
@@ -121,21 +126,8 @@ pub fn bunny(a: &BunnyArgs<'_>) -> Result<()> {
                 "\n[optimizer]\nmax_iterations = {}\n\n[schedule]\nkernel_geom = [\"gaussian:0.2\", \"gaussian:0.1\", \"gaussian:0.05\"]\n",
                 a.max_iterations
             );
-        let cfg = run.join("config.toml");
-        io::write_atomic(&cfg, config.as_bytes(), false)?;
         eprintln!("bunny: {norm} -> {}", run.display());
-        crate::match_cmd::run(&crate::match_cmd::MatchArgs {
-            source: &sp,
-            target: &tp,
-            config: &cfg,
-            out: &run,
-            resume: false,
-            stop_after: None,
-            signal_name: None,
-            times: &[0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
-            view: (0.0, 90.0),
-        })
-        .with_context(|| format!("bunny, {norm}"))?;
+        run_match(&sp, &tp, &config, &run).with_context(|| format!("bunny, {norm}"))?;
     }
     Ok(())
 }

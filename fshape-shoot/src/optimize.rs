@@ -382,6 +382,8 @@ fn zoom<O: Objective>(
     mut budget: usize,
     objective: &mut O,
 ) -> Result<Accepted, O::Error> {
+    // The point and gradient of `lo` once a probe here has set it.
+    let mut lo_point: Option<(Vec<f64>, Vec<f64>)> = None;
     while budget > 0 {
         budget -= 1;
         let t = cubic_min(lo, hi);
@@ -402,10 +404,15 @@ fn zoom<O: Objective>(
                 hi = lo;
             }
             lo = (t, f, g);
+            lo_point = Some((x, grad));
         }
     }
     // Out of evaluations: accept the best point if it decreased J enough.
     if lo.0 > 0.0 && lo.1 <= f0 + C1 * lo.0 * g0 {
+        // Re-evaluated only if `lo` came from the bracketing phase.
+        if let Some((x, grad)) = lo_point {
+            return Ok(Some((lo.0, x, lo.1, grad)));
+        }
         let Some((f, grad, _, x)) = probe(state, d, lo.0, objective)? else { return Ok(None) };
         return Ok(Some((lo.0, x, f, grad)));
     }
