@@ -127,7 +127,7 @@ enum Command {
     /// Register SOURCE onto TARGET: minimise J = H + γ_W·A over the initial
     /// momenta (L-BFGS by default), stage by stage of the configuration's
     /// coarse-to-fine schedule. Writes the geodesic (VTK + .pvd, PLY), the
-    /// momenta (p0.csv, pf.csv, momenta.vtk), summary.json and energy.svg.
+    /// momenta (p0.csv, pf.csv, momenta.vtk), summary.json and energy.svg/.png.
     /// A checkpoint is written after every iteration: after Ctrl-C or a
     /// kill, `--resume` continues to the same result, bit for bit.
     Match {

@@ -264,8 +264,10 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     }
     outputs.push((a.out.join("target.png"), crate::render::png(&crate::render::rasterise(&target, &view))?));
     files.push("target.png".into());
-    outputs.push((a.out.join("energy.svg"), energy_plot(&ck.done, gamma_w)?.into_bytes()));
-    files.push("energy.svg".into());
+    let (svg, png) = energy_plot(&ck.done, gamma_w)?;
+    outputs.push((a.out.join("energy.svg"), svg.into_bytes()));
+    outputs.push((a.out.join("energy.png"), png));
+    files.extend(["energy.svg".into(), "energy.png".into()]);
     let iterations = ck.done.iter().map(|s| s.iterations.len()).sum();
     let evaluations = ck.done.iter().map(|s| s.iterations.last().unwrap_or(&s.initial).evaluations).sum();
     let summary = Summary {
@@ -328,8 +330,8 @@ fn progress(
 }
 
 /// J, the energy and γ_W·A against the iteration number (log scale), all
-/// stages one after the other.
-fn energy_plot(stages: &[Stage], gamma_w: f64) -> Result<String> {
+/// stages one after the other, as (SVG text, PNG bytes).
+fn energy_plot(stages: &[Stage], gamma_w: f64) -> Result<(String, Vec<u8>)> {
     use plotters::prelude::*;
     let mut series: [Vec<(f64, f64)>; 3] = Default::default();
     let mut n = 0usize;
@@ -343,32 +345,63 @@ fn energy_plot(stages: &[Stage], gamma_w: f64) -> Result<String> {
             n += 1;
         }
     }
+    register_plot_font()?;
+    let mut svg = String::new();
+    draw_energy(SVGBackend::with_string(&mut svg, PLOT_SIZE).into_drawing_area(), &series, n)?;
+    let mut rgb = vec![0u8; (PLOT_SIZE.0 * PLOT_SIZE.1 * 3) as usize];
+    draw_energy(BitMapBackend::with_buffer(&mut rgb, PLOT_SIZE).into_drawing_area(), &series, n)?;
+    let png = crate::render::png_sized(&rgb, PLOT_SIZE.0, PLOT_SIZE.1)?;
+    Ok((svg, png))
+}
+
+const PLOT_SIZE: (u32, u32) = (720, 420);
+
+/// The bitmap backend draws text with ab_glyph from a font registered at run
+/// time; the font is embedded (assets/, DejaVu licence) so that a headless
+/// machine without system fonts still labels its plots.
+fn register_plot_font() -> Result<()> {
+    static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = DONE.get_or_init(|| {
+        plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSansMono.ttf"),
+        )
+        .is_ok()
+    });
+    anyhow::ensure!(*ok, "plot: the embedded font assets/DejaVuSansMono.ttf did not load");
+    Ok(())
+}
+
+fn draw_energy<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
+    series: &[Vec<(f64, f64)>; 3],
+    n: usize,
+) -> Result<()> {
+    use plotters::prelude::*;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("plot: {e}");
     let all = series.iter().flatten().map(|p| p.1);
     let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     let (lo, hi) = if lo.is_finite() { (lo / 2.0, hi * 2.0) } else { (1e-3, 1.0) };
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (720, 420)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-        let mut chart = ChartBuilder::on(&root)
-            .margin(12)
-            .x_label_area_size(36)
-            .y_label_area_size(64)
-            .caption("matching: objective by iteration", ("sans-serif", 18))
-            .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, (lo..hi).log_scale())
-            .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-        chart.configure_mesh().x_desc("iteration").draw().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-        for (k, (name, color)) in [("J", BLACK), ("energy H", BLUE), ("γ_W·A", RED)].into_iter().enumerate() {
-            chart
-                .draw_series(LineSeries::new(series[k].clone(), color))
-                .map_err(|e| anyhow::anyhow!("plot: {e}"))?
-                .label(name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-        }
-        chart.configure_series_labels().border_style(BLACK).draw().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-        root.present().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(64)
+        .caption("matching: objective by iteration", ("sans-serif", 18))
+        .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, (lo..hi).log_scale())
+        .map_err(err)?;
+    chart.configure_mesh().x_desc("iteration").draw().map_err(err)?;
+    for (k, (name, color)) in [("J", BLACK), ("energy H", BLUE), ("γ_W·A", RED)].into_iter().enumerate() {
+        chart
+            .draw_series(LineSeries::new(series[k].clone(), color))
+            .map_err(err)?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
     }
-    Ok(svg)
+    chart.configure_series_labels().background_style(WHITE).border_style(BLACK).draw().map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
 }
 
 /// The template with p_0 as a vector field `p0` and p^f as a scalar field

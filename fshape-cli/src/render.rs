@@ -200,9 +200,14 @@ pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
 
 /// `rgb` (SIZE × SIZE) as PNG bytes.
 pub fn png(rgb: &[u8]) -> anyhow::Result<Vec<u8>> {
+    png_sized(rgb, SIZE as u32, SIZE as u32)
+}
+
+/// `rgb` (width × height, row-major RGB8) as PNG bytes.
+pub fn png_sized(rgb: &[u8], width: u32, height: u32) -> anyhow::Result<Vec<u8>> {
     let mut out = Vec::new();
     {
-        let mut enc = png::Encoder::new(&mut out, SIZE as u32, SIZE as u32);
+        let mut enc = png::Encoder::new(&mut out, width, height);
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         let mut w = enc.write_header()?;

@@ -410,7 +410,7 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     assert!(dist(&end) < 0.5 * dist(&start), "{} vs {}", dist(&end), dist(&start));
     let p0 = fshape_mesh::io::csv::read_vectors(&out.join("p0.csv"), 3).unwrap();
     assert_eq!(p0.len(), 3 * target.n_vertices());
-    for f in ["momenta.vtk", "energy.svg", "trajectory.pvd", "checkpoint.json"] {
+    for f in ["momenta.vtk", "energy.svg", "energy.png", "trajectory.pvd", "checkpoint.json"] {
         assert!(out.join(f).exists(), "{f}");
     }
     // The renders are PNG images that differ from frame to frame and end
@@ -420,6 +420,18 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
         assert!(png(f).starts_with(b"\x89PNG\r\n\x1a\n"), "{f}");
     }
     assert_ne!(png("render_000.png"), png("render_004.png"));
+    // The energy curve: a 720×420 PNG with white background, black curve and
+    // axes, and text (the embedded font draws grey anti-aliased edges).
+    let dec = png::Decoder::new(std::io::Cursor::new(png("energy.png")));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (720, 420));
+    let px: Vec<&[u8]> = buf[..info.buffer_size()].chunks_exact(3).collect();
+    let count = |f: &dyn Fn(&[u8]) -> bool| px.iter().filter(|p| f(p)).count();
+    assert!(count(&|p| p == [255, 255, 255]) > px.len() / 2);
+    assert!(count(&|p| p == [0, 0, 0]) > 500);
+    assert!(count(&|p| p[0] == p[1] && p[1] == p[2] && p[0] > 40 && p[0] < 215) > 200, "no anti-aliased text");
 }
 
 #[test]
