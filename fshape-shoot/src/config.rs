@@ -27,6 +27,7 @@
 //! [optimizer]                       # matching only; every key optional
 //! method = "lbfgs"                  # lbfgs | gradient-descent          (default lbfgs)
 //! memory = 10                       # L-BFGS correction pairs           (default 10)
+//! block_scaling = true              # L-BFGS: own scale for p_0 and p^f (default true)
 //! increase = 1.2                    # gradient descent: step growth     (default 1.2)
 //! max_iterations = 200              # per schedule stage                (default 200)
 //! gradient_tolerance = 1e-3         # stop at |∇J| ≤ tol·|∇J at start|  (default 1e-3)
@@ -79,6 +80,8 @@ pub struct OptimizerSection {
     pub method: String,
     /// L-BFGS memory.
     pub memory: usize,
+    /// L-BFGS: one initial scale per block of unknowns.
+    pub block_scaling: bool,
     /// Gradient descent step growth.
     pub increase: f64,
     /// Iterations per stage.
@@ -101,6 +104,7 @@ impl Default for OptimizerSection {
         OptimizerSection {
             method: "lbfgs".into(),
             memory: 10,
+            block_scaling: d.block_scaling,
             increase: 1.2,
             max_iterations: d.max_iterations,
             gradient_tolerance: d.gradient_tolerance,
@@ -342,6 +346,7 @@ impl Config {
             gradient_tolerance: o.gradient_tolerance,
             decrease_tolerance: o.decrease_tolerance,
             decrease_window: o.decrease_window,
+            block_scaling: o.block_scaling,
             ..Settings::default()
         };
         Ok((settings, metric))

@@ -142,6 +142,11 @@ impl<'p> MatchObjective<'p> {
 impl crate::optimize::Objective for MatchObjective<'_> {
     type Error = ShootError;
 
+    /// p_0, then the signal's control (when there is one).
+    fn blocks(&self) -> Vec<usize> {
+        if self.unknowns.scale.is_empty() { Vec::new() } else { vec![self.unknowns.pn] }
+    }
+
     fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
         let (p0, pf) = self.unknowns.unpack(x);
         self.evaluations += 1;

@@ -12,6 +12,16 @@
 //! ones: Nocedal & Wright, *Numerical Optimization* (2nd ed.), Algorithm
 //! 7.4 (two-loop recursion, initial scaling γ = sᵀy/yᵀy) and Algorithms
 //! 3.5–3.6 (bracketing and zoom with safeguarded cubic interpolation).
+//!
+//! One addition: an objective whose unknowns come in blocks of different
+//! units (matching: momenta of the geometry, then of the signal) may name
+//! them ([`Objective::blocks`]), and L-BFGS then starts its two-loop
+//! recursion from a block-diagonal H₀ = diag(γ_b I), each γ_b = s_bᵀy_b /
+//! y_bᵀy_b from the newest pair restricted to block b. H₀ stays positive
+//! definite (a block without positive curvature falls back to the global
+//! γ), so the update keeps its guarantees (N&W 7.2: any positive definite
+//! H₀ is allowed); a single γ instead makes the first block's curvature
+//! set the step of the other, which left one block frozen in the demos.
 
 use std::collections::VecDeque;
 
@@ -48,6 +58,9 @@ pub struct Settings {
     pub decrease_window: usize,
     /// Objective evaluations allowed per line search.
     pub max_evaluations_per_search: usize,
+    /// L-BFGS: scale each block of [`Objective::blocks`] by its own
+    /// curvature (module docs); false: one γ for all unknowns.
+    pub block_scaling: bool,
 }
 
 impl Default for Settings {
@@ -59,6 +72,7 @@ impl Default for Settings {
             decrease_tolerance: 1e-6,
             decrease_window: 10,
             max_evaluations_per_search: 20,
+            block_scaling: true,
         }
     }
 }
@@ -128,6 +142,11 @@ pub trait Objective {
     type Error;
     /// (J(x), ∇J(x)).
     fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), Self::Error>;
+    /// Where the unknowns split into blocks of different units: the start
+    /// of every block but the first, increasing. Default: one block.
+    fn blocks(&self) -> Vec<usize> {
+        Vec::new()
+    }
 }
 
 impl<E, F: FnMut(&[f64]) -> Result<(f64, Vec<f64>), E>> Objective for F {
@@ -202,7 +221,9 @@ impl State {
     }
 
     /// The L-BFGS direction −H∇J (two-loop recursion); −∇J without pairs.
-    fn lbfgs_direction(&self) -> Vec<f64> {
+    /// `blocks`: starts of the blocks after the first, each scaled by its
+    /// own γ (module docs); empty for one γ.
+    fn lbfgs_direction(&self, blocks: &[usize]) -> Vec<f64> {
         let mut q = self.grad.clone();
         let k = self.s.len();
         let mut alpha = vec![0.0; k];
@@ -214,8 +235,16 @@ impl State {
             }
         }
         if k > 0 {
-            let gamma = dot(&self.s[k - 1], &self.y[k - 1]) / dot(&self.y[k - 1], &self.y[k - 1]);
-            q.iter_mut().for_each(|v| *v *= gamma);
+            let (s, y) = (&self.s[k - 1], &self.y[k - 1]);
+            let gamma = dot(s, y) / dot(y, y);
+            let n = q.len();
+            let starts = std::iter::once(0).chain(blocks.iter().copied().filter(|&b| b > 0 && b < n));
+            let ends = blocks.iter().copied().filter(|&b| b > 0 && b < n).chain(std::iter::once(n));
+            for (a, b) in starts.zip(ends) {
+                let (sy, yy) = (dot(&s[a..b], &y[a..b]), dot(&y[a..b], &y[a..b]));
+                let g = if sy > 0.0 && yy > 0.0 && (sy / yy).is_finite() { sy / yy } else { gamma };
+                q[a..b].iter_mut().for_each(|v| *v *= g);
+            }
         }
         for i in 0..k {
             let beta = rho[i] * dot(&self.y[i], &q);
@@ -236,7 +265,8 @@ impl State {
         }
         let accepted = match settings.method {
             Method::Lbfgs { memory } => {
-                let mut d = self.lbfgs_direction();
+                let blocks = if settings.block_scaling { objective.blocks() } else { Vec::new() };
+                let mut d = self.lbfgs_direction(&blocks);
                 let mut slope = dot(&d, &self.grad);
                 if slope >= 0.0 || !slope.is_finite() {
                     // Not a descent direction (should not happen with
