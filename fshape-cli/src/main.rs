@@ -160,8 +160,8 @@ enum Command {
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo {
-        /// Which experiment: digits or bunny.
-        #[arg(value_parser = ["digits", "bunny"])]
+        /// Which experiment: digits, bunny or cortex.
+        #[arg(value_parser = ["digits", "bunny", "cortex"])]
         name: String,
         /// Output directory.
         #[arg(long, default_value = "demo-output")]
@@ -175,9 +175,10 @@ enum Command {
         /// Digits: the ratios γ_V/γ_f to run.
         #[arg(long, value_delimiter = ',', default_value = "1,20,100")]
         ratios: Vec<f64>,
-        /// Weight γ_W of the data attachment.
-        #[arg(long, default_value_t = 100.0)]
-        gamma_w: f64,
+        /// Weight γ_W of the data attachment [default: 100 for digits and
+        /// bunny, 1e-2 for the cortex (whose areas are in mm²)].
+        #[arg(long)]
+        gamma_w: Option<f64>,
     },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
     /// optionally .gz), optionally attaching a signal from a CSV file.
@@ -250,10 +251,19 @@ fn main() -> ExitCode {
         }
         Command::Demo { name, out, data, max_iterations, ratios, gamma_w } => {
             let data = data.unwrap_or_else(demo::default_data);
-            if name == "bunny" {
-                demo::bunny(&demo::BunnyArgs { out: &out, data: &data, max_iterations, gamma_w })
-            } else {
-                demo::digits(&demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w })
+            match name.as_str() {
+                "bunny" => {
+                    let gamma_w = gamma_w.unwrap_or(100.0);
+                    demo::bunny(&demo::BunnyArgs { out: &out, data: &data, max_iterations, gamma_w })
+                }
+                "cortex" => {
+                    let gamma_w = gamma_w.unwrap_or(1e-2);
+                    demo::cortex(&demo::CortexArgs { out: &out, data: &data, max_iterations, gamma_w })
+                }
+                _ => {
+                    let gamma_w = gamma_w.unwrap_or(100.0);
+                    demo::digits(&demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w })
+                }
             }
         }
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {
