@@ -38,6 +38,10 @@ pub struct Trajectory {
     pub hamiltonian: Vec<f64>,
     /// Where the forward time went.
     pub timings: Timings,
+    /// Tangential model: the residual ζ (the nodes carry f_0 + ζ from
+    /// t = 0, the value the data term sees; [`Trajectory::at`] reports the
+    /// paper's f_0 + tζ). Empty for the other models.
+    zeta: Vec<f64>,
 }
 
 impl Trajectory {
@@ -86,7 +90,8 @@ impl Trajectory {
     }
 
     /// (x, f) at any t ∈ [0, 1]: cubic Hermite interpolation between the
-    /// steps with the field's ẋ, ḟ at both ends (exact at the steps).
+    /// steps with the field's ẋ, ḟ at both ends (exact at the steps). For
+    /// the tangential model f is the paper's affine path f_0 + tζ.
     pub fn at(&self, t: f64) -> (Vec<f64>, Vec<f64>) {
         let n = self.steps();
         let s = (t.clamp(0.0, 1.0) * n as f64).min(n as f64);
@@ -103,7 +108,14 @@ impl Trajectory {
         let interp = |r: std::ops::Range<usize>| -> Vec<f64> {
             r.map(|i| h00 * z0[i] + h10 * dt * d0[i] + h01 * z1[i] + h11 * dt * d1[i]).collect()
         };
-        (interp(self.layout.x()), interp(self.layout.f()))
+        let mut f = interp(self.layout.f());
+        // f is f_0 + ζ here (constant along the path): f_0 + tζ is that
+        // minus (1 − t)ζ.
+        let back = 1.0 - t.clamp(0.0, 1.0);
+        for (v, z) in f.iter_mut().zip(&self.zeta) {
+            *v -= back * z;
+        }
+        (interp(self.layout.x()), f)
     }
 }
 
@@ -238,7 +250,11 @@ impl Problem {
     /// the tangential model the signal residual ζ, for LDDMM ignored).
     pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
         self.check(p0, pf)?;
-        self.shoot_from(self.initial(p0, pf))
+        let mut traj = self.shoot_from(self.initial(p0, pf))?;
+        if self.model.kind == ModelKind::Tangential {
+            traj.zeta = pf.to_vec();
+        }
+        Ok(traj)
     }
 
     /// The forward pass. Every buffer is allocated here, before the first
@@ -295,7 +311,7 @@ impl Problem {
                 }
             }
         }
-        Ok(Trajectory { layout: l, n_stages: s, nodes, slopes, stages, hamiltonian: ham, timings: t })
+        Ok(Trajectory { layout: l, n_stages: s, nodes, slopes, stages, hamiltonian: ham, timings: t, zeta: Vec::new() })
     }
 
     fn attachment(&self) -> Result<&Attachment, ShootError> {

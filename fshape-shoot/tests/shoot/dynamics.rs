@@ -114,3 +114,22 @@ fn the_hamiltonian_is_conserved_to_the_integrators_order() {
     eprintln!("relative drift of H: {d1:e} at 20 steps, {d2:e} at 40, order {order:.2}");
     assert!((3.5..4.5).contains(&order) && d2 < 1e-6, "drifts {d1:e}, {d2:e}");
 }
+
+#[test]
+fn the_tangential_path_reports_the_affine_signal_and_the_lddmm_geometry() {
+    // The paper's tangential model: geometry by LDDMM, signal f_0 + tζ.
+    let (template, _) = surfaces();
+    let (p0, zeta) = momenta(&template, 0.5, 5);
+    let tan = Problem::new(&template, model("kind = \"tangential\"\nnorm = \"h1\"", "", "rk4", 10)).unwrap();
+    let lddmm = Problem::new(&template, model("kind = \"lddmm\"", "", "rk4", 10)).unwrap();
+    let (traj, geom) = (tan.shoot(&p0, &zeta).unwrap(), lddmm.shoot(&p0, &zeta).unwrap());
+    let f0 = template.signal().unwrap();
+    for t in [0.0, 0.3, 0.5, 1.0] {
+        let ((x, f), (xl, _)) = (traj.at(t), geom.at(t));
+        assert_eq!(x, xl, "t = {t}: the geometry is LDDMM's");
+        let affine: Vec<f64> = f0.iter().zip(&zeta).map(|(a, z)| a + t * z).collect();
+        assert!(max_diff(&f, &affine) < 1e-12, "t = {t}: {}", max_diff(&f, &affine));
+    }
+    // What the data term sees at t = 1 is f_0 + ζ.
+    assert!(max_diff(traj.signal(10), &traj.at(1.0).1) < 1e-12);
+}
