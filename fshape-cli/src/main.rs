@@ -154,7 +154,7 @@ enum Command {
         #[arg(long)]
         signal_name: Option<String>,
         /// Camera of the PNG renders of surfaces in space: azimuth,elevation in degrees.
-        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [30.0, 20.0])]
+        #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
         view: Vec<f64>,
     },
     /// Run one of the paper's experiments on data shipped in the repository
@@ -237,6 +237,14 @@ fn main() -> ExitCode {
             signal_name,
         }),
         Command::Match { source, target, config, out, resume, stop_after, times, signal_name, view } => {
+            let (azimuth, elevation) = match view[..] {
+                [a, e] if a.is_finite() && e.is_finite() => (a, e),
+                _ => {
+                    let got: Vec<String> = view.iter().map(f64::to_string).collect();
+                    eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
+                    return ExitCode::from(2);
+                }
+            };
             match_cmd::run(&match_cmd::MatchArgs {
                 source: &source,
                 target: &target,
@@ -246,7 +254,7 @@ fn main() -> ExitCode {
                 stop_after,
                 signal_name,
                 times: &times,
-                view: (view[0], view[1]),
+                view: (azimuth, elevation),
             })
         }
         Command::Demo { name, out, data, max_iterations, ratios, gamma_w } => {

@@ -168,8 +168,10 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let mut problem = Problem::new(&source, model).with_context(|| format!("setting up {}", a.source.display()))?;
     let unknowns = Unknowns::new(&problem, metric)?;
     let mut budget = a.stop_after;
+    let mut has_target = false;
     for (k, (geom, kernel)) in schedule.iter().enumerate().skip(ck.done.len()) {
         problem.set_target(&target, kernel.clone()).with_context(|| format!("target {}", a.target.display()))?;
+        has_target = true;
         let mut objective = MatchObjective::new(&problem, unknowns.clone());
         let (mut state, initial, mut records) = match ck.current.take() {
             Some(c) => c,
@@ -219,7 +221,11 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         });
         write_json(&checkpoint_path, &ck)?;
     }
-    // The result: shoot the final momenta, write everything.
+    // The result: shoot the final momenta, write everything. (Resuming a
+    // finished run skips every stage: the data term is then set here.)
+    if let Some((_, kernel)) = schedule.last().filter(|_| !has_target) {
+        problem.set_target(&target, kernel.clone()).with_context(|| format!("target {}", a.target.display()))?;
+    }
     let x = ck.warm.clone().context("at least one stage ran")?;
     let (p0, pf) = unknowns.unpack(&x);
     let (objective, traj) = problem.objective(&p0, &pf)?;

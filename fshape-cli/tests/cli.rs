@@ -458,9 +458,42 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
         v["stages"].clone()
     };
     assert_eq!(stages(&whole), stages(&parts), "every iteration's energies");
+    // Resuming a finished run writes the same results again (e.g. after a
+    // change of --view or --times), without iterating.
+    std::fs::remove_file(whole.join("p0.csv")).unwrap();
+    run(&whole, &["--resume"]);
+    assert_eq!(std::fs::read(whole.join("p0.csv")).unwrap(), std::fs::read(parts.join("p0.csv")).unwrap());
+    assert_eq!(stages(&whole), stages(&parts));
     // A checkpoint of other inputs is refused by name.
     std::fs::write(&c, std::fs::read_to_string(&c).unwrap().replace("gamma_w = 50.0", "gamma_w = 5.0")).unwrap();
     let o = fshape(&["match", &s, &t, "--config", &c, "--out", &parts.display().to_string(), "--resume"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("checkpoint.json: written for other inputs"));
+}
+
+#[test]
+fn match_takes_the_view_as_azimuth_comma_elevation_negative_included() {
+    let (s, t, c) = match_inputs("match_view", 1);
+    let ok = tmp("match_view_ok");
+    let o = fshape(&[
+        "match",
+        &s,
+        &t,
+        "--config",
+        &c,
+        "--out",
+        &ok.display().to_string(),
+        "--view",
+        "-90,0",
+        "--stop-after",
+        "0",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for bad in ["30", "1,2,3", "nan,0"] {
+        let out = tmp("match_view_bad");
+        let o = fshape(&["match", &s, &t, "--config", &c, "--out", &out.display().to_string(), "--view", bad]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("view"), "--view {bad}: {err}");
+        assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none(), "--view {bad} wrote files");
+    }
 }
