@@ -66,7 +66,8 @@ struct Checkpoint {
     current: Option<(State, Iteration, Vec<Iteration>)>,
     /// The unknowns at the end of the last finished stage (warm start).
     warm: Option<Vec<f64>>,
-    /// Seconds spent by earlier invocations.
+    /// Wall seconds spent on this match so far, by this and earlier
+    /// invocations, as of this write.
     seconds: f64,
 }
 
@@ -163,6 +164,9 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         Checkpoint { fingerprint: print, done: Vec::new(), current: None, warm: None, seconds: 0.0 }
     };
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    // Wall time of the earlier runs of this match (every checkpoint records
+    // the total so far, so a killed run loses at most one iteration's).
+    let earlier = ck.seconds;
     let (kind, norm, steps) = (model.kind, model.norm.name(), model.steps);
     let (gamma_v, gamma_f, gamma_w) = (model.gamma_v, model.gamma_f, model.gamma_w);
     let mut problem = Problem::new(&source, model).with_context(|| format!("setting up {}", a.source.display()))?;
@@ -186,7 +190,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         let stop = loop {
             if budget == Some(0) {
                 ck.current = Some((state, initial, records));
-                ck.seconds += start.elapsed().as_secs_f64();
+                ck.seconds = earlier + start.elapsed().as_secs_f64();
                 write_json(&checkpoint_path, &ck)?;
                 bar.abandon_with_message("stopped by --stop-after; continue with --resume");
                 eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());
@@ -207,6 +211,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
             records.push(it);
             budget = budget.map(|b| b - 1);
             ck.current = Some((state.clone(), initial.clone(), records.clone()));
+            ck.seconds = earlier + start.elapsed().as_secs_f64();
             write_json(&checkpoint_path, &ck)?;
             ck.current = None;
         };
@@ -219,6 +224,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
             initial,
             iterations: records,
         });
+        ck.seconds = earlier + start.elapsed().as_secs_f64();
         write_json(&checkpoint_path, &ck)?;
     }
     // The result: shoot the final momenta, write everything. (Resuming a
@@ -295,7 +301,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         hamiltonian: traj.hamiltonian.clone(),
         iterations,
         evaluations,
-        seconds: ck.seconds + start.elapsed().as_secs_f64(),
+        seconds: earlier + start.elapsed().as_secs_f64(),
         files: files.clone(),
     };
     outputs.push((a.out.join("summary.json"), serde_json::to_vec_pretty(&summary)?));

@@ -461,7 +461,16 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     // Resuming a finished run writes the same results again (e.g. after a
     // change of --view or --times), without iterating.
     std::fs::remove_file(whole.join("p0.csv")).unwrap();
+    let seconds = |f: &PathBuf| -> f64 {
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(f).unwrap()).unwrap();
+        v["seconds"].as_f64().unwrap()
+    };
+    // The checkpoint carries the wall time so far, and the summary of the
+    // resumed run counts it.
+    let before = seconds(&whole.join("checkpoint.json"));
+    assert!(before > 0.0);
     run(&whole, &["--resume"]);
+    assert!(seconds(&whole.join("summary.json")) >= before);
     assert_eq!(std::fs::read(whole.join("p0.csv")).unwrap(), std::fs::read(parts.join("p0.csv")).unwrap());
     assert_eq!(stages(&whole), stages(&parts));
     // A checkpoint of other inputs is refused by name.
