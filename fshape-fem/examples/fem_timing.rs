@@ -6,14 +6,15 @@
 //! ```
 //! - assembly: from raw vertex and cell arrays to the P1 mass and stiffness
 //!   values, counting the shape's validation and the sparsity pattern;
-//! - refactor_solve: numeric Cholesky of D_1 (ℓ = 1) with the saved
-//!   analysis, plus one solve;
+//! - refactor_solve: assembly and numeric Cholesky of D_1 (ℓ = 1) at x
+//!   with the saved analysis, plus one solve (nested-dissection ordering,
+//!   the default; `refactor_solve_amd_ms` with AMD, `l_len_*` their fill);
 //! - `--export` writes the mesh as binary PLY for the other side to read.
 
 use std::path::Path;
 use std::time::Instant;
 
-use fshape_fem::{Norm, SignalNorm};
+use fshape_fem::{Norm, Ordering, SignalNorm};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
 
@@ -57,16 +58,23 @@ fn main() -> anyhow::Result<()> {
     let fixed = time_ms(reps, || {
         std::hint::black_box(d.assemble(&points).expect("assembly"));
     });
-    let t = Instant::now();
-    let mut solver = d.solver()?;
-    let symbolic_ms = t.elapsed().as_secs_f64() * 1e3;
     let b = vec![1.0; shape.n_vertices()];
-    let refactor_solve = time_ms(reps, || {
-        solver.factor(&points).expect("factor");
-        std::hint::black_box(solver.solve(&b).expect("solve"));
-    });
+    // (analysis ms, refactor+solve ms, factor values) for one ordering.
+    let run = |ordering: Ordering| -> anyhow::Result<(f64, f64, usize)> {
+        let d = SignalNorm::try_new(&shape, Norm::H1 { length: 1.0 })?.with_ordering(ordering);
+        let t = Instant::now();
+        let mut solver = d.solver()?;
+        let symbolic_ms = t.elapsed().as_secs_f64() * 1e3;
+        let ms = time_ms(reps, || {
+            solver.factor(&points).expect("factor");
+            std::hint::black_box(solver.solve(&b).expect("solve"));
+        });
+        Ok((symbolic_ms, ms, solver.l_len()))
+    };
+    let (symbolic_ms, refactor_solve, l_len) = run(Ordering::NestedDissection)?;
+    let (symbolic_amd_ms, refactor_solve_amd, l_len_amd) = run(Ordering::Amd)?;
     println!(
-        "{{\"mesh\": \"{target}\", \"n_vertices\": {}, \"n_cells\": {}, \"assembly_ms\": {assembly:.3}, \"assembly_fixed_pattern_ms\": {fixed:.3}, \"symbolic_ms\": {symbolic_ms:.3}, \"refactor_solve_ms\": {refactor_solve:.3}, \"threads\": {}}}",
+        "{{\"mesh\": \"{target}\", \"n_vertices\": {}, \"n_cells\": {}, \"assembly_ms\": {assembly:.3}, \"assembly_fixed_pattern_ms\": {fixed:.3}, \"symbolic_ms\": {symbolic_ms:.3}, \"refactor_solve_ms\": {refactor_solve:.3}, \"l_len\": {l_len}, \"symbolic_amd_ms\": {symbolic_amd_ms:.3}, \"refactor_solve_amd_ms\": {refactor_solve_amd:.3}, \"l_len_amd\": {l_len_amd}, \"threads\": {}}}",
         shape.n_vertices(),
         shape.n_cells(),
         rayon::current_num_threads()

@@ -38,9 +38,10 @@
 
 mod local;
 mod norm;
+mod ordering;
 mod solver;
 
-pub use norm::{SignalNorm, Workspace};
+pub use norm::{Ordering, SignalNorm, Workspace};
 pub use solver::Solver;
 
 /// Which signal norm D_s(x) to use.

@@ -57,6 +57,18 @@ pub struct SignalNorm {
     /// [`SignalNorm::solver`] call; never for the diagonal lumped norm.
     symbolic: OnceLock<Result<SymbolicCholesky<usize>, FemError>>,
     parallel: bool,
+    ordering: Ordering,
+}
+
+/// The fill-reducing ordering of the Cholesky factor.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Ordering {
+    /// Approximate minimum degree (faer's).
+    Amd,
+    /// METIS nested dissection, postordered by its elimination tree; AMD
+    /// if METIS cannot order the pattern.
+    #[default]
+    NestedDissection,
 }
 
 impl SignalNorm {
@@ -94,6 +106,7 @@ impl SignalNorm {
             inc,
             symbolic,
             parallel: true,
+            ordering: Ordering::default(),
         })
     }
 
@@ -104,13 +117,25 @@ impl SignalNorm {
             return Ok(None);
         }
         let s = self.symbolic.get_or_init(|| {
-            factorize_symbolic_cholesky(
-                self.pattern.as_ref(),
-                Side::Lower,
-                SymmetricOrdering::Amd,
-                CholeskySymbolicParams::default(),
-            )
-            .map_err(|e| FemError::Factorisation { message: format!("{e:?}") })
+            let order = match self.ordering {
+                Ordering::Amd => None,
+                Ordering::NestedDissection => crate::ordering::nested_dissection(self.pattern.as_ref()),
+            };
+            let inverse = order.as_ref().map(|fwd| {
+                let mut inv = vec![0usize; fwd.len()];
+                for (k, &v) in fwd.iter().enumerate() {
+                    inv[v] = k;
+                }
+                inv
+            });
+            let ordering = match (&order, &inverse) {
+                (Some(fwd), Some(inv)) => {
+                    SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, self.n_vertices))
+                }
+                _ => SymmetricOrdering::Amd,
+            };
+            factorize_symbolic_cholesky(self.pattern.as_ref(), Side::Lower, ordering, CholeskySymbolicParams::default())
+                .map_err(|e| FemError::Factorisation { message: format!("{e:?}") })
         });
         s.as_ref().map(Some).map_err(Clone::clone)
     }
@@ -119,6 +144,13 @@ impl SignalNorm {
     /// results bit for bit.
     pub fn with_parallel(mut self, parallel: bool) -> Self {
         self.parallel = parallel;
+        self
+    }
+
+    /// Chooses the fill-reducing ordering of the factorisation (before the
+    /// first [`SignalNorm::solver`] call; later calls keep the analysis).
+    pub fn with_ordering(mut self, ordering: Ordering) -> Self {
+        self.ordering = ordering;
         self
     }
 

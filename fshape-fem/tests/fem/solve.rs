@@ -101,3 +101,26 @@ fn singular_and_degenerate_input_is_refused_with_its_index() {
     assert_eq!(d.quadratic(s.points(), &[1.0; 3]), Err(FemError::Dimension { what: "f", expected: 4, found: 3 }));
     assert_eq!(d.solver().unwrap().solve(&[1.0; 4]), Err(FemError::NotFactored));
 }
+
+#[test]
+fn nested_dissection_and_amd_orderings_solve_alike_and_nested_dissection_fills_less() {
+    use fshape_fem::Ordering;
+    // The paper's template size (10242 vertices), slightly perturbed so
+    // that no symmetry hides an ordering error.
+    let s = icosphere(5, 1.0);
+    let mut rng = SplitMix64(11);
+    let x: Vec<f64> = s.points().iter().map(|v| v * (1.0 + 0.05 * rng.range(-1.0, 1.0))).collect();
+    let h_true = random_direction(s.n_vertices(), &mut rng);
+    let mut fill = Vec::new();
+    for ordering in [Ordering::NestedDissection, Ordering::Amd] {
+        let d = SignalNorm::try_new(&s, Norm::H1 { length: 0.3 }).unwrap().with_ordering(ordering);
+        let mut solver = d.solver().unwrap();
+        solver.factor(&x).unwrap();
+        let h = solver.solve(&d.matvec(&x, &h_true).unwrap()).unwrap();
+        let err = h.iter().zip(&h_true).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(err < 1e-10, "{ordering:?}: {err}");
+        fill.push(solver.l_len());
+    }
+    eprintln!("factor values, nested dissection vs AMD: {fill:?}");
+    assert!(fill[0] < fill[1], "factor values, nested dissection vs AMD: {fill:?}");
+}
