@@ -506,3 +506,42 @@ fn match_takes_the_view_as_azimuth_comma_elevation_negative_included() {
         assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none(), "--view {bad} wrote files");
     }
 }
+
+#[test]
+fn demo_cortex_runs_both_models_on_the_hemispheres_it_is_given() {
+    // Stand-ins for fsaverage5 (coarse spheres in mm, the right one at
+    // x > 0), so the demo's wiring runs in a second: mirroring, the
+    // thickness CSV, one config per model, three stages each.
+    use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
+    let data = tmp("cortex_data");
+    let fs5 = data.join("fsaverage5");
+    std::fs::create_dir_all(&fs5).unwrap();
+    let sphere = fshape_mesh::generate::icosphere(2, 30.0);
+    let left: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [p[0] - 35.0, p[1], p[2]]).collect();
+    let right: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.1 * p[0] + 36.0, p[1], p[2]]).collect();
+    let thick = |pts: &[f64], a: f64| -> Vec<f64> { pts.chunks_exact(3).map(|p| 2.5 + a * p[2] / 30.0).collect() };
+    let lh = sphere.clone().with_points(left.clone()).unwrap().with_signal(Some(thick(&left, 0.5))).unwrap();
+    let rh = sphere.clone().with_points(right.clone()).unwrap();
+    write_mesh(&fs5.join("lh.pial.thick.ply.gz"), &lh, Encoding::Binary).unwrap();
+    write_mesh(&fs5.join("rh.pial.ply.gz"), &rh, Encoding::Binary).unwrap();
+    fshape_mesh::io::csv::write_signal(&fs5.join("rh.thick.csv.gz"), "thickness", &thick(&right, -0.5)).unwrap();
+    let out = tmp("cortex_out");
+    let args = ["demo", "cortex", "--data", &data.display().to_string(), "--out", &out.display().to_string()];
+    let o = fshape(&[&args[..], &["--max-iterations", "2"]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let target = read_mesh(&out.join("cortex/target.ply"), &ReadOptions::default()).unwrap();
+    assert!(target.points().chunks_exact(3).all(|p| p[0] < 0.0), "mirrored to x < 0");
+    for model in ["tangential", "metamorphosis"] {
+        let dir = out.join("cortex").join(model);
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["stages"].as_array().unwrap().len(), 3, "{model}");
+        assert!(summary["final_value"].as_f64().unwrap() < summary["stages"][0]["initial"]["value"].as_f64().unwrap());
+        assert!(std::fs::read_to_string(dir.join("config.toml")).unwrap().contains(&format!("kind = \"{model}\"")));
+    }
+    // A thickness file of the wrong length is refused by name.
+    fshape_mesh::io::csv::write_signal(&fs5.join("rh.thick.csv.gz"), "thickness", &[2.0; 5]).unwrap();
+    let o = fshape(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("rh.thick.csv.gz") && err.contains("5 values"), "{err}");
+}
