@@ -1,7 +1,7 @@
 //! Every x-derivative against central finite differences, and serial
 //! against parallel evaluation, bit for bit.
 
-use fshape_fem::SignalNorm;
+use fshape_fem::{Norm, SignalNorm};
 use fshape_mesh::generate::SplitMix64;
 use fshape_mesh::test_support::{check_gradient, check_jvp, random_direction};
 
@@ -62,6 +62,11 @@ fn serial_and_parallel_results_are_bitwise_equal() {
         assert_eq!(par.grad(x, &a, &a).unwrap(), ser.grad(x, &a, &a).unwrap());
         assert_eq!(par.hvp(x, &a, &a, &dx).unwrap(), ser.hvp(x, &a, &a, &dx).unwrap());
         assert_eq!(par.dmatvec(x, &dx, &a).unwrap(), ser.dmatvec(x, &dx, &a).unwrap());
+        // The from-scratch P1 mass and stiffness (the libigl comparison's
+        // path): parallel local matrices, then a per-entry gather.
+        if norm != Norm::L2Lumped {
+            assert_eq!(par.assemble_mass_and_stiffness(x).unwrap(), ser.assemble_mass_and_stiffness(x).unwrap());
+        }
     }
 }
 
