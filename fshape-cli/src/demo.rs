@@ -21,10 +21,21 @@ pub fn default_data() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../data")
 }
 
-/// Writes `config` to RUN/config.toml and runs `fshape match` with it into
+/// Creates DIR and writes the demo's inputs there as binary PLY: the paths
+/// of DIR/source.ply and DIR/target.ply.
+fn write_inputs(dir: &Path, source: &fshape_mesh::FShape, target: &fshape_mesh::FShape) -> Result<(PathBuf, PathBuf)> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let (sp, tp) = (dir.join("source.ply"), dir.join("target.ply"));
+    write_mesh(&sp, source, Encoding::Binary)?;
+    write_mesh(&tp, target, Encoding::Binary)?;
+    Ok((sp, tp))
+}
+
+/// Writes `config` to RUN/config.toml (creating RUN) and runs `fshape match` with it into
 /// RUN, writing the geodesic at t = 0, 0.2, …, 1 seen from `view`
 /// (azimuth, elevation in degrees).
 fn run_match(source: &Path, target: &Path, config: &str, run: &Path, view: (f64, f64)) -> Result<()> {
+    std::fs::create_dir_all(run).with_context(|| format!("creating {}", run.display()))?;
     let cfg = run.join("config.toml");
     io::write_atomic(&cfg, config.as_bytes(), false)?;
     crate::match_cmd::run(&crate::match_cmd::MatchArgs {
@@ -54,7 +65,6 @@ pub struct DigitsArgs<'a> {
 /// 4900 vertices, L² (lumped) metamorphosis for each γ_V/γ_f.
 pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
     let dir = a.out.join("digits");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let shape = |file: &str, seed: u64| -> Result<fshape_mesh::FShape> {
         let path = a.data.join("digits").join(file);
         let image = read_image(&path, None)?;
@@ -63,9 +73,7 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
         Ok(mesh.with_signal(Some(values))?)
     };
     let (source, target) = (shape("mnist5k_1000_label2.csv", 1)?, shape("mnist5k_1500_label3.csv", 2)?);
-    let (sp, tp) = (dir.join("source.ply"), dir.join("target.ply"));
-    write_mesh(&sp, &source, Encoding::Binary)?;
-    write_mesh(&tp, &target, Encoding::Binary)?;
+    let (sp, tp) = write_inputs(&dir, &source, &target)?;
     eprintln!(
         "digits: source {} vertices, target {} vertices (a 2 onto a 3, signal in [0, 0.6])",
         source.n_vertices(),
@@ -75,7 +83,6 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
     let (p1, p2, p3, f) = (from_fshapestk(0.2), from_fshapestk(0.1), from_fshapestk(0.05), from_fshapestk(0.7));
     for &ratio in a.ratios {
         let run = dir.join(format!("ratio_{ratio}"));
-        std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
         let config = format!(
             "# fshape demo digits: gamma_V / gamma_f = {ratio}. Widths are the paper's\n\
              # (fshapesTk's exp(-u/s^2)) divided by sqrt(2) for fshape's exp(-u/(2 s^2)).\n\
@@ -96,8 +103,8 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
     Ok(())
 }
 
-/// Settings of the bunny runs.
-pub struct BunnyArgs<'a> {
+/// Settings of the bunny and cortex runs.
+pub struct RunArgs<'a> {
     pub out: &'a Path,
     pub data: &'a Path,
     pub max_iterations: usize,
@@ -108,19 +115,15 @@ pub struct BunnyArgs<'a> {
 /// textured 2581-vertex Stanford bunny, H¹ against lumped L², the shipped
 /// `data/configs/bunny.toml` with γ_W and a coarse-to-fine schedule of k_p
 /// (0.2, 0.1, 0.05) added.
-pub fn bunny(a: &BunnyArgs<'_>) -> Result<()> {
+pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
     let dir = a.out.join("bunny");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let bunny = io::read_mesh(&a.data.join("stanford_bunny/bunny_qslim_2581v.ply.gz"), &io::ReadOptions::default())?;
     let (template, target) = fshape_shoot::paper::bunny_setting(&bunny)?;
-    let (sp, tp) = (dir.join("source.ply"), dir.join("target.ply"));
-    write_mesh(&sp, &template, Encoding::Binary)?;
-    write_mesh(&tp, &target, Encoding::Binary)?;
+    let (sp, tp) = write_inputs(&dir, &template, &target)?;
     let shipped = std::fs::read_to_string(a.data.join("configs/bunny.toml"))
         .with_context(|| format!("reading {}", a.data.join("configs/bunny.toml").display()))?;
     for norm in ["h1", "l2-lumped"] {
         let run = dir.join(norm);
-        std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
         let config = shipped
             .replace("norm = \"h1\"", &format!("norm = \"{norm}\""))
             .replace("gamma_w = 1.0", &format!("gamma_w = {}", a.gamma_w))
@@ -132,14 +135,6 @@ pub fn bunny(a: &BunnyArgs<'_>) -> Result<()> {
         run_match(&sp, &tp, &config, &run, (0.0, 90.0)).with_context(|| format!("bunny, {norm}"))?;
     }
     Ok(())
-}
-
-/// Settings of the cortex runs.
-pub struct CortexArgs<'a> {
-    pub out: &'a Path,
-    pub data: &'a Path,
-    pub max_iterations: usize,
-    pub gamma_w: f64,
 }
 
 /// The right hemisphere mirrored onto the left: x → −x, and each
@@ -171,9 +166,8 @@ pub const CORTEX_LENGTH_MM: f64 = 5.0;
 /// pial surface with its thickness onto the right one mirrored (x → −x,
 /// faces reoriented) with its thickness, in millimetres; H¹ tangential
 /// model against H¹ metamorphosis.
-pub fn cortex(a: &CortexArgs<'_>) -> Result<()> {
+pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
     let dir = a.out.join("cortex");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let fs5 = a.data.join("fsaverage5");
     let source = io::read_mesh(&fs5.join("lh.pial.thick.ply.gz"), &io::ReadOptions::default())?;
     let right = io::read_mesh(&fs5.join("rh.pial.ply.gz"), &io::ReadOptions::default())?;
@@ -186,9 +180,7 @@ pub fn cortex(a: &CortexArgs<'_>) -> Result<()> {
         right.n_vertices()
     );
     let target = mirror_x(&right.with_signal(Some(thick.values))?)?;
-    let (sp, tp) = (dir.join("source.ply"), dir.join("target.ply"));
-    write_mesh(&sp, &source, Encoding::Binary)?;
-    write_mesh(&tp, &target, Encoding::Binary)?;
+    let (sp, tp) = write_inputs(&dir, &source, &target)?;
     eprintln!(
         "cortex: left pial ({} vertices) onto the mirrored right pial ({} vertices), thickness in mm",
         source.n_vertices(),
@@ -196,7 +188,6 @@ pub fn cortex(a: &CortexArgs<'_>) -> Result<()> {
     );
     for kind in ["tangential", "metamorphosis"] {
         let run = dir.join(kind);
-        std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
         let config = format!(
             "# fshape demo cortex: {kind}, H1 with length {l} mm. Everything is in mm\n\
              # (fsaverage5, FreeSurfer surface RAS); widths use exp(-u/(2 s^2)).\n\

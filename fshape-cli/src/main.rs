@@ -262,11 +262,11 @@ fn main() -> ExitCode {
             match name.as_str() {
                 "bunny" => {
                     let gamma_w = gamma_w.unwrap_or(100.0);
-                    demo::bunny(&demo::BunnyArgs { out: &out, data: &data, max_iterations, gamma_w })
+                    demo::bunny(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w })
                 }
                 "cortex" => {
                     let gamma_w = gamma_w.unwrap_or(1e-2);
-                    demo::cortex(&demo::CortexArgs { out: &out, data: &data, max_iterations, gamma_w })
+                    demo::cortex(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w })
                 }
                 _ => {
                     let gamma_w = gamma_w.unwrap_or(100.0);
