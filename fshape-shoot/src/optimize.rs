@@ -237,10 +237,18 @@ impl State {
         if k > 0 {
             let (s, y) = (&self.s[k - 1], &self.y[k - 1]);
             let gamma = dot(s, y) / dot(y, y);
+            // Block bounds 0 < b₁ < … < n; starts out of order or range
+            // are skipped rather than trusted.
             let n = q.len();
-            let starts = std::iter::once(0).chain(blocks.iter().copied().filter(|&b| b > 0 && b < n));
-            let ends = blocks.iter().copied().filter(|&b| b > 0 && b < n).chain(std::iter::once(n));
-            for (a, b) in starts.zip(ends) {
+            let mut bounds = vec![0];
+            for &b in blocks {
+                if b > bounds[bounds.len() - 1] && b < n {
+                    bounds.push(b);
+                }
+            }
+            bounds.push(n);
+            for w in bounds.windows(2) {
+                let (a, b) = (w[0], w[1]);
                 let (sy, yy) = (dot(&s[a..b], &y[a..b]), dot(&y[a..b], &y[a..b]));
                 let g = if sy > 0.0 && yy > 0.0 && (sy / yy).is_finite() { sy / yy } else { gamma };
                 q[a..b].iter_mut().for_each(|v| *v *= g);
