@@ -387,6 +387,10 @@ pub(crate) struct FastWorkspace {
     dys: Vec<f64>,
     dbs: Vec<f64>,
     rows: Vec<f64>,
+    /// Run the block kernel without SIMD dispatch (baseline x86-64), for
+    /// the test that every instruction set gives the same bits.
+    #[cfg(test)]
+    scalar: bool,
 }
 
 /// Computes the sum `MODE` for Gaussian sums in 2 or 3 dimensions with
@@ -462,7 +466,11 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
     let uses_d = matches!(MODE, CONV_JVP | GRAD_JVP | BOTH_JVP);
     // Inputs were validated by the caller; the taper only decides which
     // runs BlockPairs hands out.
-    let FastWorkspace { pairs, ys, bs, dys, dbs, rows } = ws;
+    #[cfg(test)]
+    let scalar = ws.scalar;
+    #[cfg(not(test))]
+    let scalar = false;
+    let FastWorkspace { pairs, ys, bs, dys, dbs, rows, .. } = ws;
     pairs.rebuild(inp.x, inp.y, D, taper);
     let order = pairs.source_order();
     gather::<D>(inp.y, order, ys);
@@ -485,7 +493,8 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
             a: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.a, BD, uses_a, c, l))),
             da: std::array::from_fn(|c| std::array::from_fn(|l| pick(inp.da, BD, uses_a && uses_d, c, l))),
         };
-        let acc = arch.dispatch(Block::<D, BD, MODE> { terms, taper, t: &t, all, runs });
+        let block = Block::<D, BD, MODE> { terms, taper, t: &t, all, runs };
+        let acc = if scalar { block.with_simd(pulp::Scalar::new()) } else { arch.dispatch(block) };
         for (l, row) in out.chunks_exact_mut(w_out).enumerate() {
             for (c, v) in row.iter_mut().enumerate() {
                 *v = acc[c][l];
@@ -503,7 +512,69 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
 
 #[cfg(test)]
 mod tests {
-    use super::{L, exp_lanes};
+    use super::{BOTH_JVP, CONV_GRAD, FastWorkspace, Inputs, L, exp_lanes, gaussian_sum_into};
+    use crate::{Kernel, Profile};
+
+    #[test]
+    fn every_instruction_set_gives_the_same_bits() {
+        // The runtime dispatch (AVX-512 or AVX2 where the CPU has them)
+        // against the baseline x86-64 build of the same block kernel, for
+        // the two fused modes (which between them use every line of it),
+        // a two-term sum with integer ratio (the power path), exact and
+        // truncated (tapered and untapered runs).
+        let mut seed = 7u64;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (n, m) = (70, 150);
+        let mut v = |len: usize| (0..len).map(|_| rnd()).collect::<Vec<f64>>();
+        let (x, dx, y, dy, a, da, b, db) =
+            (v(3 * n), v(3 * n), v(3 * m), v(3 * m), v(3 * n), v(3 * n), v(3 * m), v(3 * m));
+        let inp = Inputs { x: &x, dx: &dx, y: &y, dy: &dy, a: &a, da: &da, b: &b, db: &db };
+        let exact = Kernel::try_new(&Profile::Gaussians { sigmas: vec![0.3, 0.15], weights: vec![1.0, 0.5] }).unwrap();
+        for kernel in [exact.clone(), exact.truncated(1e-6).unwrap()] {
+            let terms = kernel.gaussian_terms().unwrap();
+            for mode in [CONV_GRAD, BOTH_JVP] {
+                let mut outs = Vec::new();
+                for scalar in [false, true] {
+                    let mut ws = FastWorkspace { scalar, ..Default::default() };
+                    let mut out = vec![0.0; n * 6];
+                    let done = match mode {
+                        CONV_GRAD => gaussian_sum_into::<CONV_GRAD>(
+                            &terms,
+                            kernel.taper(),
+                            inp,
+                            3,
+                            3,
+                            true,
+                            &mut ws,
+                            6,
+                            &mut out,
+                            &mut [],
+                        ),
+                        _ => gaussian_sum_into::<BOTH_JVP>(
+                            &terms,
+                            kernel.taper(),
+                            inp,
+                            3,
+                            3,
+                            true,
+                            &mut ws,
+                            6,
+                            &mut out,
+                            &mut [],
+                        ),
+                    };
+                    assert!(done);
+                    outs.push(out);
+                }
+                assert!(outs[0].iter().any(|v| *v != 0.0));
+                let same = outs[0].iter().zip(&outs[1]).all(|(p, q)| p.to_bits() == q.to_bits());
+                assert!(same, "mode {mode}, truncated {}", kernel.taper().is_some());
+            }
+        }
+    }
     #[test]
     fn the_vectorised_exponential_is_accurate_to_a_few_ulps() {
         // The whole domain used (arguments −a·u ≤ 0), densely near 0 where the
