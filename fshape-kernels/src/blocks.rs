@@ -195,14 +195,28 @@ impl BlockPairs {
     /// once it has held as many points (the shooting rebuilds the blocks at
     /// every evaluation of its vector field, as the points move).
     pub(crate) fn rebuild(&mut self, x: &[f64], y: &[f64], dim: usize, taper: Option<crate::Taper>) {
+        // Exact sums visit every source: sorting would only cost time.
+        self.rebuild_sorting(x, y, dim, taper, taper.is_some());
+    }
+
+    /// [`BlockPairs::rebuild`], sorting into k-d blocks even for an
+    /// untapered kernel if `sort` (the mixed-precision sums need spatially
+    /// small target blocks: `mixed.rs`).
+    pub(crate) fn rebuild_sorting(
+        &mut self,
+        x: &[f64],
+        y: &[f64],
+        dim: usize,
+        taper: Option<crate::Taper>,
+        sort: bool,
+    ) {
         self.taper = taper;
-        if taper.is_none() {
-            // Exact sums visit every source: sorting would only cost time.
-            self.tgt.rebuild_identity(x.len() / dim, L);
-            self.src.rebuild_identity(y.len() / dim, LEAF);
-        } else {
+        if sort {
             self.tgt.rebuild(x, dim, L);
             self.src.rebuild(y, dim, LEAF);
+        } else {
+            self.tgt.rebuild_identity(x.len() / dim, L);
+            self.src.rebuild_identity(y.len() / dim, LEAF);
         }
         // Every target block's runs, in one serial pass over the block
         // pairs (box tests only: ~0.1 % of the cheapest sum's time).

@@ -2,7 +2,7 @@
 //! and degenerate inputs; the truncation bound; symmetry; PSD; serial =
 //! parallel.
 
-use fshape_kernels::{Kernel, KernelSums};
+use fshape_kernels::{Kernel, KernelSums, Precision};
 use fshape_mesh::generate::SplitMix64;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
@@ -137,6 +137,8 @@ fn serial_and_parallel_are_bitwise_equal() {
         let ser = KernelSums::try_new(&k, &x, 3).unwrap().with_parallel(false);
         assert_eq!(par.conv(&x, &p, 3).unwrap(), ser.conv(&x, &p, 3).unwrap());
         assert_eq!(par.grad_cross(&x, &p, &p, 3).unwrap(), ser.grad_cross(&x, &p, &p, 3).unwrap());
+        let (par, ser) = (par.with_precision(Precision::MixedF32), ser.with_precision(Precision::MixedF32));
+        assert_eq!(par.conv(&x, &p, 3).unwrap(), ser.conv(&x, &p, 3).unwrap());
     }
 }
 
