@@ -5,8 +5,9 @@ Inputs: N = M points from real cortical surfaces (conte69 32k midthickness;
 pycortex S1 pial for 10^5), weights b_j in R^3 drawn uniformly in [0, 1]
 with a fixed seed, Gaussian widths sigma = f x the bounding-box diagonal.
 out_i = sum_j exp(-|x_i - x_j|^2 / (2 sigma^2)) b_j. fshape's exact sum is
-checked against pykeops' (relative difference), its truncated sums against
-its exact one (max_i |err_i| / max_i |exact_i|). KeOps writes
+checked against pykeops' (relative difference), its truncated and its
+mixed-precision sums against its f64 exact one (max_i |err_i| /
+max_i |exact_i|). KeOps writes
 exp(-u / s^2); we pass it 1/(2 sigma^2) explicitly, so both compute the
 same kernel. Run with scripts/kernel_compare.sh.
 """
@@ -84,6 +85,14 @@ def main():
     for name, n, f, k, o, agree in rows:
         t6, t9 = o["truncated"]
         print(f"| {name} | {n} | {f} | {k:.1f} | {o['exact_ms']:.1f} | {o['exact_ms']/k:.2f} | {t6['ms']:.1f} | {t6['ms']/k:.2f} | {t6['rel_err']:.1e} | {t9['ms']:.1f} | {t9['ms']/k:.2f} | {t9['rel_err']:.1e} | {agree:.1e} |")
+    print()
+    print("Mixed precision (Precision::MixedF32: pair terms in f32, sums and results in f64), same runs; rel. error against fshape's f64 exact sum:")
+    print()
+    print("| points | N = M | sigma / diameter | pykeops (ms) | fshape exact, mixed (ms) | ratio | rel. error | fshape tau=1e-6, mixed (ms) | ratio | rel. error |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name, n, f, k, o, agree in rows:
+        t6 = o["truncated"][0]
+        print(f"| {name} | {n} | {f} | {k:.1f} | {o['mixed_ms']:.1f} | {o['mixed_ms']/k:.2f} | {o['mixed_rel_err']:.1e} | {t6['mixed_ms']:.1f} | {t6['mixed_ms']/k:.2f} | {t6['mixed_rel_err']:.1e} |")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 //! Kernel-sum benchmarks on real cortex points: N = M ∈ {10³, 10⁴, 32·10³},
 //! σ ∈ {0.01, 0.05, 0.2} × diameter, exact and truncated (τ = 1e-6, 1e-9),
-//! Gaussian sums with 3-vector weights and the gradient of pᵀKp. Run with
+//! Gaussian sums with 3-vector weights, in f64 and in mixed precision
+//! (`_mixed`: pair terms in f32), and the gradient of pᵀKp. Run with
 //! `cargo bench -p fshape-kernels`; the pykeops comparison is
 //! `scripts/kernel_compare.sh`.
 
@@ -9,7 +10,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use fshape_kernels::{Kernel, KernelSums};
+use fshape_kernels::{Kernel, KernelSums, Precision};
 use fshape_mesh::generate::SplitMix64;
 use fshape_mesh::io::{ReadOptions, read_mesh};
 
@@ -32,10 +33,15 @@ fn bench(c: &mut Criterion) {
                 ("tau1e-6", exact.truncated(1e-6).unwrap()),
                 ("tau1e-9", exact.truncated(1e-9).unwrap()),
             ] {
-                let id = BenchmarkId::new(format!("conv_{label}_sigma{f}"), n);
-                group.bench_function(id, |bch| {
-                    bch.iter(|| black_box(KernelSums::try_new(&k, &x, 3).unwrap().conv(&x, &b, 3).unwrap()))
-                });
+                for (prec, precision) in [("", Precision::F64), ("_mixed", Precision::MixedF32)] {
+                    let id = BenchmarkId::new(format!("conv_{label}{prec}_sigma{f}"), n);
+                    group.bench_function(id, |bch| {
+                        bch.iter(|| {
+                            let sums = KernelSums::try_new(&k, &x, 3).unwrap().with_precision(precision);
+                            black_box(sums.conv(&x, &b, 3).unwrap())
+                        })
+                    });
+                }
             }
         }
         if n <= 10_000 {
