@@ -1,5 +1,6 @@
-//! Kernel-sum benchmarks on real cortex points: N = M ∈ {10³, 10⁴, 32·10³},
-//! σ ∈ {0.01, 0.05, 0.2} × diameter, exact and truncated (τ = 1e-6, 1e-9),
+//! Kernel-sum benchmarks on real cortex points: N = M ∈ {10³, 10⁴, 32·10³}
+//! (conte69) with σ ∈ {0.01, 0.05, 0.2} × diameter, and 10⁵ (pycortex S1)
+//! with σ = 0.05 × diameter, exact and truncated (τ = 1e-6, 1e-9),
 //! Gaussian sums with 3-vector weights, in f64 and in mixed precision
 //! (`_mixed`: pair terms in f32), and the gradient of pᵀKp. Run with
 //! `cargo bench -p fshape-kernels`; the pykeops comparison is
@@ -17,16 +18,23 @@ use fshape_mesh::io::{ReadOptions, read_mesh};
 fn bench(c: &mut Criterion) {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/conte69_32k/lh.midthickness.ply.gz");
     let cortex = read_mesh(&path, &ReadOptions::default()).expect("shipped cortex");
-    let diam = cortex.bounding_box().diagonal();
+    // 10⁵ points: the 152893-vertex pycortex S1 pial surface, one width.
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/pycortex_S1/lh.pia.ply.gz");
+    let large = read_mesh(&path, &ReadOptions::default()).expect("shipped cortex");
     let mut group = c.benchmark_group("kernels");
     group.sample_size(10).warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(2));
-    for n in [1_000usize, 10_000, cortex.n_vertices()] {
-        // Every (P/n)-th vertex: a subset spread over the whole surface.
-        let step = cortex.n_vertices() / n;
-        let x: Vec<f64> = (0..n).flat_map(|k| cortex.point(k * step).to_vec()).collect();
+    for (mesh, n, widths) in [
+        (&cortex, 1_000usize, &[0.01, 0.05, 0.2][..]),
+        (&cortex, 10_000, &[0.01, 0.05, 0.2]),
+        (&cortex, cortex.n_vertices(), &[0.01, 0.05, 0.2]),
+        (&large, 100_000, &[0.05]),
+    ] {
+        // Vertices k·P/n: a subset spread over the whole surface.
+        let x: Vec<f64> = (0..n).flat_map(|k| mesh.point(k * mesh.n_vertices() / n).to_vec()).collect();
+        let diam = mesh.bounding_box().diagonal();
         let mut rng = SplitMix64(1);
         let b: Vec<f64> = (0..3 * n).map(|_| rng.uniform()).collect();
-        for f in [0.01, 0.05, 0.2] {
+        for &f in widths {
             let exact = Kernel::gaussian(f * diam).unwrap();
             for (label, k) in [
                 ("exact", exact.clone()),
