@@ -92,7 +92,7 @@ def main():
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name, n, f, k, o, agree in rows:
         t6 = o["truncated"][0]
-        print(f"| {name} | {n} | {f} | {k:.1f} | {o['mixed_ms']:.1f} | {o['mixed_ms']/k:.2f} | {o['mixed_rel_err']:.1e} | {t6['mixed_ms']:.1f} | {t6['mixed_ms']/k:.2f} | {t6['mixed_rel_err']:.1e} |")
+        print(f"| {name} | {n} | {f} | {k:.1f} | {o['mixed_ms']:.1f} | {o['mixed_ms']/k:.3f} | {o['mixed_rel_err']:.1e} | {t6['mixed_ms']:.1f} | {t6['mixed_ms']/k:.3f} | {t6['mixed_rel_err']:.1e} |")
 
 
 if __name__ == "__main__":
