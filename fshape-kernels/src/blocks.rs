@@ -161,6 +161,8 @@ pub struct BlockPairs {
     /// The runs of target block t: `runs[run_ptr[t]..run_ptr[t + 1]]`.
     runs: Vec<SourceRun>,
     run_ptr: Vec<usize>,
+    /// Targets per block: [`L`], or the mixed-precision path's own lane count.
+    tgt_size: usize,
 }
 
 impl BlockPairs {
@@ -196,26 +198,29 @@ impl BlockPairs {
     /// every evaluation of its vector field, as the points move).
     pub(crate) fn rebuild(&mut self, x: &[f64], y: &[f64], dim: usize, taper: Option<crate::Taper>) {
         // Exact sums visit every source: sorting would only cost time.
-        self.rebuild_sorting(x, y, dim, taper, taper.is_some());
+        self.rebuild_blocks(x, y, dim, taper, taper.is_some(), L);
     }
 
-    /// [`BlockPairs::rebuild`], sorting into k-d blocks even for an
-    /// untapered kernel if `sort` (the mixed-precision sums need spatially
-    /// small target blocks: `mixed.rs`).
-    pub(crate) fn rebuild_sorting(
+    /// [`BlockPairs::rebuild`] with `tgt_size` targets per block, sorting
+    /// into k-d blocks even for an untapered kernel if `sort` (the
+    /// mixed-precision sums need spatially small target blocks of their own
+    /// lane count: `mixed.rs`).
+    pub(crate) fn rebuild_blocks(
         &mut self,
         x: &[f64],
         y: &[f64],
         dim: usize,
         taper: Option<crate::Taper>,
         sort: bool,
+        tgt_size: usize,
     ) {
         self.taper = taper;
+        self.tgt_size = tgt_size;
         if sort {
-            self.tgt.rebuild(x, dim, L);
+            self.tgt.rebuild(x, dim, tgt_size);
             self.src.rebuild(y, dim, LEAF);
         } else {
-            self.tgt.rebuild_identity(x.len() / dim, L);
+            self.tgt.rebuild_identity(x.len() / dim, tgt_size);
             self.src.rebuild_identity(y.len() / dim, LEAF);
         }
         // Every target block's runs, in one serial pass over the block
@@ -283,7 +288,7 @@ impl BlockPairs {
             debug_assert_eq!(rows.len(), targets.len() * w);
             f(targets, runs, rows)
         };
-        let chunk = (L * w).max(1);
+        let chunk = (self.tgt_size * w).max(1);
         if parallel {
             out.par_chunks_mut(chunk).enumerate().for_each(block);
         } else {

@@ -30,8 +30,10 @@ use pulp::{Arch, Simd, WithSimd};
 use crate::profile::GaussTerms;
 use crate::{BlockPairs, Taper};
 
-/// Lanes per block.
-pub const L: usize = 32;
+/// Lanes per block: 16 f64 lanes: two AVX-512 registers per lane array. The shooting's fused
+/// sums keep a dozen such arrays live; at 32 lanes they were 1.3× slower
+/// (presumably register spills; not profiled), the plain sums no faster.
+pub const L: usize = 16;
 
 /// exp(x) for each lane, for x ≤ 0 (x < −708 gives 0, below
 /// f64's normal range); also exact to a few ulps for 0 < x ≤ 1 (rounding

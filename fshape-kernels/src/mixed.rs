@@ -35,7 +35,9 @@
 
 use pulp::{Arch, Simd, WithSimd};
 
-use crate::fast::L;
+/// Targets per block, as f32 lanes: 32 (two AVX-512 registers) measured
+/// 1.3× faster here than the f64 paths' 16.
+pub(crate) const L: usize = 32;
 use crate::profile::GaussTerms;
 use crate::{BlockPairs, SourceRun, Taper};
 
@@ -250,7 +252,7 @@ fn run<const D: usize, const BD: usize>(
     // Sorted even for an exact kernel: the error bound grows with the
     // target blocks' size.
     let mut pairs = BlockPairs::default();
-    pairs.rebuild_sorting(x, y, D, taper, true);
+    pairs.rebuild_blocks(x, y, D, taper, true, L);
     let order = pairs.source_order();
     let ys: Vec<[f64; D]> = order.iter().map(|&j| std::array::from_fn(|k| y[j * D + k])).collect();
     let bs: Vec<[f32; BD]> = order.iter().map(|&j| std::array::from_fn(|c| b[j * BD + c] as f32)).collect();
@@ -312,7 +314,7 @@ mod tests {
         let (nx, ny) = (x.len() / dim, y.len() / dim);
         let mut h = vec![0.0; nx];
         let mut pairs = BlockPairs::default();
-        pairs.rebuild_sorting(x, y, dim, k.taper(), true);
+        pairs.rebuild_blocks(x, y, dim, k.taper(), true, super::L);
         pairs
             .map_blocks(false, |targets, _| {
                 let half: f64 = (0..dim)

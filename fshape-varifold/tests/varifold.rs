@@ -52,7 +52,7 @@ pub fn kernels() -> Vec<VarifoldKernel> {
 }
 
 /// Pairs of random fshapes of each kind: surfaces in R³, curves in R² and
-/// R³, triangulated squares in R². Sizes above one block of 32 cells.
+/// R³, triangulated squares in R². Sizes above one block of cells (16).
 pub fn shape_pairs(seed: u64) -> Vec<(&'static str, FShape, FShape)> {
     vec![
         ("surface", perturbed_icosphere(1, 0.1, seed), perturbed_icosphere(2, 0.1, seed + 1)),
