@@ -207,8 +207,9 @@ impl<const D: usize, const BD: usize> Block<'_, D, BD> {
 }
 
 /// The mixed-precision conv for 2 or 3 dimensions and 1 to 3 weight
-/// components (`None` otherwise: the caller takes the f64 path). Inputs
-/// were validated by the caller.
+/// components (`None` otherwise, or where f32 cannot hold the kernel's
+/// 1/(2σ²) as a normal number or the squared distances: the caller then
+/// takes the f64 path). Inputs were validated by the caller.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn conv(
     terms: &GaussTerms,
@@ -220,6 +221,11 @@ pub(crate) fn conv(
     bdim: usize,
     parallel: bool,
 ) -> Option<Vec<f64>> {
+    let a_fits = terms.a[..terms.n].iter().all(|&a| (a as f32).is_normal());
+    let extent = x.iter().chain(y).fold(0.0f64, |m, v| m.max(v.abs()));
+    if !a_fits || extent > 1e18 {
+        return None;
+    }
     Some(match (dim, bdim) {
         (2, 1) => run::<2, 1>(terms, taper, x, y, b, parallel),
         (2, 2) => run::<2, 2>(terms, taper, x, y, b, parallel),
@@ -358,6 +364,24 @@ mod tests {
             }
         }
         worst
+    }
+
+    #[test]
+    fn widths_and_coordinates_beyond_f32_take_the_f64_path() {
+        // 1/(2σ²) overflows f32 for σ = 1e-25 (then −a·0 would be NaN at a
+        // repeated point) and is 0 in f32 for σ = 1e25; coordinates of 1e30
+        // square beyond f32. Each must give the f64 result, bit for bit.
+        let y = [0.0, 0.0, 0.0, 1e-26, 0.0, 0.0, 2.0, 1.0, 0.0];
+        let big = [1e30, 0.0, 0.0, -1e30, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let b = [1.0, 2.0, 3.0];
+        for (sigma, pts) in [(1e-25, &y), (1e25, &y), (1.0, &big)] {
+            let k = Kernel::gaussian(sigma).unwrap();
+            let f64_sum = KernelSums::try_new(&k, pts, 3).unwrap().conv(pts, &b, 1).unwrap();
+            let mixed = KernelSums::try_new(&k, pts, 3).unwrap().with_precision(Precision::MixedF32);
+            let out = mixed.conv(pts, &b, 1).unwrap();
+            assert!(out.iter().all(|v| v.is_finite()), "sigma {sigma}: {out:?}");
+            assert_eq!(out, f64_sum, "sigma {sigma}");
+        }
     }
 
     #[test]
