@@ -41,11 +41,11 @@ use crate::{BlockPairs, SourceRun, Taper};
 
 /// Targets per block, as f32 lanes: 32 (two AVX-512 registers) measured
 /// 1.3× faster here than the f64 paths' 16.
-pub(crate) const L: usize = 32;
+const L: usize = 32;
 
 /// Sources summed in f32 before the partial sums join the f64 ones: the
 /// f32 accumulation error stays below (FLUSH − 1)·ε of Σ|k b|.
-pub(crate) const FLUSH: usize = 16;
+const FLUSH: usize = 16;
 
 /// Which arithmetic [`KernelSums::conv`](crate::KernelSums::conv) uses for
 /// sums of Gaussians.
@@ -78,7 +78,7 @@ pub enum Precision {
 /// degree-7 Taylor polynomial of e^r (truncation < 6e-9 relative), 2ⁿ from
 /// its exponent bits: within 3 f32 ulps of e^x (tested).
 #[inline(always)]
-pub(crate) fn exp_lanes_f32(x: [f32; L]) -> [f32; L] {
+fn exp_lanes_f32(x: [f32; L]) -> [f32; L] {
     const LOG2E: f32 = std::f32::consts::LOG2_E;
     // 1.5·2^23: adding it rounds to an integer held in the low mantissa bits.
     const MAGIC: f32 = 12_582_912.0;
@@ -240,7 +240,7 @@ pub(crate) fn conv(
 }
 
 /// The centre of the bounding box of the targets `idx` of `x`.
-pub(crate) fn block_centre<const D: usize>(x: &[f64], idx: &[usize]) -> [f64; D] {
+fn block_centre<const D: usize>(x: &[f64], idx: &[usize]) -> [f64; D] {
     std::array::from_fn(|k| {
         let (lo, hi) = idx
             .iter()
