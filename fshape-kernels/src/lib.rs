@@ -49,7 +49,7 @@ pub use profile::{Kernel, Profile, TAPER_WIDTH, Taper};
 pub use sums::{KernelSums, Pair, SpatialIndex, SumWorkspace};
 
 /// Lane-wise building blocks for vectorised kernels in other crates: a
-/// block of [`L`] targets is held as `[f64; L]` arrays, and plain loops over
+/// block of [`L`](lanes::L) targets is held as `[f64; L]` arrays, and plain loops over
 /// the lanes inside a `pulp::WithSimd` body compile to SIMD.
 pub mod lanes {
     pub use crate::fast::{L, exp_lanes};
