@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use fshape_fem::{Norm, Ordering, SignalNorm};
+use fshape_fem::{FillOrdering, Norm, SignalNorm};
 use fshape_mesh::FShape;
 use fshape_mesh::generate::icosphere;
 use fshape_mesh::io::{ReadOptions, read_mesh};
@@ -48,7 +48,7 @@ fn bench(c: &mut Criterion) {
         // Nested dissection (the default) and AMD, for the record of the
         // choice (README).
         for (op, ordering) in
-            [("refactor_solve_h1", Ordering::NestedDissection), ("refactor_solve_h1_amd", Ordering::Amd)]
+            [("refactor_solve_h1", FillOrdering::NestedDissection), ("refactor_solve_h1_amd", FillOrdering::Amd)]
         {
             let d = SignalNorm::try_new(&s, Norm::H1 { length: 1.0 }).unwrap().with_ordering(ordering);
             let mut solver = d.solver().unwrap();

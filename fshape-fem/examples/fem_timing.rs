@@ -14,7 +14,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use fshape_fem::{Norm, Ordering, SignalNorm};
+use fshape_fem::{FillOrdering, Norm, SignalNorm};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
 
@@ -60,7 +60,7 @@ fn main() -> anyhow::Result<()> {
     });
     let b = vec![1.0; shape.n_vertices()];
     // (analysis ms, refactor+solve ms, factor values) for one ordering.
-    let run = |ordering: Ordering| -> anyhow::Result<(f64, f64, usize)> {
+    let run = |ordering: FillOrdering| -> anyhow::Result<(f64, f64, usize)> {
         let d = SignalNorm::try_new(&shape, Norm::H1 { length: 1.0 })?.with_ordering(ordering);
         let t = Instant::now();
         let mut solver = d.solver()?;
@@ -71,8 +71,8 @@ fn main() -> anyhow::Result<()> {
         });
         Ok((symbolic_ms, ms, solver.l_len()))
     };
-    let (symbolic_ms, refactor_solve, l_len) = run(Ordering::NestedDissection)?;
-    let (symbolic_amd_ms, refactor_solve_amd, l_len_amd) = run(Ordering::Amd)?;
+    let (symbolic_ms, refactor_solve, l_len) = run(FillOrdering::NestedDissection)?;
+    let (symbolic_amd_ms, refactor_solve_amd, l_len_amd) = run(FillOrdering::Amd)?;
     println!(
         "{{\"mesh\": \"{target}\", \"n_vertices\": {}, \"n_cells\": {}, \"assembly_ms\": {assembly:.3}, \"assembly_fixed_pattern_ms\": {fixed:.3}, \"symbolic_ms\": {symbolic_ms:.3}, \"refactor_solve_ms\": {refactor_solve:.3}, \"l_len\": {l_len}, \"symbolic_amd_ms\": {symbolic_amd_ms:.3}, \"refactor_solve_amd_ms\": {refactor_solve_amd:.3}, \"l_len_amd\": {l_len_amd}, \"threads\": {}}}",
         shape.n_vertices(),

@@ -21,9 +21,10 @@
 //! forward-mode dual numbers (num-dual). All are exact and checked against
 //! central finite differences in the tests.
 //!
-//! Every operation runs cell by cell in parallel (rayon) and gathers per
-//! output index in a fixed order, so serial and parallel results are equal
-//! bit for bit.
+//! Local work runs cell by cell (in parallel with rayon unless
+//! [`SignalNorm::with_parallel`] turns it off) and is gathered per output
+//! index in a fixed order; the assembly of D_s is one serial scatter in cell
+//! order. Serial and parallel results are equal bit for bit.
 //!
 //! ```
 //! use fshape_fem::{Norm, SignalNorm};
@@ -41,7 +42,7 @@ mod norm;
 mod ordering;
 mod solver;
 
-pub use norm::{Ordering, SignalNorm, Workspace};
+pub use norm::{FillOrdering, SignalNorm, Workspace};
 pub use solver::Solver;
 
 /// Which signal norm D_s(x) to use.

@@ -53,16 +53,16 @@ pub struct SignalNorm {
     /// For each vertex, its (cell·3 + corner) incidences in increasing order.
     inc_ptr: Vec<usize>,
     inc: Vec<usize>,
-    /// Cholesky analysis (AMD ordering, elimination tree), done on the first
+    /// Cholesky analysis (fill-reducing ordering, elimination tree), done on the first
     /// [`SignalNorm::solver`] call; never for the diagonal lumped norm.
     symbolic: OnceLock<Result<SymbolicCholesky<usize>, FemError>>,
     parallel: bool,
-    ordering: Ordering,
+    ordering: FillOrdering,
 }
 
 /// The fill-reducing ordering of the Cholesky factor.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Ordering {
+pub enum FillOrdering {
     /// Approximate minimum degree (faer's).
     Amd,
     /// METIS nested dissection, postordered by its elimination tree; AMD
@@ -106,7 +106,7 @@ impl SignalNorm {
             inc,
             symbolic,
             parallel: true,
-            ordering: Ordering::default(),
+            ordering: FillOrdering::default(),
         })
     }
 
@@ -118,8 +118,8 @@ impl SignalNorm {
         }
         let s = self.symbolic.get_or_init(|| {
             let order = match self.ordering {
-                Ordering::Amd => None,
-                Ordering::NestedDissection => crate::ordering::nested_dissection(self.pattern.as_ref()),
+                FillOrdering::Amd => None,
+                FillOrdering::NestedDissection => crate::ordering::nested_dissection(self.pattern.as_ref()),
             };
             let inverse = order.as_ref().map(|fwd| {
                 let mut inv = vec![0usize; fwd.len()];
@@ -149,7 +149,7 @@ impl SignalNorm {
 
     /// Chooses the fill-reducing ordering of the factorisation (before the
     /// first [`SignalNorm::solver`] call; later calls keep the analysis).
-    pub fn with_ordering(mut self, ordering: Ordering) -> Self {
+    pub fn with_ordering(mut self, ordering: FillOrdering) -> Self {
         self.ordering = ordering;
         self
     }

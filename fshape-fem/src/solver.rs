@@ -38,7 +38,8 @@ pub struct Solver<'a> {
 
 impl SignalNorm {
     /// A solver workspace for this norm. The first call runs the Cholesky
-    /// analysis of the pattern (AMD ordering, elimination tree); later
+    /// analysis of the pattern (fill-reducing [`crate::FillOrdering`],
+    /// nested dissection by default; elimination tree); later
     /// calls reuse it.
     pub fn solver(&self) -> Result<Solver<'_>, FemError> {
         let symbolic = self.symbolic()?;

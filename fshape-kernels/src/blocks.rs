@@ -171,7 +171,7 @@ impl BlockPairs {
     pub fn try_new(x: &[f64], y: &[f64], dim: usize, kernel: &crate::Kernel) -> Result<Self, crate::KernelError> {
         use crate::KernelError;
         if dim != 2 && dim != 3 {
-            return Err(KernelError::Dimension { what: "point dimension", expected: 3, found: dim });
+            return Err(KernelError::PointDimension { found: dim });
         }
         for (what, p) in [("target coordinates", x), ("source coordinates", y)] {
             if !p.len().is_multiple_of(dim) {

@@ -95,6 +95,12 @@ pub enum KernelError {
         /// Length given.
         found: usize,
     },
+    /// Points must have 2 or 3 coordinates.
+    #[error("point dimension: expected 2 or 3 coordinates per point, found {found}")]
+    PointDimension {
+        /// The dimension given.
+        found: usize,
+    },
     /// The spatial index of a truncated sum takes at most 2³² − 1 sources.
     #[error("{n} source points exceed the spatial index's capacity (2^32 - 1)")]
     TooManyPoints {

@@ -79,7 +79,7 @@ impl<'a> KernelSums<'a> {
     /// Prepares sums against `y` (`dim` = 2 or 3 coordinates per point).
     pub fn try_new(kernel: &'a Kernel, y: &'a [f64], dim: usize) -> Result<Self, KernelError> {
         if dim != 2 && dim != 3 {
-            return Err(KernelError::Dimension { what: "point dimension", expected: 3, found: dim });
+            return Err(KernelError::PointDimension { found: dim });
         }
         if !y.len().is_multiple_of(dim) {
             return Err(KernelError::Dimension {
@@ -145,7 +145,8 @@ impl<'a> KernelSums<'a> {
         Inputs { x: &[], dx: &[], y: &[], dy: &[], a: &[], da: &[], b: &[], db: &[] }
     }
 
-    /// The k-d tree over y for a truncated kernel (built once), or `None`.
+    /// The spatial index over y for a truncated kernel (obvhs BVH by
+    /// default, or kiddo's k-d tree; built once), or `None`.
     fn tree(&self) -> Option<&Tree> {
         self.kernel.support_radius()?;
         let t = self.tree.get_or_init(|| {

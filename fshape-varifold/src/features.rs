@@ -109,7 +109,7 @@ impl CellFeatures {
         signal: Option<Vec<f64>>,
     ) -> Result<CellFeatures, VarifoldError> {
         if dim != 2 && dim != 3 {
-            return Err(VarifoldError::Dimension { what: "point dimension", expected: 3, found: dim });
+            return Err(VarifoldError::PointDimension { found: dim });
         }
         let n = weight.len();
         let du = dir.len().checked_div(n).unwrap_or(dim);

@@ -46,7 +46,7 @@ mod kernel;
 
 pub use attach::{Attachment, Distance, ShapeGrad, distance, inner_product, inner_product_grad};
 pub use features::{CellFeatures, FeatureGrad};
-pub use kernel::{GrassKernel, SignalKernel, VarifoldKernel};
+pub use kernel::{GrassKernel, SignalKernel, VarifoldKernel, parse_position};
 
 /// Why a data attachment could not be computed.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -90,6 +90,12 @@ pub enum VarifoldError {
         /// Expected length.
         expected: usize,
         /// Length given.
+        found: usize,
+    },
+    /// Points must have 2 or 3 coordinates.
+    #[error("point dimension: expected 2 or 3 coordinates per point, found {found}")]
+    PointDimension {
+        /// The dimension given.
         found: usize,
     },
     /// The two shapes are not of the same kind.

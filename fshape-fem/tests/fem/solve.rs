@@ -104,7 +104,7 @@ fn singular_and_degenerate_input_is_refused_with_its_index() {
 
 #[test]
 fn nested_dissection_and_amd_orderings_solve_alike_and_nested_dissection_fills_less() {
-    use fshape_fem::Ordering;
+    use fshape_fem::FillOrdering;
     // The paper's template size (10242 vertices), slightly perturbed so
     // that no symmetry hides an ordering error.
     let s = icosphere(5, 1.0);
@@ -112,7 +112,7 @@ fn nested_dissection_and_amd_orderings_solve_alike_and_nested_dissection_fills_l
     let x: Vec<f64> = s.points().iter().map(|v| v * (1.0 + 0.05 * rng.range(-1.0, 1.0))).collect();
     let h_true = random_direction(s.n_vertices(), &mut rng);
     let mut fill = Vec::new();
-    for ordering in [Ordering::NestedDissection, Ordering::Amd] {
+    for ordering in [FillOrdering::NestedDissection, FillOrdering::Amd] {
         let d = SignalNorm::try_new(&s, Norm::H1 { length: 0.3 }).unwrap().with_ordering(ordering);
         let mut solver = d.solver().unwrap();
         solver.factor(&x).unwrap();
