@@ -66,14 +66,9 @@ impl VarifoldKernel {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn try_new(position: Kernel, signal: SignalKernel, grass: GrassKernel) -> Result<Self, VarifoldError> {
-        let check = |what, sigma: f64| {
-            if sigma > 0.0 && sigma.is_finite() { Ok(()) } else { Err(VarifoldError::Width { what, sigma }) }
-        };
-        if let SignalKernel::Gaussian { sigma } = signal {
-            check("signal kernel", sigma)?;
-        }
+        check_width("signal kernel", nums_of(signal))?;
         if let GrassKernel::OrientedGaussian { sigma } | GrassKernel::UnorientedGaussian { sigma } = grass {
-            check("direction kernel", sigma)?;
+            check_width("direction kernel", Some(sigma))?;
         }
         Ok(VarifoldKernel { position, signal, grass })
     }
@@ -166,26 +161,58 @@ impl VarifoldKernel {
     /// # Ok::<(), fshape_varifold::VarifoldError>(())
     /// ```
     pub fn parse(position: &str, signal: Option<&str>, grass: &str) -> Result<Self, VarifoldError> {
-        use fshape_kernels::Profile;
-        const GEOM: &str = "gaussian:σ, gaussian:σ1,σ2,... or cauchy:σ";
-        let (name, nums) = parse_spec("position kernel", position, GEOM)?;
-        let bad = |what, input: &str, expected| VarifoldError::Parse { what, input: input.to_string(), expected };
-        let profile = match (name.as_str(), nums.as_slice()) {
-            ("gaussian", [sigma]) => Profile::Gaussian { sigma: *sigma },
-            ("gaussian", s) if s.len() > 1 => Profile::Gaussians { sigmas: s.to_vec(), weights: vec![1.0; s.len()] },
-            ("cauchy", [sigma]) => Profile::Cauchy { sigma: *sigma },
-            _ => return Err(bad("position kernel", position, GEOM)),
-        };
-        const SIG: &str = "gaussian:σ_f";
         let signal = match signal {
             None => SignalKernel::Constant,
-            Some(spec) => match parse_spec("signal kernel", spec, SIG)? {
-                (name, nums) if name == "gaussian" && nums.len() == 1 => SignalKernel::Gaussian { sigma: nums[0] },
-                _ => return Err(bad("signal kernel", spec, SIG)),
-            },
+            Some(spec) => SignalKernel::parse(spec)?,
         };
+        VarifoldKernel::try_new(parse_position(position)?, signal, GrassKernel::parse(grass)?)
+    }
+}
+
+/// Parses a position kernel k_p: `gaussian:σ`, `gaussian:σ1,σ2,…` (a sum
+/// with unit weights) or `cauchy:σ`.
+///
+/// ```
+/// let k = fshape_varifold::parse_position("gaussian:0.2,0.1")?;
+/// assert_eq!(k.value(0.0), 2.0);
+/// assert!(fshape_varifold::parse_position("gaussian:-1").is_err());
+/// # Ok::<(), fshape_varifold::VarifoldError>(())
+/// ```
+pub fn parse_position(spec: &str) -> Result<Kernel, VarifoldError> {
+    use fshape_kernels::Profile;
+    const GEOM: &str = "gaussian:σ, gaussian:σ1,σ2,... or cauchy:σ";
+    let (name, nums) = parse_spec("position kernel", spec, GEOM)?;
+    let profile = match (name.as_str(), nums.as_slice()) {
+        ("gaussian", [sigma]) => Profile::Gaussian { sigma: *sigma },
+        ("gaussian", s) if s.len() > 1 => Profile::Gaussians { sigmas: s.to_vec(), weights: vec![1.0; s.len()] },
+        ("cauchy", [sigma]) => Profile::Cauchy { sigma: *sigma },
+        _ => return Err(VarifoldError::Parse { what: "position kernel", input: spec.to_string(), expected: GEOM }),
+    };
+    Kernel::try_new(&profile).map_err(|e| match e {
+        fshape_kernels::KernelError::Width { sigma } => VarifoldError::Width { what: "position kernel", sigma },
+        other => other.into(),
+    })
+}
+
+impl SignalKernel {
+    /// Parses `gaussian:σ_f` (the width checked).
+    pub fn parse(spec: &str) -> Result<SignalKernel, VarifoldError> {
+        const SIG: &str = "gaussian:σ_f";
+        let k = match parse_spec("signal kernel", spec, SIG)? {
+            (name, nums) if name == "gaussian" && nums.len() == 1 => SignalKernel::Gaussian { sigma: nums[0] },
+            _ => return Err(VarifoldError::Parse { what: "signal kernel", input: spec.to_string(), expected: SIG }),
+        };
+        check_width("signal kernel", nums_of(k))?;
+        Ok(k)
+    }
+}
+
+impl GrassKernel {
+    /// Parses `linear`, `binet`, `gaussian-oriented:σ_t` or
+    /// `gaussian-unoriented:σ_t` (the width checked).
+    pub fn parse(spec: &str) -> Result<GrassKernel, VarifoldError> {
         const GR: &str = "linear, binet, gaussian-oriented:σ_t or gaussian-unoriented:σ_t";
-        let grass_kernel = match parse_spec("direction kernel", grass, GR)? {
+        let k = match parse_spec("direction kernel", spec, GR)? {
             (name, nums) if name == "linear" && nums.is_empty() => GrassKernel::Linear,
             (name, nums) if name == "binet" && nums.is_empty() => GrassKernel::Binet,
             (name, nums) if name == "gaussian-oriented" && nums.len() == 1 => {
@@ -194,12 +221,25 @@ impl VarifoldKernel {
             (name, nums) if name == "gaussian-unoriented" && nums.len() == 1 => {
                 GrassKernel::UnorientedGaussian { sigma: nums[0] }
             }
-            _ => return Err(bad("direction kernel", grass, GR)),
+            _ => return Err(VarifoldError::Parse { what: "direction kernel", input: spec.to_string(), expected: GR }),
         };
-        let position = Kernel::try_new(&profile).map_err(|e| match e {
-            fshape_kernels::KernelError::Width { sigma } => VarifoldError::Width { what: "position kernel", sigma },
-            other => other.into(),
-        })?;
-        VarifoldKernel::try_new(position, signal, grass_kernel)
+        if let GrassKernel::OrientedGaussian { sigma } | GrassKernel::UnorientedGaussian { sigma } = k {
+            check_width("direction kernel", Some(sigma))?;
+        }
+        Ok(k)
+    }
+}
+
+fn nums_of(k: SignalKernel) -> Option<f64> {
+    match k {
+        SignalKernel::Gaussian { sigma } => Some(sigma),
+        SignalKernel::Constant => None,
+    }
+}
+
+fn check_width(what: &'static str, sigma: Option<f64>) -> Result<(), VarifoldError> {
+    match sigma {
+        Some(sigma) if !(sigma > 0.0 && sigma.is_finite()) => Err(VarifoldError::Width { what, sigma }),
+        _ => Ok(()),
     }
 }
