@@ -298,7 +298,7 @@ fn shoot_writes_states_a_collection_and_a_summary_that_read_back() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let template = read_mesh(mesh.as_ref(), &ReadOptions::default()).unwrap();
     // The library's own shooting, for the end state.
-    let model = fshape_shoot::Config::read(cfg.as_ref()).unwrap().model().unwrap();
+    let model = fshape_match::Config::read(cfg.as_ref()).unwrap().model().unwrap();
     let p0 = fshape_mesh::io::csv::read_vectors(p.as_ref(), 3).unwrap();
     let pfv = fshape_mesh::io::csv::read_signal(pf.as_ref(), false).unwrap().values;
     let traj = fshape_shoot::Problem::new(&template, model).unwrap().shoot(&p0, &pfv).unwrap();
@@ -346,6 +346,69 @@ fn shoot_refuses_bad_input_and_writes_nothing() {
         assert_eq!(r.status.code(), Some(1), "{all:?}: {err}");
         assert!(err.contains(needle), "{all:?}: {err}");
         assert!(!out.exists(), "{all:?}: output written despite the error");
+    }
+}
+
+#[test]
+fn shoot_reports_divergence_and_zero_steps_and_writes_nothing() {
+    let (mesh, _, _, cfg) = shoot_inputs("diverge");
+    // The case: momenta of 1e6 on a small sphere.
+    let huge = tmp("huge_p.csv");
+    let sphere = fshape_mesh::generate::icosphere(2, 1.0);
+    let mut text = String::from("p_x,p_y,p_z\n");
+    for p in sphere.points().chunks_exact(3) {
+        text.push_str(&format!("{},{},{}\n", 1e6 * p[0], -1e6 * p[1], 1e6 * p[2]));
+    }
+    std::fs::write(&huge, text).unwrap();
+    let zero_steps = tmp("zero_steps.toml");
+    std::fs::write(&zero_steps, "[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 0\n").unwrap();
+    for (i, (momenta, config, needles)) in [
+        (huge.display().to_string(), cfg.clone(), vec!["diverged", "reduce the momenta or add time steps"]),
+        (huge.display().to_string(), zero_steps.display().to_string(), vec!["integrator.steps", "at least 1"]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = tmp(&format!("diverge_{i}"));
+        let o = out.display().to_string();
+        let r = fshape(&["shoot", &mesh, "--momentum", &momenta, "--config", &config, "--out", &o]);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{err}");
+        assert!(needles.iter().all(|n| err.contains(n)), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.exists(), "output written despite the error");
+    }
+}
+
+#[test]
+fn a_checkpoint_cut_short_is_refused_naming_the_file_and_the_array() {
+    let (s, t, c) = match_inputs("match_cut", 8);
+    let out = tmp("match_cut_out");
+    let o = out.display().to_string();
+    let r = fshape(&["match", &s, &t, "--config", &c, "--out", &o, "--stop-after", "3"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let path = out.join("checkpoint.json");
+    let mut ck: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let x = ck["current"]["state"]["x"].as_array_mut().unwrap();
+    let n = x.len();
+    x.truncate(n / 2);
+    std::fs::write(&path, serde_json::to_string(&ck).unwrap()).unwrap();
+    // Also bytes cut short: not JSON any more.
+    let text = std::fs::read_to_string(&path).unwrap();
+    for (case, contents) in [("short arrays", text.clone()), ("short file", text[..text.len() / 3].to_string())] {
+        std::fs::write(&path, contents).unwrap();
+        let r = fshape(&["match", &s, &t, "--config", &c, "--out", &o, "--resume"]);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{case}: {err}");
+        assert!(!err.contains("panicked"), "{case}: {err}");
+        assert!(err.contains(&path.display().to_string()), "{case}: {err}");
+        let what = if case == "short arrays" {
+            format!("current.state.x has {} values", n / 2)
+        } else {
+            "not a readable checkpoint".to_string()
+        };
+        assert!(err.contains(&what), "{case}: {err}");
+        assert!(!out.join("summary.json").exists());
     }
 }
 
@@ -477,7 +540,9 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     std::fs::write(&c, std::fs::read_to_string(&c).unwrap().replace("gamma_w = 50.0", "gamma_w = 5.0")).unwrap();
     let o = fshape(&["match", &s, &t, "--config", &c, "--out", &parts.display().to_string(), "--resume"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("checkpoint.json: written for other inputs"));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("checkpoint.json: the checkpoint was written for other inputs")
+    );
 }
 
 #[test]

@@ -12,7 +12,7 @@
 //!   r_τ, centres, area-weighted normals or tangents, lumped vertex volumes),
 //!   [`FShape::topology`] (boundary, components, orientation).
 //! - [`FShape::validate`]: every problem with its index, split into errors
-//!   and warnings ([`Problem`], [`Severity`]), and [`FShape::repaired`].
+//!   and warnings ([`Finding`], [`Severity`]), and [`FShape::repaired`].
 //! - [`io`]: PLY, OBJ and VTK legacy readers and writers (ASCII and binary,
 //!   gzip by magic bytes or `.gz`), per-vertex signal CSV, images (EXR, digit
 //!   CSV). Parsers never panic or over-allocate on bad input, and report the
@@ -47,4 +47,4 @@ pub mod test_support;
 pub use geometry::BoundingBox;
 pub use shape::{CellKind, FShape, ShapeError};
 pub use topology::{Facet, Topology};
-pub use validate::{Problem, RepairLog, Repairs, Severity, Validation, ZERO_VOLUME_REL, summarise};
+pub use validate::{Finding, RepairLog, Repairs, Severity, Validation, ZERO_VOLUME_REL, summarise};

@@ -1,6 +1,6 @@
 //! The discrete functional shape: vertices, cells and an optional signal.
 
-use crate::validate::{self, Problem, Validation};
+use crate::validate::{self, Finding, Validation};
 
 /// The kind of cell an fshape is made of.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -70,7 +70,7 @@ pub enum ShapeError {
     #[error("invalid fshape: {}", validate::summarise(.problems))]
     Invalid {
         /// Every blocking problem found, in index order.
-        problems: Vec<Problem>,
+        problems: Vec<Finding>,
     },
 }
 

@@ -23,7 +23,7 @@ pub const ZERO_VOLUME_REL: f64 = 1e-12;
 /// One problem of an fshape, naming where it is.
 #[derive(Clone, Debug, PartialEq)]
 #[non_exhaustive]
-pub enum Problem {
+pub enum Finding {
     /// A coordinate is NaN or infinite. Error.
     NonFiniteCoordinate {
         /// Vertex index.
@@ -109,15 +109,15 @@ pub enum Problem {
     },
 }
 
-impl Problem {
+impl Finding {
     /// Whether the problem blocks computation.
     pub fn severity(&self) -> Severity {
         match self {
-            Problem::NonFiniteCoordinate { .. }
-            | Problem::NonFiniteSignal { .. }
-            | Problem::SignalLength { .. }
-            | Problem::IndexOutOfRange { .. }
-            | Problem::RepeatedIndex { .. } => Severity::Error,
+            Finding::NonFiniteCoordinate { .. }
+            | Finding::NonFiniteSignal { .. }
+            | Finding::SignalLength { .. }
+            | Finding::IndexOutOfRange { .. }
+            | Finding::RepeatedIndex { .. } => Severity::Error,
             _ => Severity::Warning,
         }
     }
@@ -126,58 +126,58 @@ impl Problem {
     /// and in JSON output).
     pub fn code(&self) -> &'static str {
         match self {
-            Problem::NonFiniteCoordinate { .. } => "non_finite_coordinate",
-            Problem::NonFiniteSignal { .. } => "non_finite_signal",
-            Problem::SignalLength { .. } => "signal_length",
-            Problem::IndexOutOfRange { .. } => "index_out_of_range",
-            Problem::RepeatedIndex { .. } => "repeated_index",
-            Problem::ZeroVolumeCell { .. } => "zero_volume_cell",
-            Problem::DuplicateCell { .. } => "duplicate_cell",
-            Problem::UnusedVertex { .. } => "unused_vertex",
-            Problem::NonManifoldFacet { .. } => "non_manifold_facet",
-            Problem::InconsistentOrientation { .. } => "inconsistent_orientation",
-            Problem::Boundary { .. } => "boundary",
+            Finding::NonFiniteCoordinate { .. } => "non_finite_coordinate",
+            Finding::NonFiniteSignal { .. } => "non_finite_signal",
+            Finding::SignalLength { .. } => "signal_length",
+            Finding::IndexOutOfRange { .. } => "index_out_of_range",
+            Finding::RepeatedIndex { .. } => "repeated_index",
+            Finding::ZeroVolumeCell { .. } => "zero_volume_cell",
+            Finding::DuplicateCell { .. } => "duplicate_cell",
+            Finding::UnusedVertex { .. } => "unused_vertex",
+            Finding::NonManifoldFacet { .. } => "non_manifold_facet",
+            Finding::InconsistentOrientation { .. } => "inconsistent_orientation",
+            Finding::Boundary { .. } => "boundary",
         }
     }
 }
 
-impl fmt::Display for Problem {
+impl fmt::Display for Finding {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Problem::NonFiniteCoordinate { vertex } => {
+            Finding::NonFiniteCoordinate { vertex } => {
                 write!(f, "vertex {vertex} has a NaN or infinite coordinate")
             }
-            Problem::NonFiniteSignal { vertex } => {
+            Finding::NonFiniteSignal { vertex } => {
                 write!(f, "vertex {vertex} has a NaN or infinite (missing) signal value")
             }
-            Problem::SignalLength { expected, found } => {
+            Finding::SignalLength { expected, found } => {
                 write!(f, "the signal has {found} values for {expected} vertices")
             }
-            Problem::IndexOutOfRange { cell, index, n_vertices } => {
+            Finding::IndexOutOfRange { cell, index, n_vertices } => {
                 write!(f, "cell {cell} uses vertex {index}, but there are only {n_vertices} vertices")
             }
-            Problem::RepeatedIndex { cell, vertex } => {
+            Finding::RepeatedIndex { cell, vertex } => {
                 write!(f, "cell {cell} uses vertex {vertex} twice")
             }
-            Problem::ZeroVolumeCell { cell, volume } => {
+            Finding::ZeroVolumeCell { cell, volume } => {
                 write!(f, "cell {cell} has zero volume ({volume:e})")
             }
-            Problem::DuplicateCell { cell, first, same_orientation } => {
+            Finding::DuplicateCell { cell, first, same_orientation } => {
                 let o = if *same_orientation { "same" } else { "opposite" };
                 write!(f, "cell {cell} repeats cell {first} ({o} orientation)")
             }
-            Problem::UnusedVertex { vertex } => write!(f, "vertex {vertex} is used by no cell"),
-            Problem::NonManifoldFacet { facet, cells } => {
+            Finding::UnusedVertex { vertex } => write!(f, "vertex {vertex} is used by no cell"),
+            Finding::NonManifoldFacet { facet, cells } => {
                 write!(f, "{} is shared by {cells} cells", facet_name(*facet, false))
             }
-            Problem::InconsistentOrientation { facet } => {
+            Finding::InconsistentOrientation { facet } => {
                 write!(
                     f,
                     "{} is traversed the same way by two cells (inconsistent orientation)",
                     facet_name(*facet, true)
                 )
             }
-            Problem::Boundary { facets, loops } => {
+            Finding::Boundary { facets, loops } => {
                 write!(f, "{facets} boundary facets in {loops} loops (or curve end points)")
             }
         }
@@ -194,9 +194,9 @@ fn facet_name([a, b]: Facet, directed: bool) -> String {
 
 /// A one-paragraph summary of a problem list: counts per kind and the first
 /// few instances of each.
-pub fn summarise(problems: &[Problem]) -> String {
+pub fn summarise(problems: &[Finding]) -> String {
     const SHOWN: usize = 3;
-    let mut codes: Vec<&'static str> = problems.iter().map(Problem::code).collect();
+    let mut codes: Vec<&'static str> = problems.iter().map(Finding::code).collect();
     codes.dedup();
     let mut seen = Vec::new();
     let mut parts = Vec::new();
@@ -205,7 +205,7 @@ pub fn summarise(problems: &[Problem]) -> String {
             continue;
         }
         seen.push(code);
-        let of_kind: Vec<&Problem> = problems.iter().filter(|p| p.code() == code).collect();
+        let of_kind: Vec<&Finding> = problems.iter().filter(|p| p.code() == code).collect();
         let shown: Vec<String> = of_kind.iter().take(SHOWN).map(|p| p.to_string()).collect();
         let more = of_kind.len().saturating_sub(SHOWN);
         let tail = if more > 0 { format!("; and {more} more") } else { String::new() };
@@ -218,21 +218,21 @@ pub fn summarise(problems: &[Problem]) -> String {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Validation {
     /// Every problem found, errors first, each group in index order.
-    pub problems: Vec<Problem>,
+    pub problems: Vec<Finding>,
 }
 
 impl Validation {
     /// The problems that block computation.
-    pub fn errors(&self) -> impl Iterator<Item = &Problem> {
+    pub fn errors(&self) -> impl Iterator<Item = &Finding> {
         self.problems.iter().filter(|p| p.severity() == Severity::Error)
     }
 
     /// The problems that allow computation.
-    pub fn warnings(&self) -> impl Iterator<Item = &Problem> {
+    pub fn warnings(&self) -> impl Iterator<Item = &Finding> {
         self.problems.iter().filter(|p| p.severity() == Severity::Warning)
     }
 
-    /// Number of problems with the given [`Problem::code`].
+    /// Number of problems with the given [`Finding::code`].
     pub fn count(&self, code: &str) -> usize {
         self.problems.iter().filter(|p| p.code() == code).count()
     }
@@ -260,28 +260,28 @@ pub(crate) fn blocking_problems(
     points: &[f64],
     cells: &[usize],
     signal: Option<&[f64]>,
-) -> Vec<Problem> {
+) -> Vec<Finding> {
     let n_vertices = points.len() / dim;
     let mut out = Vec::new();
     for (vertex, p) in points.chunks_exact(dim).enumerate() {
         if p.iter().any(|x| !x.is_finite()) {
-            out.push(Problem::NonFiniteCoordinate { vertex });
+            out.push(Finding::NonFiniteCoordinate { vertex });
         }
     }
     if let Some(f) = signal {
         if f.len() != n_vertices {
-            out.push(Problem::SignalLength { expected: n_vertices, found: f.len() });
+            out.push(Finding::SignalLength { expected: n_vertices, found: f.len() });
         }
         out.extend(
-            f.iter().enumerate().filter(|(_, x)| !x.is_finite()).map(|(vertex, _)| Problem::NonFiniteSignal { vertex }),
+            f.iter().enumerate().filter(|(_, x)| !x.is_finite()).map(|(vertex, _)| Finding::NonFiniteSignal { vertex }),
         );
     }
     for (cell, c) in cells.chunks_exact(kind.n_corners()).enumerate() {
         for (i, &index) in c.iter().enumerate() {
             if index >= n_vertices {
-                out.push(Problem::IndexOutOfRange { cell, index, n_vertices });
+                out.push(Finding::IndexOutOfRange { cell, index, n_vertices });
             } else if c[..i].contains(&index) {
-                out.push(Problem::RepeatedIndex { cell, vertex: index });
+                out.push(Finding::RepeatedIndex { cell, vertex: index });
             }
         }
     }
@@ -312,24 +312,24 @@ pub(crate) fn validate(shape: &FShape) -> Validation {
     for t in 0..shape.n_cells() {
         let volume = shape.cell_volume(t);
         if volume <= tol {
-            problems.push(Problem::ZeroVolumeCell { cell: t, volume });
+            problems.push(Finding::ZeroVolumeCell { cell: t, volume });
         }
     }
     problems.extend(duplicate_cells(shape));
     let topo = shape.topology();
     for (vertex, c) in topo.vertex_component.iter().enumerate() {
         if c.is_none() {
-            problems.push(Problem::UnusedVertex { vertex });
+            problems.push(Finding::UnusedVertex { vertex });
         }
     }
     for &(facet, cells) in &topo.nonmanifold_facets {
-        problems.push(Problem::NonManifoldFacet { facet, cells });
+        problems.push(Finding::NonManifoldFacet { facet, cells });
     }
     for &facet in &topo.misoriented_facets {
-        problems.push(Problem::InconsistentOrientation { facet });
+        problems.push(Finding::InconsistentOrientation { facet });
     }
     if !topo.is_closed() {
-        problems.push(Problem::Boundary { facets: topo.boundary_facets.len(), loops: topo.n_boundary_loops });
+        problems.push(Finding::Boundary { facets: topo.boundary_facets.len(), loops: topo.n_boundary_loops });
     }
     Validation { problems }
 }
@@ -338,7 +338,7 @@ pub(crate) fn validate(shape: &FShape) -> Validation {
 /// orientation" when an earlier copy has its orientation (and `first` is
 /// that copy), "opposite" otherwise (and `first` is the earliest copy): the
 /// counts are then the same as counting distinct oriented cells.
-fn duplicate_cells(shape: &FShape) -> Vec<Problem> {
+fn duplicate_cells(shape: &FShape) -> Vec<Finding> {
     let mut keyed: Vec<([usize; 3], usize, bool)> = shape
         .cell_iter()
         .enumerate()
@@ -354,11 +354,11 @@ fn duplicate_cells(shape: &FShape) -> Vec<Problem> {
         for (i, &(_, cell, o)) in group.iter().enumerate().skip(1) {
             let same = group[..i].iter().find(|g| g.2 == o);
             let first = same.map_or(group[0].1, |g| g.1);
-            out.push(Problem::DuplicateCell { cell, first, same_orientation: same.is_some() });
+            out.push(Finding::DuplicateCell { cell, first, same_orientation: same.is_some() });
         }
     }
     out.sort_unstable_by_key(|p| match p {
-        Problem::DuplicateCell { cell, .. } => *cell,
+        Finding::DuplicateCell { cell, .. } => *cell,
         _ => 0,
     });
     out
@@ -401,8 +401,8 @@ impl FShape {
         let mut drop_cell = vec![false; self.n_cells()];
         for p in validate(self).problems {
             match p {
-                Problem::ZeroVolumeCell { cell, .. } if repairs.drop_zero_volume_cells => drop_cell[cell] = true,
-                Problem::DuplicateCell { cell, .. } if repairs.drop_duplicate_cells => drop_cell[cell] = true,
+                Finding::ZeroVolumeCell { cell, .. } if repairs.drop_zero_volume_cells => drop_cell[cell] = true,
+                Finding::DuplicateCell { cell, .. } if repairs.drop_duplicate_cells => drop_cell[cell] = true,
                 _ => {}
             }
         }

@@ -140,3 +140,32 @@ pub fn write_signal(path: &Path, name: &str, values: &[f64]) -> Result<(), Write
     let gz = path.extension().is_some_and(|e| e == "gz");
     write_atomic(path, s.as_bytes(), gz)
 }
+
+/// The text of a vector-field CSV: a header of `names` joined by commas,
+/// then one row of `names.len()` values per point (Rust's shortest
+/// round-trip form), as [`read_vectors`] reads back.
+///
+/// # Panics
+///
+/// If `values.len()` is not a multiple of `names.len()` (a caller's bug).
+#[track_caller]
+pub fn vectors_text(names: &[&str], values: &[f64]) -> String {
+    let w = names.len().max(1);
+    assert!(values.len().is_multiple_of(w), "{} values do not make rows of {w}", values.len());
+    let mut s = names.join(",");
+    s.push('\n');
+    for row in values.chunks_exact(w) {
+        let cells: Vec<String> = row.iter().map(|c| format!("{c}")).collect();
+        s.push_str(&cells.join(","));
+        s.push('\n');
+    }
+    s
+}
+
+/// Writes a vector-field CSV ([`vectors_text`]) atomically, gzipped when
+/// the path ends in `.gz`.
+#[track_caller]
+pub fn write_vectors(path: &Path, names: &[&str], values: &[f64]) -> Result<(), WriteError> {
+    let gz = path.extension().is_some_and(|e| e == "gz");
+    write_atomic(path, vectors_text(names, values).as_bytes(), gz)
+}

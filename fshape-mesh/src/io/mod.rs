@@ -15,6 +15,7 @@ use crate::shape::{CellKind, FShape, ShapeError};
 pub mod csv;
 mod cursor;
 pub mod image;
+pub mod mtx;
 pub mod obj;
 pub mod ply;
 pub mod vtk;

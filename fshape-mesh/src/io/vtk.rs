@@ -450,3 +450,79 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
     }
     Ok(())
 }
+
+/// Writes `shape` with named per-vertex fields as legacy ASCII VTK
+/// POLYDATA (for ParaView: glyphs of the vectors, colours of the scalars),
+/// in place of the signal: `vectors` holds `dim` values per vertex (padded
+/// to 3 components), `scalars` one value per vertex. Names must be single
+/// words (VTK separates by whitespace).
+///
+/// # Errors
+///
+/// An array whose length is not the vertex count (times `dim` for a vector
+/// field), or a name with whitespace, is an `InvalidInput` error naming it.
+pub fn write_point_fields(
+    w: &mut impl Write,
+    shape: &FShape,
+    title: &str,
+    vectors: &[(&str, &[f64])],
+    scalars: &[(&str, &[f64])],
+) -> io::Result<()> {
+    let (n, dim) = (shape.n_vertices(), shape.dim());
+    let invalid = |m: String| io::Error::new(io::ErrorKind::InvalidInput, m);
+    for (name, v, per) in vectors.iter().map(|(a, b)| (a, b, dim)).chain(scalars.iter().map(|(a, b)| (a, b, 1))) {
+        if name.is_empty() || name.contains(char::is_whitespace) {
+            return Err(invalid(format!("VTK field name {name:?}: must be one word")));
+        }
+        if v.len() != n * per {
+            return Err(invalid(format!("VTK field {name}: {} values for {n} vertices × {per}", v.len())));
+        }
+    }
+    let title: String = title.chars().map(|c| if c == '\n' { ' ' } else { c }).collect();
+    let pad = |row: &[f64]| -> String {
+        let mut v: Vec<String> = row.iter().map(|c| format!("{c:e}")).collect();
+        v.resize(3, "0".into());
+        v.join(" ")
+    };
+    writeln!(w, "# vtk DataFile Version 4.2\n{title}\nASCII\nDATASET POLYDATA\nPOINTS {n} double")?;
+    for p in shape.points().chunks_exact(dim) {
+        writeln!(w, "{}", pad(p))?;
+    }
+    let k = shape.kind().n_corners();
+    let keyword = if shape.kind() == CellKind::Triangle { "POLYGONS" } else { "LINES" };
+    writeln!(w, "{keyword} {} {}", shape.n_cells(), shape.n_cells() * (k + 1))?;
+    for c in shape.cell_iter() {
+        let ids: Vec<String> = c.iter().map(usize::to_string).collect();
+        writeln!(w, "{k} {}", ids.join(" "))?;
+    }
+    if vectors.is_empty() && scalars.is_empty() {
+        return Ok(());
+    }
+    writeln!(w, "POINT_DATA {n}")?;
+    for (name, v) in vectors {
+        writeln!(w, "VECTORS {name} double")?;
+        for row in v.chunks_exact(dim) {
+            writeln!(w, "{}", pad(row))?;
+        }
+    }
+    for (name, v) in scalars {
+        writeln!(w, "SCALARS {name} double 1\nLOOKUP_TABLE default")?;
+        for x in *v {
+            writeln!(w, "{x:e}")?;
+        }
+    }
+    Ok(())
+}
+
+/// A ParaView collection (`.pvd`) of time steps: one `(time, file)` per
+/// entry, the files relative to the collection.
+pub fn collection(entries: &[(f64, &str)]) -> String {
+    let mut pvd =
+        String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
+    for (t, file) in entries {
+        let file = file.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;");
+        pvd.push_str(&format!("    <DataSet timestep=\"{t}\" part=\"0\" file=\"{file}\"/>\n"));
+    }
+    pvd.push_str("  </Collection>\n</VTKFile>\n");
+    pvd
+}

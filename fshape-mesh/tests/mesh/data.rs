@@ -58,8 +58,8 @@ fn duplicate_orientation_split_matches_the_reference() {
     ] {
         let report = read(file).validate();
         let split = report.problems.iter().fold((0, 0), |(s, o), p| match p {
-            fshape_mesh::Problem::DuplicateCell { same_orientation: true, .. } => (s + 1, o),
-            fshape_mesh::Problem::DuplicateCell { .. } => (s, o + 1),
+            fshape_mesh::Finding::DuplicateCell { same_orientation: true, .. } => (s + 1, o),
+            fshape_mesh::Finding::DuplicateCell { .. } => (s, o + 1),
             _ => (s, o),
         });
         assert_eq!(split, (same, opposite), "{file}");

@@ -291,3 +291,50 @@ fn signal_csv_round_trips_exactly() {
         assert!(read_signal(&path, false).is_err(), "NaN refused when missing values are not accepted");
     }
 }
+
+#[test]
+fn vtkio_reads_our_point_fields_and_our_csv_reader_reads_our_vector_csv() {
+    use vtkio::model::{Attribute, DataSet, ElementType, Piece};
+    for shape in [fshape_mesh::test_support::perturbed_icosphere(1, 0.1, 4), fshape_mesh::generate::circle(12, 1.5)] {
+        let (n, dim) = (shape.n_vertices(), shape.dim());
+        let p0: Vec<f64> = (0..n * dim).map(|i| (i as f64 * 0.37).sin() * 1e-3).collect();
+        let pf: Vec<f64> = (0..n).map(|i| (i as f64 * 0.11).cos()).collect();
+        let path = tmp(&format!("fields{dim}.vtk"));
+        let mut bytes = Vec::new();
+        fshape_mesh::io::vtk::write_point_fields(&mut bytes, &shape, "momenta", &[("p0", &p0)], &[("pf", &pf)])
+            .unwrap();
+        fshape_mesh::io::write_atomic(&path, &bytes, false).unwrap();
+        let (pts, cells, _) = read_with_vtkio(&path, shape.kind());
+        assert_eq!((pts, cells), (points_3d(&shape), shape.cells().to_vec()));
+        let vtk = vtkio::Vtk::import(&path).unwrap();
+        let DataSet::PolyData { pieces, .. } = vtk.data else { panic!("not polydata") };
+        let Piece::Inline(piece) = pieces.into_iter().next().unwrap() else { panic!("not inline") };
+        let field = |name: &str| {
+            piece.data.point.iter().find_map(|a| match a {
+                Attribute::DataArray(d) if d.name == name => Some((d.elem.clone(), d.data.clone().cast_into::<f64>()?)),
+                _ => None,
+            })
+        };
+        let (elem, vectors) = field("p0").expect("p0");
+        assert_eq!(elem, ElementType::Vectors);
+        let ours: Vec<f64> =
+            p0.chunks_exact(dim).flat_map(|r| [r[0], r[1], if dim == 3 { r[2] } else { 0.0 }]).collect();
+        assert_eq!(vectors, ours);
+        assert_eq!(field("pf").expect("pf").1, pf);
+        std::fs::remove_file(&path).unwrap();
+        // Wrong lengths and names are refused, not written.
+        let mut sink = Vec::new();
+        let err = fshape_mesh::io::vtk::write_point_fields(&mut sink, &shape, "t", &[("p0", &p0[1..])], &[]);
+        assert!(err.unwrap_err().to_string().contains("p0"));
+        let err = fshape_mesh::io::vtk::write_point_fields(&mut sink, &shape, "t", &[], &[("p f", &pf)]);
+        assert!(err.unwrap_err().to_string().contains("one word"));
+        // The momentum CSV reads back bit for bit.
+        let csv = tmp(&format!("p0_{dim}.csv"));
+        let names = if dim == 3 { vec!["p_x", "p_y", "p_z"] } else { vec!["p_x", "p_y"] };
+        fshape_mesh::io::csv::write_vectors(&csv, &names, &p0).unwrap();
+        assert_eq!(fshape_mesh::io::csv::read_vectors(&csv, dim).unwrap(), p0);
+        std::fs::remove_file(&csv).unwrap();
+    }
+    let pvd = fshape_mesh::io::vtk::collection(&[(0.0, "state_000.vtk"), (0.5, "a&b.vtk")]);
+    assert!(pvd.contains("timestep=\"0.5\" part=\"0\" file=\"a&amp;b.vtk\""), "{pvd}");
+}

@@ -1,6 +1,6 @@
 //! Validation on hand-made shapes: each problem found, with its index.
 
-use fshape_mesh::{CellKind, FShape, Problem, Repairs, Severity, ShapeError};
+use fshape_mesh::{CellKind, FShape, Finding, Repairs, Severity, ShapeError};
 
 /// Two triangles sharing the edge (1, 2), consistently oriented.
 fn square_pts() -> Vec<f64> {
@@ -23,11 +23,11 @@ fn every_blocking_problem_is_reported_at_once() {
     assert_eq!(
         problems,
         &vec![
-            Problem::NonFiniteCoordinate { vertex: 1 },
-            Problem::SignalLength { expected: 4, found: 3 },
-            Problem::NonFiniteSignal { vertex: 1 },
-            Problem::IndexOutOfRange { cell: 1, index: 9, n_vertices: 4 },
-            Problem::RepeatedIndex { cell: 2, vertex: 3 },
+            Finding::NonFiniteCoordinate { vertex: 1 },
+            Finding::SignalLength { expected: 4, found: 3 },
+            Finding::NonFiniteSignal { vertex: 1 },
+            Finding::IndexOutOfRange { cell: 1, index: 9, n_vertices: 4 },
+            Finding::RepeatedIndex { cell: 2, vertex: 3 },
         ]
     );
     assert!(problems.iter().all(|p| p.severity() == Severity::Error));
@@ -61,14 +61,14 @@ fn warnings_name_their_cells_and_vertices() {
     let s = FShape::try_new(2, CellKind::Triangle, pts, cells, None).unwrap();
     let r = s.validate();
     assert_eq!(r.errors().count(), 0);
-    assert!(r.problems.contains(&Problem::UnusedVertex { vertex: 4 }));
-    assert!(r.problems.contains(&Problem::DuplicateCell { cell: 2, first: 0, same_orientation: false }));
-    assert!(r.problems.contains(&Problem::DuplicateCell { cell: 4, first: 1, same_orientation: true }));
-    assert!(r.problems.contains(&Problem::ZeroVolumeCell { cell: 3, volume: 0.0 }));
+    assert!(r.problems.contains(&Finding::UnusedVertex { vertex: 4 }));
+    assert!(r.problems.contains(&Finding::DuplicateCell { cell: 2, first: 0, same_orientation: false }));
+    assert!(r.problems.contains(&Finding::DuplicateCell { cell: 4, first: 1, same_orientation: true }));
+    assert!(r.problems.contains(&Finding::ZeroVolumeCell { cell: 3, volume: 0.0 }));
     // Edge (0, 1) is in cells 0, 2 and 3: non-manifold.
-    assert!(r.problems.contains(&Problem::NonManifoldFacet { facet: [0, 1], cells: 3 }));
+    assert!(r.problems.contains(&Finding::NonManifoldFacet { facet: [0, 1], cells: 3 }));
     // Cells 1 and 4 both traverse 2→3.
-    assert!(r.problems.contains(&Problem::InconsistentOrientation { facet: [2, 3] }));
+    assert!(r.problems.contains(&Finding::InconsistentOrientation { facet: [2, 3] }));
     assert!(r.warnings().all(|p| p.severity() == Severity::Warning));
 
     let (fixed, log) = s.repaired(Repairs::ALL);
@@ -76,7 +76,7 @@ fn warnings_name_their_cells_and_vertices() {
     assert_eq!(log.dropped_vertices, vec![4, 5]);
     assert_eq!(log.vertex_map, vec![Some(0), Some(1), Some(2), Some(3), None, None]);
     assert_eq!(fixed.cells(), &[0, 1, 2, 0, 2, 3]);
-    let left: Vec<&str> = fixed.validate().problems.iter().map(Problem::code).collect();
+    let left: Vec<&str> = fixed.validate().problems.iter().map(Finding::code).collect();
     assert_eq!(left, vec!["boundary"], "only the boundary of the unit square remains");
 }
 
