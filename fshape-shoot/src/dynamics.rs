@@ -83,7 +83,8 @@ pub struct Timings {
     pub attachment: f64,
 }
 
-fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+/// Runs `f`, adding its wall time to `acc` (seconds).
+pub(crate) fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = std::time::Instant::now();
     let out = f();
     *acc += t.elapsed().as_secs_f64();

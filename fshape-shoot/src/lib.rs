@@ -15,84 +15,41 @@
 //! template, f_1 = f_0 + ζ, cost (γ_f/2) ζᵀ D_s(x_0) ζ).
 //!
 //! ```
+//! use fshape_kernels::Kernel;
 //! use fshape_mesh::generate::icosphere;
-//! use fshape_shoot::{Config, Problem};
-//! let model = Config::parse("[deformation]\nwidths = [0.5]\n")?.model()?;
+//! use fshape_shoot::{Model, Problem};
+//! let model = Model::new(Kernel::gaussian(0.5)?);
 //! let sphere = icosphere(1, 1.0);
 //! let problem = Problem::new(&sphere, model)?;
 //! // Zero momenta: nothing moves.
 //! let traj = problem.shoot(&vec![0.0; 3 * sphere.n_vertices()], &vec![0.0; sphere.n_vertices()])?;
 //! assert_eq!(traj.points(10), sphere.points());
-//! # Ok::<(), fshape_shoot::ShootError>(())
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! The configuration file, the optimiser and the registration workflow
+//! (stages, checkpoints) are fshape-match's; this crate is the model.
 
-mod config;
 mod dynamics;
-pub mod matching;
-pub mod optimize;
-pub mod paper;
+mod model;
 mod shoot;
 
-pub use config::{
-    AttachmentSection, Config, DeformationSection, IntegratorSection, ModelSection, OptimizerSection, ScheduleSection,
-};
 pub use dynamics::Timings;
-pub use shoot::{Gradient, Objective, Problem, Trajectory};
-
-use fshape_fem::Norm;
-use fshape_kernels::Kernel;
-
-/// Which model the signal follows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ModelKind {
-    /// Metamorphosis: the signal evolves along the path, its change costed
-    /// by D_s(x_t) on the moving shape.
-    Metamorphosis,
-    /// Tangential model: LDDMM geometry, signal residual on the template.
-    Tangential,
-    /// Pure LDDMM: the signal is carried unchanged.
-    Lddmm,
-}
-
-/// Time integrator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Integrator {
-    /// Classical fourth-order Runge–Kutta (default).
-    Rk4,
-    /// Explicit midpoint (second order; fshapesTk's scheme).
-    Midpoint,
-    /// Forward Euler.
-    Euler,
-}
-
-/// A validated model (built by [`Config::model`]).
-#[derive(Clone, Debug)]
-pub struct Model {
-    /// Metamorphosis, tangential or LDDMM.
-    pub kind: ModelKind,
-    /// The signal norm D_s.
-    pub norm: Norm,
-    /// γ_V.
-    pub gamma_v: f64,
-    /// γ_f.
-    pub gamma_f: f64,
-    /// γ_W.
-    pub gamma_w: f64,
-    /// Deformation kernel (a sum of Gaussians, exact or truncated).
-    pub kernel: Kernel,
-    /// Time integrator.
-    pub integrator: Integrator,
-    /// Number of time steps on [0, 1].
-    pub steps: usize,
-}
+pub use model::{DEFAULT_MAX_DRIFT, Integrator, Model, ModelKind};
+pub use shoot::{Energies, Gradient, Problem, Trajectory};
 
 /// Why shooting or matching failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ShootError {
-    /// The configuration is invalid (the message names the key).
-    #[error("configuration: {0}")]
-    Config(String),
+    /// A model parameter is out of range (the message names it).
+    #[error("model: {what} {why}")]
+    Invalid {
+        /// Which parameter.
+        what: &'static str,
+        /// What is wrong with it.
+        why: String,
+    },
     /// A kernel sum refused its input.
     #[error(transparent)]
     Kernel(#[from] fshape_kernels::KernelError),
@@ -129,7 +86,44 @@ pub enum ShootError {
         /// The step.
         step: usize,
     },
+    /// The flow degenerated a cell of the moving mesh (its signal norm is
+    /// no longer defined).
+    #[error(
+        "shooting diverged at step {step}: the flow collapsed a cell ({source}); reduce the momenta or add time steps"
+    )]
+    Collapsed {
+        /// The step.
+        step: usize,
+        /// The signal norm's error.
+        source: fshape_fem::FemError,
+    },
+    /// The Hamiltonian, which a geodesic conserves, drifted by more than
+    /// the model's tolerance: the integration is not to be trusted.
+    #[error(
+        "shooting diverged: the Hamiltonian drifted by {drift:.3e} of its initial value {initial:.3e} by step {step} \
+         (tolerance {tolerance:e}); reduce the momenta or add time steps"
+    )]
+    Drift {
+        /// max_k |H_k − H_0| / |H_0|.
+        drift: f64,
+        /// H_0.
+        initial: f64,
+        /// The step where the drift first exceeded the tolerance.
+        step: usize,
+        /// The model's tolerance ([`Model::max_drift`]).
+        tolerance: f64,
+    },
     /// Matching needs a target ([`Problem::with_target`]).
     #[error("no target: matching needs Problem::with_target")]
     NoTarget,
+    /// Points of another dimension than the template's.
+    #[error("{what}: {found} coordinates is not a whole number of {dim}-D points")]
+    Points {
+        /// Which array.
+        what: &'static str,
+        /// Its length.
+        found: usize,
+        /// The template's dimension.
+        dim: usize,
+    },
 }

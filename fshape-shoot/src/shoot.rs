@@ -5,7 +5,7 @@ use fshape_fem::SignalNorm;
 use fshape_mesh::FShape;
 use fshape_varifold::{Attachment, VarifoldKernel};
 
-use crate::dynamics::{Dynamics, Layout, Scratch, Timings};
+use crate::dynamics::{Dynamics, Layout, Scratch, Timings, timed};
 use crate::{Integrator, Model, ModelKind, ShootError};
 
 impl Integrator {
@@ -45,6 +45,23 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
+    /// The relative drift of the Hamiltonian, max_k |H_k − H_0| / |H_0|
+    /// (0 when H_0 = 0), and the first step where it is reached.
+    pub fn drift(&self) -> (f64, usize) {
+        let h0 = self.hamiltonian[0];
+        if h0 == 0.0 {
+            return (0.0, 0);
+        }
+        let mut worst = (0.0, 0);
+        for (k, h) in self.hamiltonian.iter().enumerate() {
+            let d = (h - h0).abs() / h0.abs();
+            if d > worst.0 {
+                worst = (d, k);
+            }
+        }
+        worst
+    }
+
     /// Number of time steps N.
     pub fn steps(&self) -> usize {
         self.nodes.len() / self.layout.len() - 1
@@ -119,9 +136,9 @@ impl Trajectory {
     }
 }
 
-/// The value of the matching objective and its parts.
+/// The value of the matching objective J and its parts.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct Objective {
+pub struct Energies {
     /// J = energy + γ_W·A.
     pub value: f64,
     /// H(x_0, p_0, p^f) (metamorphosis, LDDMM), plus (γ_f/2)ζᵀD_s(x_0)ζ for
@@ -147,10 +164,10 @@ impl Problem {
     /// Shooting only (no target).
     pub fn new(template: &FShape, model: Model) -> Result<Self, ShootError> {
         let (n, dim) = (template.n_vertices(), template.dim());
-        let fem = if model.kind == ModelKind::Lddmm {
+        let fem = if model.kind() == ModelKind::Lddmm {
             None
         } else {
-            let fem = SignalNorm::try_new(template, model.norm)?;
+            let fem = SignalNorm::try_new(template, model.norm())?;
             // Run the symbolic analysis now, once for every evaluation.
             fem.solver()?;
             Some(fem)
@@ -171,24 +188,37 @@ impl Problem {
 
     /// With a target and data attachment kernel (⟨Y,Y⟩ computed here, once).
     pub fn with_target(mut self, target: &FShape, kernel: VarifoldKernel) -> Result<Self, ShootError> {
-        self.attachment = Some(Attachment::new(target, kernel)?);
+        self.attachment = Some(Attachment::new(target, kernel)?.with_parallel(self.parallel));
         Ok(self)
     }
 
     /// Replaces the target or its data attachment kernel (a coarse-to-fine
     /// schedule changes the kernel between stages).
     pub fn set_target(&mut self, target: &FShape, kernel: VarifoldKernel) -> Result<(), ShootError> {
-        self.attachment = Some(Attachment::new(target, kernel)?);
+        self.attachment = Some(Attachment::new(target, kernel)?.with_parallel(self.parallel));
         Ok(())
     }
 
-    /// Parallel (default) or serial kernel sums and FEM operations in the
-    /// shooting and its adjoint (serial for running many problems at once,
-    /// one per thread). The results are identical bit for bit.
+    /// Parallel (default) or serial work everywhere below: kernel sums and
+    /// FEM operations in the shooting and its adjoint, the data attachment
+    /// (this target and any later one) and [`Problem::flow_points`]. Serial
+    /// is for running many problems at once, one per thread. The results
+    /// are identical bit for bit.
     pub fn with_parallel(mut self, parallel: bool) -> Self {
-        self.parallel = parallel;
-        self.fem = self.fem.map(|f| f.with_parallel(parallel));
+        self.set_parallel(parallel);
         self
+    }
+
+    /// [`Problem::with_parallel`] in place.
+    pub fn set_parallel(&mut self, parallel: bool) {
+        self.parallel = parallel;
+        self.fem = self.fem.take().map(|f| f.with_parallel(parallel));
+        self.attachment = self.attachment.take().map(|a| a.with_parallel(parallel));
+    }
+
+    /// Whether the work runs in parallel ([`Problem::with_parallel`]).
+    pub fn parallel(&self) -> bool {
+        self.parallel
     }
 
     /// The model.
@@ -202,12 +232,12 @@ impl Problem {
     }
 
     fn dynamics(&self) -> Dynamics<'_> {
-        let evolving = self.model.kind == ModelKind::Metamorphosis;
+        let evolving = self.model.kind() == ModelKind::Metamorphosis;
         Dynamics {
-            kernel: &self.model.kernel,
+            kernel: self.model.kernel(),
             fem: if evolving { self.fem.as_ref() } else { None },
-            gamma_v: self.model.gamma_v,
-            gamma_f: self.model.gamma_f,
+            gamma_v: self.model.gamma_v(),
+            gamma_f: self.model.gamma_f(),
             layout: self.layout,
             parallel: self.parallel,
         }
@@ -234,7 +264,7 @@ impl Problem {
         z[l.x()].copy_from_slice(self.template.points());
         z[l.f()].copy_from_slice(self.template.signal().expect("set in new"));
         z[l.mom()].copy_from_slice(p0);
-        match self.model.kind {
+        match self.model.kind() {
             ModelKind::Metamorphosis => z[l.pf()].copy_from_slice(pf),
             ModelKind::Tangential => {
                 for (a, b) in z[l.f()].iter_mut().zip(pf) {
@@ -251,7 +281,7 @@ impl Problem {
     pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
         self.check(p0, pf)?;
         let mut traj = self.shoot_from(self.initial(p0, pf))?;
-        if self.model.kind == ModelKind::Tangential {
+        if self.model.kind() == ModelKind::Tangential {
             traj.zeta = pf.to_vec();
         }
         Ok(traj)
@@ -262,8 +292,8 @@ impl Problem {
     fn shoot_from(&self, z0: Vec<f64>) -> Result<Trajectory, ShootError> {
         let dynamics = self.dynamics();
         let mut scratch = Scratch::new(self.layout, dynamics.fem)?;
-        let (a, b) = self.model.integrator.tableau();
-        let n = self.model.steps;
+        let (a, b) = self.model.integrator().tableau();
+        let n = self.model.steps();
         let dt = 1.0 / n as f64;
         let mut t = Timings::default();
         let l = self.layout;
@@ -280,7 +310,7 @@ impl Problem {
             let (done, rest) = nodes.split_at_mut((step + 1) * len);
             let z = &done[step * len..];
             let k0 = &mut slopes[step * len..(step + 1) * len];
-            dynamics.field(z, &mut h, k0, &mut scratch, &mut t)?;
+            dynamics.field(z, &mut h, k0, &mut scratch, &mut t).map_err(|e| collapsed(e, step, step > 0))?;
             let energy = 0.5 * (dot(&z[l.mom()], &k0[l.x()]) + dot(&z[l.pf()], &k0[l.f()]));
             if !energy.is_finite() || z.iter().any(|v| !v.is_finite()) {
                 return Err(ShootError::Diverged { step });
@@ -301,7 +331,9 @@ impl Problem {
                         axpy(zi, dt * aij, &prev[j * len..(j + 1) * len]);
                     }
                 }
-                dynamics.field(zi, &mut h, &mut cur[..len], &mut scratch, &mut t)?;
+                dynamics
+                    .field(zi, &mut h, &mut cur[..len], &mut scratch, &mut t)
+                    .map_err(|e| collapsed(e, step, true))?;
             }
             let next = &mut rest[..len];
             next.copy_from_slice(z);
@@ -311,7 +343,22 @@ impl Problem {
                 }
             }
         }
-        Ok(Trajectory { layout: l, n_stages: s, nodes, slopes, stages, hamiltonian: ham, timings: t, zeta: Vec::new() })
+        let traj = Trajectory {
+            layout: l,
+            n_stages: s,
+            nodes,
+            slopes,
+            stages,
+            hamiltonian: ham,
+            timings: t,
+            zeta: Vec::new(),
+        };
+        let (drift, step) = traj.drift();
+        let tolerance = self.model.max_drift();
+        if drift > tolerance {
+            return Err(ShootError::Drift { drift, initial: traj.hamiltonian[0], step, tolerance });
+        }
+        Ok(traj)
     }
 
     fn attachment(&self) -> Result<&Attachment, ShootError> {
@@ -320,8 +367,8 @@ impl Problem {
 
     /// The signal part of the energy and its gradient in the control pf.
     fn signal_energy(&self, pf: &[f64], t: &mut Timings) -> Result<(f64, Vec<f64>), ShootError> {
-        let g = self.model.gamma_f;
-        match (self.model.kind, &self.fem) {
+        let g = self.model.gamma_f();
+        match (self.model.kind(), &self.fem) {
             (ModelKind::Tangential, Some(fem)) => timed(&mut t.fem, || {
                 // (γ_f/2) ζᵀD(x_0)ζ, gradient γ_f D(x_0)ζ.
                 let dz = fem.matvec(self.template.points(), pf)?;
@@ -332,7 +379,7 @@ impl Problem {
     }
 
     /// J(p_0, p^f) and its parts.
-    pub fn objective(&self, p0: &[f64], pf: &[f64]) -> Result<(Objective, Trajectory), ShootError> {
+    pub fn objective(&self, p0: &[f64], pf: &[f64]) -> Result<(Energies, Trajectory), ShootError> {
         self.evaluate(p0, pf, false).map(|e| (e.objective, e.trajectory))
     }
 
@@ -343,7 +390,7 @@ impl Problem {
         let traj = self.shoot(p0, pf)?;
         let mut t = traj.timings;
         let (es, ges) = self.signal_energy(pf, &mut t)?;
-        let last = self.model.steps;
+        let last = self.model.steps();
         let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
         let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
         let (a, ga) = if grad {
@@ -353,14 +400,14 @@ impl Problem {
             (timed(&mut t.attachment, || att.eval(&x1))?.value, None)
         };
         let h0 = traj.hamiltonian[0];
-        let metamorphosis_signal = if self.model.kind == ModelKind::Metamorphosis {
+        let metamorphosis_signal = if self.model.kind() == ModelKind::Metamorphosis {
             0.5 * dot(&traj.node(0)[self.layout.pf()], &traj.slope(0)[self.layout.f()])
         } else {
             0.0
         };
         let energy = h0 + es;
-        let objective = Objective {
-            value: energy + self.model.gamma_w * a,
+        let objective = Energies {
+            value: energy + self.model.gamma_w() * a,
             energy,
             signal_energy: es + metamorphosis_signal,
             attachment: a,
@@ -384,10 +431,10 @@ impl Problem {
         let forward = start.elapsed().as_secs_f64();
         let mut t = traj.timings;
         let l = self.layout;
-        let last = self.model.steps;
+        let last = self.model.steps();
         let back = std::time::Instant::now();
         // λ_N = ∂J/∂z_N.
-        let gw = self.model.gamma_w;
+        let gw = self.model.gamma_w();
         let mut lam = vec![0.0; l.len()];
         for (o, v) in lam[l.x()].iter_mut().zip(&ga.points) {
             *o = gw * v;
@@ -397,7 +444,7 @@ impl Problem {
         }
         let dynamics = self.dynamics();
         let mut scratch = Scratch::new(l, dynamics.fem)?;
-        let (a, b) = self.model.integrator.tableau();
+        let (a, b) = self.model.integrator().tableau();
         let dt = 1.0 / last as f64;
         let (len, s) = (l.len(), b.len());
         // ∂J/∂Z_i for the stages of one step, ∂J/∂k_i, and h at a stage.
@@ -436,7 +483,7 @@ impl Problem {
         // or the signal energy's gradient + λ_f (tangential: f_0 = f + ζ).
         let k0 = traj.slope(0);
         let grad_p: Vec<f64> = lam[l.mom()].iter().zip(&k0[l.x()]).map(|(a, b)| a + b).collect();
-        let grad_pf: Vec<f64> = match self.model.kind {
+        let grad_pf: Vec<f64> = match self.model.kind() {
             ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
             ModelKind::Tangential => lam[l.f()].iter().zip(&ges).map(|(a, b)| a + b).collect(),
             ModelKind::Lddmm => vec![0.0; l.p],
@@ -450,17 +497,14 @@ impl Problem {
     pub fn flow_points(&self, traj: &Trajectory, y0: &[f64]) -> Result<Vec<Vec<f64>>, ShootError> {
         let l = self.layout;
         if !y0.len().is_multiple_of(l.dim) {
-            return Err(ShootError::Dimension {
-                what: "points to flow",
-                expected: y0.len() / l.dim * l.dim,
-                found: y0.len(),
-            });
+            return Err(ShootError::Points { what: "points to flow", found: y0.len(), dim: l.dim });
         }
-        let (a, b) = self.model.integrator.tableau();
-        let dt = 1.0 / self.model.steps as f64;
+        let (a, b) = self.model.integrator().tableau();
+        let dt = 1.0 / self.model.steps() as f64;
         let field = |y: &[f64], z: &[f64]| -> Result<Vec<f64>, ShootError> {
-            let sums = fshape_kernels::KernelSums::try_new(&self.model.kernel, &z[l.x()], l.dim)?;
-            Ok(sums.conv(y, &z[l.mom()], l.dim)?.iter().map(|v| v / self.model.gamma_v).collect())
+            let sums = fshape_kernels::KernelSums::try_new(self.model.kernel(), &z[l.x()], l.dim)?
+                .with_parallel(self.parallel);
+            Ok(sums.conv(y, &z[l.mom()], l.dim)?.iter().map(|v| v / self.model.gamma_v()).collect())
         };
         let mut y = y0.to_vec();
         let mut out = vec![y.clone()];
@@ -482,9 +526,18 @@ impl Problem {
     }
 }
 
+/// A signal-norm error on a state the flow produced (not the template's
+/// own) means the flow degenerated a cell: divergence, reported as such.
+fn collapsed(e: ShootError, step: usize, moved: bool) -> ShootError {
+    match e {
+        ShootError::Fem(source) if moved => ShootError::Collapsed { step, source },
+        other => other,
+    }
+}
+
 /// One forward evaluation of J, with the end-point gradients when asked.
 struct Evaluation {
-    objective: Objective,
+    objective: Energies,
     trajectory: Trajectory,
     attachment_grad: Option<fshape_varifold::ShapeGrad>,
     /// ∂/∂p^f of the signal energy (tangential model; zeros otherwise).
@@ -495,7 +548,7 @@ struct Evaluation {
 #[derive(Clone, Debug)]
 pub struct Gradient {
     /// J and its parts.
-    pub objective: Objective,
+    pub objective: Energies,
     /// ∂J/∂p_0 (P × n).
     pub p0: Vec<f64>,
     /// ∂J/∂p^f (P): ∂J/∂ζ for the tangential model, zeros for LDDMM.
@@ -518,11 +571,4 @@ fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
     for (u, v) in y.iter_mut().zip(x) {
         *u += a * v;
     }
-}
-
-fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
-    let t = std::time::Instant::now();
-    let out = f();
-    *acc += t.elapsed().as_secs_f64();
-    out
 }

@@ -8,8 +8,9 @@
 //! cargo run --release -p fshape-validate --example sphere_plots
 //! ```
 
+use fshape_kernels::Kernel;
 use fshape_mesh::generate::icosphere;
-use fshape_shoot::{Config, Problem};
+use fshape_shoot::{Integrator, Model, Problem};
 use fshape_validate::{PAPER_SETTINGS, sphere_ode};
 use plotters::prelude::*;
 
@@ -34,11 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .flat_map(|(m, a)| m.iter().map(move |v| s.rho0 * a * v))
             .collect();
         let pf: Vec<f64> = areas.iter().map(|a| s.pf * a).collect();
-        let text = format!(
-            "[model]\nnorm = \"l2-lumped\"\ngamma_v = {}\ngamma_f = {}\n[deformation]\nwidths = [{}]\n[integrator]\nsteps = 20\n",
-            s.gamma_v, s.gamma_f, s.sigma
-        );
-        let model = Config::parse(&text)?.model()?;
+        let model = Model::new(Kernel::gaussian(s.sigma)?)
+            .with_weights(s.gamma_v, s.gamma_f, 1.0)?
+            .with_integrator(Integrator::Rk4, 20)?;
         let traj = Problem::new(&sphere.clone().with_signal(Some(vec![0.0; n]))?, model)?.shoot(&p0, &pf)?;
         let discrete: Vec<(f64, f64, f64)> = (0..=20)
             .map(|k| {
