@@ -6,9 +6,13 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use fshape_match::{
+    AttachmentSection, Config, GrassKernelSpec, NormKind, PositionKernel, ScheduleSection, SignalKernelSpec,
+};
 use fshape_mesh::generate::{sample_image, square};
 use fshape_mesh::io::image::read_image;
 use fshape_mesh::io::{self, Encoding, write_mesh};
+use fshape_shoot::ModelKind;
 
 /// fshapesTk writes Gaussians as exp(−u/σ²), fshape as exp(−u/(2σ²)): the
 /// paper's widths (fshapesTk's) are ours × √2, so ours = theirs / √2.
@@ -31,13 +35,36 @@ fn write_inputs(dir: &Path, source: &fshape_mesh::FShape, target: &fshape_mesh::
     Ok((sp, tp))
 }
 
-/// Writes `config` to RUN/config.toml (creating RUN) and runs `fshape match` with it into
-/// RUN, writing the geodesic at t = 0, 0.2, …, 1 seen from `view`
-/// (azimuth, elevation in degrees).
-fn run_match(source: &Path, target: &Path, config: &str, run: &Path, view: (f64, f64)) -> Result<()> {
+/// A position kernel `gaussian:σ` (σ written in Rust's shortest form).
+fn gaussian(sigma: f64) -> Result<PositionKernel> {
+    Ok(PositionKernel::parse(&format!("gaussian:{sigma}"))?)
+}
+
+/// `[attachment]` with a Gaussian k_p of width `geom`, a Gaussian k_f of
+/// width `signal`, the Binet k_t, truncated at `tolerance`.
+fn attachment(geom: f64, signal: f64, tolerance: Option<f64>) -> Result<AttachmentSection> {
+    Ok(AttachmentSection {
+        kernel_geom: gaussian(geom)?,
+        kernel_signal: Some(SignalKernelSpec::parse(&format!("gaussian:{signal}"))?),
+        kernel_grass: GrassKernelSpec::parse("binet")?,
+        tolerance,
+    })
+}
+
+/// `[schedule]` of Gaussian position kernels, coarse to fine.
+fn schedule(widths: &[f64]) -> Result<ScheduleSection> {
+    Ok(ScheduleSection { kernel_geom: widths.iter().map(|&w| gaussian(w)).collect::<Result<_>>()? })
+}
+
+/// Writes `config` (after the comment lines of `header`) to
+/// RUN/config.toml, creating RUN, and runs `fshape match` with it into RUN,
+/// writing the geodesic at t = 0, 0.2, …, 1 seen from `view` (azimuth,
+/// elevation in degrees).
+fn run_match(source: &Path, target: &Path, header: &str, config: &Config, run: &Path, view: (f64, f64)) -> Result<()> {
     std::fs::create_dir_all(run).with_context(|| format!("creating {}", run.display()))?;
     let cfg = run.join("config.toml");
-    io::write_atomic(&cfg, config.as_bytes(), false)?;
+    let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
+    io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
     crate::match_cmd::run(&crate::match_cmd::MatchArgs {
         source,
         target,
@@ -83,21 +110,21 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
     let (p1, p2, p3, f) = (from_fshapestk(0.2), from_fshapestk(0.1), from_fshapestk(0.05), from_fshapestk(0.7));
     for &ratio in a.ratios {
         let run = dir.join(format!("ratio_{ratio}"));
-        let config = format!(
-            "# fshape demo digits: gamma_V / gamma_f = {ratio}. Widths are the paper's\n\
-             # (fshapesTk's exp(-u/s^2)) divided by sqrt(2) for fshape's exp(-u/(2 s^2)).\n\
-             [model]\nkind = \"metamorphosis\"\nnorm = \"l2-lumped\"\ngamma_v = 1.0\ngamma_f = {gf}\ngamma_w = {gw}\n\
-             [deformation]\nwidths = [{v1}, {v2}]\ntolerance = 1e-6\n\
-             [integrator]\nscheme = \"rk4\"\nsteps = 10\n\
-             [attachment]\nkernel_geom = \"gaussian:{p3}\"\nkernel_signal = \"gaussian:{f}\"\nkernel_grass = \"binet\"\ntolerance = 1e-6\n\
-             [optimizer]\nmax_iterations = {it}\n\
-             [schedule]\nkernel_geom = [\"gaussian:{p1}\", \"gaussian:{p2}\", \"gaussian:{p3}\"]\n",
-            gf = 1.0 / ratio,
-            gw = a.gamma_w,
-            it = a.max_iterations,
+        let mut config = Config::new(vec![v1, v2]);
+        config.model.kind = ModelKind::Metamorphosis;
+        config.model.norm = NormKind::L2Lumped;
+        config.model.gamma_f = 1.0 / ratio;
+        config.model.gamma_w = a.gamma_w;
+        config.deformation.tolerance = Some(1e-6);
+        config.attachment = Some(attachment(p3, f, Some(1e-6))?);
+        config.optimizer.max_iterations = a.max_iterations;
+        config.schedule = Some(schedule(&[p1, p2, p3])?);
+        let header = format!(
+            "fshape demo digits: gamma_V / gamma_f = {ratio}. Widths are the paper's\n\
+             (fshapesTk's exp(-u/s^2)) divided by sqrt(2) for fshape's exp(-u/(2 s^2))."
         );
         eprintln!("digits: gamma_V/gamma_f = {ratio} -> {}", run.display());
-        run_match(&sp, &tp, &config, &run, (0.0, 90.0))
+        run_match(&sp, &tp, &header, &config, &run, (0.0, 90.0))
             .with_context(|| format!("digits, gamma_V/gamma_f = {ratio}"))?;
     }
     Ok(())
@@ -118,21 +145,24 @@ pub struct RunArgs<'a> {
 pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
     let dir = a.out.join("bunny");
     let bunny = io::read_mesh(&a.data.join("stanford_bunny/bunny_qslim_2581v.ply.gz"), &io::ReadOptions::default())?;
-    let (template, target) = fshape_shoot::paper::bunny_setting(&bunny)?;
+    let (template, target) = fshape_match::demo::bunny_setting(&bunny)?;
     let (sp, tp) = write_inputs(&dir, &template, &target)?;
-    let shipped = std::fs::read_to_string(a.data.join("configs/bunny.toml"))
-        .with_context(|| format!("reading {}", a.data.join("configs/bunny.toml").display()))?;
-    for norm in ["h1", "l2-lumped"] {
-        let run = dir.join(norm);
-        let config = shipped
-            .replace("norm = \"h1\"", &format!("norm = \"{norm}\""))
-            .replace("gamma_w = 1.0", &format!("gamma_w = {}", a.gamma_w))
-            + &format!(
-                "\n[optimizer]\nmax_iterations = {}\n\n[schedule]\nkernel_geom = [\"gaussian:0.2\", \"gaussian:0.1\", \"gaussian:0.05\"]\n",
-                a.max_iterations
-            );
-        eprintln!("bunny: {norm} -> {}", run.display());
-        run_match(&sp, &tp, &config, &run, (0.0, 90.0)).with_context(|| format!("bunny, {norm}"))?;
+    let shipped = Config::read(&a.data.join("configs/bunny.toml"))?;
+    for norm in [NormKind::H1, NormKind::L2Lumped] {
+        let name = if norm == NormKind::H1 { "h1" } else { "l2-lumped" };
+        let run = dir.join(name);
+        let mut config = shipped.clone();
+        config.model.norm = norm;
+        config.model.gamma_w = a.gamma_w;
+        config.optimizer.max_iterations = a.max_iterations;
+        config.schedule = Some(schedule(&[0.2, 0.1, 0.05])?);
+        let header = format!(
+            "fshape demo bunny: data/configs/bunny.toml with norm {name}, gamma_w {} and\n\
+             a coarse-to-fine schedule of k_p (0.2, 0.1, 0.05).",
+            a.gamma_w
+        );
+        eprintln!("bunny: {name} -> {}", run.display());
+        run_match(&sp, &tp, &header, &config, &run, (0.0, 90.0)).with_context(|| format!("bunny, {name}"))?;
     }
     Ok(())
 }
@@ -186,26 +216,29 @@ pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
         source.n_vertices(),
         target.n_vertices()
     );
-    for kind in ["tangential", "metamorphosis"] {
-        let run = dir.join(kind);
-        let config = format!(
-            "# fshape demo cortex: {kind}, H1 with length {l} mm. Everything is in mm\n\
-             # (fsaverage5, FreeSurfer surface RAS); widths use exp(-u/(2 s^2)).\n\
-             # gamma_f = gamma_v / 100: correcting the whole thickness difference\n\
-             # (~0.5 mm over 76000 mm^2) then costs ~1% of the initial data term.\n\
-             [model]\nkind = \"{kind}\"\nnorm = \"h1\"\nlength = {l}\ngamma_v = 1.0\ngamma_f = 0.01\ngamma_w = {gw}\n\
-             [deformation]\nwidths = [20.0, 10.0]\ntolerance = 1e-6\n\
-             [integrator]\nscheme = \"rk4\"\nsteps = 10\n\
-             [attachment]\nkernel_geom = \"gaussian:5.0\"\nkernel_signal = \"gaussian:1.0\"\nkernel_grass = \"binet\"\ntolerance = 1e-6\n\
-             [optimizer]\nmax_iterations = {it}\n\
-             [schedule]\nkernel_geom = [\"gaussian:20.0\", \"gaussian:10.0\", \"gaussian:5.0\"]\n",
-            l = CORTEX_LENGTH_MM,
-            gw = a.gamma_w,
-            it = a.max_iterations,
+    for kind in [ModelKind::Tangential, ModelKind::Metamorphosis] {
+        let run = dir.join(kind.name());
+        let mut config = Config::new(vec![20.0, 10.0]);
+        config.model.kind = kind;
+        config.model.norm = NormKind::H1;
+        config.model.length = CORTEX_LENGTH_MM;
+        config.model.gamma_f = 0.01;
+        config.model.gamma_w = a.gamma_w;
+        config.deformation.tolerance = Some(1e-6);
+        config.attachment = Some(attachment(5.0, 1.0, Some(1e-6))?);
+        config.optimizer.max_iterations = a.max_iterations;
+        config.schedule = Some(schedule(&[20.0, 10.0, 5.0])?);
+        let header = format!(
+            "fshape demo cortex: {}, H1 with length {CORTEX_LENGTH_MM} mm. Everything is in mm\n\
+             (fsaverage5, FreeSurfer surface RAS); widths use exp(-u/(2 s^2)).\n\
+             gamma_f = gamma_v / 100: correcting the whole thickness difference\n\
+             (~0.5 mm over 76000 mm^2) then costs ~1% of the initial data term.",
+            kind.name()
         );
-        eprintln!("cortex: {kind} -> {}", run.display());
+        eprintln!("cortex: {} -> {}", kind.name(), run.display());
         // Seen from −x: the lateral side of a left hemisphere, anterior to the left.
-        run_match(&sp, &tp, &config, &run, (-90.0, 0.0)).with_context(|| format!("cortex, {kind}"))?;
+        run_match(&sp, &tp, &header, &config, &run, (-90.0, 0.0))
+            .with_context(|| format!("cortex, {}", kind.name()))?;
     }
     Ok(())
 }

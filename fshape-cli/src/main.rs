@@ -1,4 +1,4 @@
-//! `fshape`: inspect, convert and (in later releases) register functional
+//! `fshape`: inspect, convert, compare, shoot and register functional
 //! shapes. Exit codes: 0 success, 1 bad input (the message names the file
 //! and the place), 2 usage error.
 
@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use fshape_fem::{Norm, SignalNorm};
 use fshape_mesh::io::{self, Encoding, ReadOptions};
-use fshape_mesh::{FShape, Problem, Repairs, Severity};
+use fshape_mesh::{FShape, Finding, Repairs, Severity};
 use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
@@ -104,14 +104,14 @@ enum Command {
     Shoot {
         /// The template mesh (its signal, if any, is f_0; else 0).
         source: PathBuf,
-        /// Initial momenta p_0: CSV, a header line then p_x,p_y[,p_z] per vertex.
+        /// Initial momenta p_0: CSV, a header line, then p_x,p_y (or p_x,p_y,p_z) per vertex.
         #[arg(long)]
         momentum: PathBuf,
         /// Signal momentum p^f (one-column CSV; default 0). For the
         /// tangential model, the signal residual ζ.
         #[arg(long)]
         signal_momentum: Option<PathBuf>,
-        /// Model configuration (TOML; see fshape_shoot::Config).
+        /// Model configuration (TOML; see fshape_match::Config).
         #[arg(long)]
         config: PathBuf,
         /// Output directory (created if needed).
@@ -135,7 +135,7 @@ enum Command {
         source: PathBuf,
         /// The target mesh.
         target: PathBuf,
-        /// Model, attachment, optimizer and schedule (TOML; see fshape_shoot::Config).
+        /// Model, attachment, optimizer and schedule (TOML; see fshape_match::Config).
         #[arg(long)]
         config: PathBuf,
         /// Output directory (created if needed).
@@ -345,7 +345,7 @@ struct Info {
     warnings: Vec<ProblemGroup>,
 }
 
-fn group(problems: &[&Problem]) -> Vec<ProblemGroup> {
+fn group(problems: &[&Finding]) -> Vec<ProblemGroup> {
     let mut out: Vec<ProblemGroup> = Vec::new();
     for p in problems {
         match out.iter_mut().find(|g| g.code == p.code()) {
@@ -480,15 +480,8 @@ fn fem(path: &Path, norm: &str, length: f64, out: Option<&Path>, json: bool) -> 
         total_area: shape.total_volume(),
     };
     if let Some(out) = out {
-        let mut text = String::from("%%MatrixMarket matrix coordinate real symmetric\n");
-        text.push_str(&format!("% fshape signal norm {} of {}\n", norm.name(), path.display()));
-        text.push_str(&format!("{n} {n} {}\n", values.len()));
-        for c in 0..n {
-            for e in col_ptr[c]..col_ptr[c + 1] {
-                text.push_str(&format!("{} {} {:e}\n", row_idx[e] + 1, c + 1, values[e]));
-            }
-        }
-        io::write_atomic(out, text.as_bytes(), false)?;
+        let comment = format!("fshape signal norm {} of {}", norm.name(), path.display());
+        io::mtx::write_symmetric_lower(out, n, col_ptr, row_idx, &values, &comment)?;
     }
     if json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -640,8 +633,7 @@ fn trajectory_files(
 ) -> Result<(Vec<Output>, Vec<String>)> {
     let mut outputs: Vec<Output> = Vec::new();
     let mut files = Vec::new();
-    let mut pvd =
-        String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
+    let mut steps: Vec<(f64, String)> = Vec::new();
     for (k, &t) in times.iter().enumerate() {
         let (x, f) = traj.at(t);
         let state = template.clone().with_points(x)?.with_signal(Some(f))?;
@@ -653,16 +645,18 @@ fn trajectory_files(
             outputs.push((out.join(&name), bytes));
             files.push(name);
         }
-        pvd.push_str(&format!("    <DataSet timestep=\"{t}\" part=\"0\" file=\"state_{k:03}.vtk\"/>\n"));
+        steps.push((t, format!("state_{k:03}.vtk")));
     }
-    pvd.push_str("  </Collection>\n</VTKFile>\n");
+    let entries: Vec<(f64, &str)> = steps.iter().map(|(t, f)| (*t, f.as_str())).collect();
+    let pvd = io::vtk::collection(&entries);
     outputs.push((out.join("trajectory.pvd"), pvd.into_bytes()));
     files.push("trajectory.pvd".into());
     Ok((outputs, files))
 }
 
 fn shoot(a: &ShootArgs<'_>) -> Result<()> {
-    use fshape_shoot::{Config, Problem};
+    use fshape_match::Config;
+    use fshape_shoot::Problem;
     let start = std::time::Instant::now();
     let config = Config::read(a.config)?;
     let model = config.model()?;
@@ -685,15 +679,15 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
         }
         None => vec![0.0; n],
     };
-    let kind = format!("{:?}", model.kind).to_lowercase();
-    let (norm, integrator, steps) = (model.norm.name(), format!("{:?}", model.integrator).to_lowercase(), model.steps);
+    let kind = model.kind().name().to_string();
+    let (norm, integrator, steps) = (model.norm().name(), model.integrator().name().to_string(), model.steps());
     let problem = Problem::new(&shape, model).with_context(|| format!("setting up {}", a.source.display()))?;
     let traj = problem.shoot(&p0, &pf).with_context(|| format!("shooting from {}", a.source.display()))?;
     // Everything is computed before anything is written.
     let template = problem.template().clone();
     let (mut outputs, files) = trajectory_files(&template, &traj, a.times, a.out)?;
     let h = traj.hamiltonian.clone();
-    let drift = if h[0] == 0.0 { 0.0 } else { h.iter().map(|v| (v - h[0]).abs()).fold(0.0, f64::max) / h[0].abs() };
+    let drift = traj.drift().0;
     let (x0, x1) = (template.points(), traj.points(steps));
     let disp: Vec<f64> = x0
         .chunks_exact(dim)

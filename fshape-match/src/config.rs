@@ -1,0 +1,529 @@
+//! The configuration of a registration: a TOML file, or a value built in
+//! code and written with serde. Every choice is a typed value (the
+//! spellings below are serde's), kernels are parsed once when the file is
+//! read, and [`Config::plan`] checks every number before any work.
+//!
+//! ```toml
+//! [model]
+//! kind = "metamorphosis"   # metamorphosis | tangential | lddmm   (default metamorphosis)
+//! norm = "h1"              # l2-lumped | l2 | h1                  (default l2-lumped)
+//! length = 1.0             # ℓ of the H1 norm, in mesh units      (default 1)
+//! gamma_v = 1.0            # weight γ_V of the deformation energy (default 1)
+//! gamma_f = 1.0            # weight γ_f of the signal energy      (default 1)
+//! gamma_w = 1.0            # weight γ_W of the data attachment    (default 1)
+//!
+//! [deformation]
+//! widths = [0.2, 0.1]      # Gaussian widths σ_i, exp(−u/(2σ²))   (required)
+//! weights = [1.0, 1.0]     # one per width                        (default all 1)
+//! tolerance = 1e-6         # smooth truncation τ                  (default: exact)
+//!
+//! [integrator]
+//! scheme = "rk4"           # rk4 | midpoint | euler               (default rk4)
+//! steps = 10               # time steps on [0, 1]                 (default 10)
+//! max_drift = 0.5          # relative drift of H reported as divergence (default 0.5)
+//!
+//! [attachment]
+//! kernel_geom = "gaussian:0.05"     # as `fshape distance --kernel-geom` (required)
+//! kernel_signal = "gaussian:0.5"    # omit for a purely geometric term
+//! kernel_grass = "binet"            # (default binet)
+//! tolerance = 1e-6                  # truncation of k_p (default: exact)
+//!
+//! [optimizer]                       # matching only; every key optional
+//! method = "lbfgs"                  # lbfgs | gradient-descent          (default lbfgs)
+//! memory = 10                       # L-BFGS correction pairs           (default 10)
+//! block_scaling = true              # L-BFGS: own scale for p_0 and p^f (default true)
+//! increase = 1.2                    # gradient descent: step growth     (default 1.2)
+//! max_iterations = 200              # per schedule stage                (default 200)
+//! gradient_tolerance = 1e-3         # stop at |∇J| ≤ tol·|∇J at start|  (default 1e-3)
+//! decrease_tolerance = 1e-6         # stop when J fell by ≤ tol·|J|...  (default 1e-6)
+//! decrease_window = 10              # ...over this many iterations      (default 10)
+//! signal_metric = "l2"              # metric of p^f: l2 (L²(x_0), the paper's) | euclidean (default l2)
+//! momentum_metric = "euclidean"     # metric of p_0: euclidean | l2     (default euclidean)
+//!
+//! [schedule]                        # coarse to fine (default: one stage, [attachment])
+//! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
+//! ```
+//!
+//! Unknown keys are refused by name. A value of the wrong type or
+//! spelling is refused while reading, with its key and line; a number out
+//! of range by [`Config::plan`], with its key.
+
+use std::fmt;
+use std::path::Path;
+
+use fshape_fem::Norm;
+use fshape_kernels::{Kernel, Profile};
+use fshape_shoot::{Integrator, Model, ModelKind};
+use fshape_varifold::{GrassKernel, SignalKernel, VarifoldKernel};
+use serde::{Deserialize, Serialize};
+
+use crate::MatchError;
+use crate::optimize::{Method, Settings};
+use crate::unknowns::{Metric, Metrics};
+
+/// The whole file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// `[model]`.
+    #[serde(default)]
+    pub model: ModelSection,
+    /// `[deformation]`.
+    pub deformation: DeformationSection,
+    /// `[integrator]`.
+    #[serde(default)]
+    pub integrator: IntegratorSection,
+    /// `[attachment]` (needed for matching, not for shooting).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attachment: Option<AttachmentSection>,
+    /// `[optimizer]` (matching).
+    #[serde(default)]
+    pub optimizer: OptimizerSection,
+    /// `[schedule]` (matching).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<ScheduleSection>,
+}
+
+/// The signal norm's name (`l2-lumped`, `l2`, `h1`); H¹'s length is
+/// `[model] length`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum NormKind {
+    /// Lumped L² (diagonal mass).
+    #[default]
+    #[serde(rename = "l2-lumped")]
+    L2Lumped,
+    /// L² with the P1 mass matrix.
+    #[serde(rename = "l2")]
+    L2,
+    /// H¹ = mass + ℓ² stiffness.
+    #[serde(rename = "h1")]
+    H1,
+}
+
+/// `[model]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelSection {
+    /// metamorphosis | tangential | lddmm.
+    pub kind: ModelKind,
+    /// l2-lumped | l2 | h1.
+    pub norm: NormKind,
+    /// ℓ of the H1 norm.
+    pub length: f64,
+    /// γ_V.
+    pub gamma_v: f64,
+    /// γ_f.
+    pub gamma_f: f64,
+    /// γ_W.
+    pub gamma_w: f64,
+}
+
+impl Default for ModelSection {
+    fn default() -> Self {
+        ModelSection {
+            kind: ModelKind::Metamorphosis,
+            norm: NormKind::L2Lumped,
+            length: 1.0,
+            gamma_v: 1.0,
+            gamma_f: 1.0,
+            gamma_w: 1.0,
+        }
+    }
+}
+
+/// `[deformation]`: a sum of Gaussians.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeformationSection {
+    /// Gaussian widths.
+    pub widths: Vec<f64>,
+    /// Weights, one per width (default all 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weights: Option<Vec<f64>>,
+    /// Truncation tolerance (default exact).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
+}
+
+/// `[integrator]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IntegratorSection {
+    /// rk4 | midpoint | euler.
+    pub scheme: Integrator,
+    /// Number of time steps.
+    pub steps: usize,
+    /// The relative drift of the Hamiltonian beyond which a shooting is
+    /// reported as diverged ([`Model::with_max_drift`]).
+    pub max_drift: f64,
+}
+
+impl Default for IntegratorSection {
+    fn default() -> Self {
+        IntegratorSection { scheme: Integrator::Rk4, steps: 10, max_drift: fshape_shoot::DEFAULT_MAX_DRIFT }
+    }
+}
+
+/// A kernel written as text in the file and parsed once, when read: it is
+/// stored as both, so that it serialises back to the same text.
+macro_rules! kernel_spec {
+    ($(#[$doc:meta])* $name:ident, $kernel:ty, $parse:expr) => {
+        $(#[$doc])*
+        #[derive(Clone, Debug, Serialize, Deserialize)]
+        #[serde(try_from = "String", into = "String")]
+        pub struct $name {
+            text: String,
+            kernel: $kernel,
+        }
+
+        impl $name {
+            /// Parses the text (the width checked).
+            pub fn parse(text: &str) -> Result<Self, fshape_varifold::VarifoldError> {
+                let parse: fn(&str) -> Result<$kernel, fshape_varifold::VarifoldError> = $parse;
+                Ok($name { kernel: parse(text)?, text: text.to_string() })
+            }
+
+            /// The text, as written.
+            pub fn text(&self) -> &str {
+                &self.text
+            }
+
+            /// The parsed kernel.
+            pub fn kernel(&self) -> &$kernel {
+                &self.kernel
+            }
+        }
+
+        impl TryFrom<String> for $name {
+            type Error = String;
+            fn try_from(text: String) -> Result<Self, String> {
+                $name::parse(&text).map_err(|e| e.to_string())
+            }
+        }
+
+        impl From<$name> for String {
+            fn from(k: $name) -> String {
+                k.text
+            }
+        }
+
+        impl PartialEq for $name {
+            fn eq(&self, other: &Self) -> bool {
+                self.text == other.text
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(&self.text)
+            }
+        }
+    };
+}
+
+kernel_spec!(
+    /// A position kernel k_p: `gaussian:σ`, `gaussian:σ1,σ2,…` or `cauchy:σ`.
+    PositionKernel,
+    Kernel,
+    fshape_varifold::parse_position
+);
+kernel_spec!(
+    /// A signal kernel k_f: `gaussian:σ_f`.
+    SignalKernelSpec,
+    SignalKernel,
+    SignalKernel::parse
+);
+kernel_spec!(
+    /// A direction kernel k_t: `linear`, `binet`, `gaussian-oriented:σ_t`,
+    /// `gaussian-unoriented:σ_t`.
+    GrassKernelSpec,
+    GrassKernel,
+    GrassKernel::parse
+);
+
+/// `[attachment]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttachmentSection {
+    /// Position kernel, as `fshape distance --kernel-geom`.
+    pub kernel_geom: PositionKernel,
+    /// Signal kernel (omit for a geometric term).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel_signal: Option<SignalKernelSpec>,
+    /// Direction kernel (default binet).
+    #[serde(default = "binet")]
+    pub kernel_grass: GrassKernelSpec,
+    /// Truncation tolerance of k_p (default exact).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
+}
+
+fn binet() -> GrassKernelSpec {
+    GrassKernelSpec::parse("binet").expect("a valid kernel")
+}
+
+/// The optimiser's name (`lbfgs`, `gradient-descent`); its parameter is
+/// `memory` or `increase`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MethodKind {
+    /// L-BFGS with a strong Wolfe line search.
+    #[default]
+    Lbfgs,
+    /// The paper's gradient descent with an adaptive step.
+    GradientDescent,
+}
+
+/// `[optimizer]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OptimizerSection {
+    /// lbfgs | gradient-descent.
+    pub method: MethodKind,
+    /// L-BFGS memory.
+    pub memory: usize,
+    /// L-BFGS: one initial scale per block of unknowns.
+    pub block_scaling: bool,
+    /// Gradient descent step growth.
+    pub increase: f64,
+    /// Iterations per stage.
+    pub max_iterations: usize,
+    /// Relative gradient tolerance.
+    pub gradient_tolerance: f64,
+    /// Relative decrease tolerance.
+    pub decrease_tolerance: f64,
+    /// Window of the decrease test.
+    pub decrease_window: usize,
+    /// Metric of p^f: l2 | euclidean.
+    pub signal_metric: Metric,
+    /// Metric of p_0: euclidean | l2.
+    pub momentum_metric: Metric,
+}
+
+impl Default for OptimizerSection {
+    fn default() -> Self {
+        let d = Settings::default();
+        let m = Metrics::default();
+        OptimizerSection {
+            method: MethodKind::Lbfgs,
+            memory: 10,
+            block_scaling: d.block_scaling,
+            increase: 1.2,
+            max_iterations: d.max_iterations,
+            gradient_tolerance: d.gradient_tolerance,
+            decrease_tolerance: d.decrease_tolerance,
+            decrease_window: d.decrease_window,
+            signal_metric: m.signal,
+            momentum_metric: m.momentum,
+        }
+    }
+}
+
+/// `[schedule]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduleSection {
+    /// The position kernel of each stage, coarse to fine.
+    pub kernel_geom: Vec<PositionKernel>,
+}
+
+/// One stage of the schedule: what it is called in reports and its data
+/// attachment kernel.
+#[derive(Clone, Debug)]
+pub struct StageSpec {
+    /// The stage's position kernel as written (`gaussian:0.1`).
+    pub label: String,
+    /// The data attachment kernel of the stage.
+    pub kernel: VarifoldKernel,
+}
+
+/// Everything a registration needs, checked: the model, the stages, the
+/// optimiser settings and the metrics of the unknowns.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// The model.
+    pub model: Model,
+    /// The stages, coarse to fine (at least one).
+    pub stages: Vec<StageSpec>,
+    /// Optimiser settings (per stage).
+    pub settings: Settings,
+    /// Metrics of p_0 and p^f.
+    pub metrics: Metrics,
+}
+
+fn bad(key: impl Into<String>, message: impl Into<String>) -> MatchError {
+    MatchError::Config { key: key.into(), message: message.into() }
+}
+
+fn positive(key: &str, v: f64) -> Result<f64, MatchError> {
+    if v > 0.0 && v.is_finite() { Ok(v) } else { Err(bad(key, format!("must be positive and finite, got {v}"))) }
+}
+
+impl Config {
+    /// A configuration with the deformation kernel's widths and every
+    /// other section at its default (no attachment, no schedule).
+    pub fn new(widths: Vec<f64>) -> Config {
+        Config {
+            model: ModelSection::default(),
+            deformation: DeformationSection { widths, weights: None, tolerance: None },
+            integrator: IntegratorSection::default(),
+            attachment: None,
+            optimizer: OptimizerSection::default(),
+            schedule: None,
+        }
+    }
+
+    /// Parses TOML text. A syntax error, an unknown key or a value of the
+    /// wrong type or spelling names its key and line.
+    ///
+    /// ```
+    /// let c = fshape_match::Config::parse("[deformation]\nwidths = [0.2, 0.1]\n")?;
+    /// assert_eq!(c.model()?.steps(), 10);
+    /// let e = fshape_match::Config::parse("[deformation]\nwidths = [0.2]\n[model]\nkind = \"magic\"\n").unwrap_err();
+    /// assert!(e.to_string().contains("model.kind") && e.to_string().contains("line 4"));
+    /// # Ok::<(), fshape_match::MatchError>(())
+    /// ```
+    pub fn parse(text: &str) -> Result<Config, MatchError> {
+        let de = toml::Deserializer::parse(text).map_err(|e| MatchError::ConfigSyntax {
+            key: String::new(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        serde_path_to_error::deserialize(de).map_err(|e| {
+            let key = e.path().to_string();
+            MatchError::ConfigSyntax {
+                key: if key == "." { String::new() } else { key },
+                message: e.into_inner().to_string().trim_end().to_string(),
+            }
+        })
+    }
+
+    /// Reads and parses a file (errors name it).
+    pub fn read(path: &Path) -> Result<Config, MatchError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })?;
+        Config::parse(&text).map_err(|e| e.in_file(path))
+    }
+
+    /// The TOML text of this configuration (every key, defaults included).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("a Config always serialises")
+    }
+
+    /// The validated model.
+    pub fn model(&self) -> Result<Model, MatchError> {
+        let m = &self.model;
+        let d = &self.deformation;
+        for (key, v) in [("model.gamma_v", m.gamma_v), ("model.gamma_f", m.gamma_f), ("model.gamma_w", m.gamma_w)] {
+            positive(key, v)?;
+        }
+        let norm = match m.norm {
+            NormKind::L2Lumped => Norm::L2Lumped,
+            NormKind::L2 => Norm::L2,
+            NormKind::H1 => Norm::H1 { length: positive("model.length", m.length)? },
+        };
+        let weights = d.weights.clone().unwrap_or_else(|| vec![1.0; d.widths.len()]);
+        let profile = Profile::Gaussians { sigmas: d.widths.clone(), weights };
+        let mut kernel = Kernel::try_new(&profile).map_err(|e| bad("deformation", e.to_string()))?;
+        if let Some(tol) = d.tolerance {
+            kernel = kernel.truncated(tol).map_err(|e| bad("deformation.tolerance", e.to_string()))?;
+        }
+        if self.integrator.steps == 0 {
+            return Err(bad("integrator.steps", "must be at least 1, got 0"));
+        }
+        if self.integrator.max_drift.is_nan() || self.integrator.max_drift <= 0.0 {
+            return Err(bad("integrator.max_drift", format!("must be positive, got {}", self.integrator.max_drift)));
+        }
+        let model = Model::new(kernel)
+            .with_kind(m.kind)
+            .with_norm(norm)
+            .and_then(|model| model.with_weights(m.gamma_v, m.gamma_f, m.gamma_w))
+            .and_then(|model| model.with_integrator(self.integrator.scheme, self.integrator.steps))
+            .and_then(|model| model.with_max_drift(self.integrator.max_drift))
+            .map_err(|e| bad("model", e.to_string()))?;
+        Ok(model)
+    }
+
+    fn attachment_section(&self) -> Result<&AttachmentSection, MatchError> {
+        self.attachment.as_ref().ok_or_else(|| bad("attachment", "missing section [attachment]"))
+    }
+
+    /// The data attachment kernel of `[attachment]`.
+    pub fn attachment_kernel(&self) -> Result<VarifoldKernel, MatchError> {
+        let a = self.attachment_section()?;
+        self.attachment_with(&a.kernel_geom, "attachment")
+    }
+
+    fn attachment_with(&self, geom: &PositionKernel, key: &str) -> Result<VarifoldKernel, MatchError> {
+        let a = self.attachment_section()?;
+        let signal = a.kernel_signal.as_ref().map_or(SignalKernel::Constant, |s| *s.kernel());
+        let mut k = VarifoldKernel::try_new(geom.kernel().clone(), signal, *a.kernel_grass.kernel())
+            .map_err(|e| bad(key, e.to_string()))?;
+        if let Some(tol) = a.tolerance {
+            k = k.truncated(tol).map_err(|e| bad("attachment.tolerance", e.to_string()))?;
+        }
+        Ok(k)
+    }
+
+    /// The stages of the coarse-to-fine schedule (`[schedule] kernel_geom`
+    /// with the rest of `[attachment]`), or the single `[attachment]` stage.
+    pub fn schedule(&self) -> Result<Vec<StageSpec>, MatchError> {
+        match &self.schedule {
+            None => {
+                let geom = &self.attachment_section()?.kernel_geom;
+                Ok(vec![StageSpec { label: geom.text().to_string(), kernel: self.attachment_kernel()? }])
+            }
+            Some(s) if s.kernel_geom.is_empty() => Err(bad("schedule.kernel_geom", "needs at least one kernel")),
+            Some(s) => s
+                .kernel_geom
+                .iter()
+                .enumerate()
+                .map(|(i, g)| {
+                    let kernel = self.attachment_with(g, &format!("schedule.kernel_geom[{i}]"))?;
+                    Ok(StageSpec { label: g.text().to_string(), kernel })
+                })
+                .collect(),
+        }
+    }
+
+    /// The optimiser settings and the metrics of the unknowns.
+    pub fn optimizer(&self) -> Result<(Settings, Metrics), MatchError> {
+        let o = &self.optimizer;
+        let method = match o.method {
+            MethodKind::Lbfgs if o.memory >= 1 => Method::Lbfgs { memory: o.memory },
+            MethodKind::Lbfgs => return Err(bad("optimizer.memory", "must be at least 1")),
+            MethodKind::GradientDescent if o.increase > 1.0 && o.increase.is_finite() => {
+                Method::GradientDescent { increase: o.increase }
+            }
+            MethodKind::GradientDescent => {
+                return Err(bad("optimizer.increase", format!("must be finite and above 1, got {}", o.increase)));
+            }
+        };
+        for (key, v) in [
+            ("optimizer.gradient_tolerance", o.gradient_tolerance),
+            ("optimizer.decrease_tolerance", o.decrease_tolerance),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(bad(key, format!("must be finite and at least 0, got {v}")));
+            }
+        }
+        let metrics = Metrics { signal: o.signal_metric, momentum: o.momentum_metric };
+        let settings = Settings {
+            method,
+            max_iterations: o.max_iterations,
+            gradient_tolerance: o.gradient_tolerance,
+            decrease_tolerance: o.decrease_tolerance,
+            decrease_window: o.decrease_window,
+            block_scaling: o.block_scaling,
+            ..Settings::default()
+        };
+        Ok((settings, metrics))
+    }
+
+    /// Everything checked at once: the model, the stages, the optimiser.
+    pub fn plan(&self) -> Result<Plan, MatchError> {
+        let model = self.model()?;
+        let stages = self.schedule()?;
+        let (settings, metrics) = self.optimizer()?;
+        Ok(Plan { model, stages, settings, metrics })
+    }
+}

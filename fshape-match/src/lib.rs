@@ -1,0 +1,115 @@
+//! Registration of functional shapes as a library: what `fshape match`
+//! does, for any caller (the program, atlas estimation, a Python binding,
+//! a cluster job).
+//!
+//! - [`Config`]: the typed configuration (TOML or a value built in code),
+//!   checked into a [`Plan`]: the model of fshape-shoot, the stages of a
+//!   coarse-to-fine schedule, the optimiser's settings and the metrics of
+//!   the unknowns.
+//! - [`optimize`]: L-BFGS with a strong Wolfe line search and the paper's
+//!   adaptive gradient descent, with a serde [`optimize::State`].
+//! - [`unknowns`]: the packing of (p_0, p^f) into the optimiser's
+//!   unknowns in their metrics, and J as an optimiser objective.
+//! - [`Session`]: runs the stages with a checkpoint after every iteration,
+//!   resumes from one (validated against the problem first) to the same
+//!   bits as an uninterrupted run, and reports to an [`Observer`].
+//! - [`demo`]: the paper's experimental settings built from shipped data.
+//!
+//! ```
+//! use fshape_match::{Config, Session};
+//! use fshape_mesh::test_support::perturbed_icosphere;
+//! let source = perturbed_icosphere(1, 0.0, 1);
+//! let target = perturbed_icosphere(1, 0.05, 2);
+//! let mut config: Config = Config::parse(
+//!     "[deformation]\nwidths = [0.5]\n[attachment]\nkernel_geom = \"gaussian:0.3\"\n",
+//! )?;
+//! config.optimizer.max_iterations = 5;
+//! let mut session = Session::new(&source, &target, &config)?;
+//! session.run(&mut ())?;
+//! let result = session.result()?;
+//! assert!(result.energies.attachment < result.stages[0].initial.attachment);
+//! # Ok::<(), fshape_match::MatchError>(())
+//! ```
+
+use std::path::{Path, PathBuf};
+
+mod config;
+pub mod demo;
+pub mod optimize;
+mod session;
+pub mod unknowns;
+
+pub use config::{
+    AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind, ModelSection,
+    NormKind, OptimizerSection, Plan, PositionKernel, ScheduleSection, SignalKernelSpec, StageSpec,
+};
+pub use session::{
+    CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, MatchResult, Observer, Outcome, Session, StageRecord,
+    fingerprint,
+};
+pub use unknowns::{Metric, Metrics};
+
+/// Why a registration could not be set up or run.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum MatchError {
+    /// A configuration value is out of range (`key`: its dotted name).
+    #[error("configuration: {key}: {message}")]
+    Config {
+        /// The key, e.g. `model.gamma_v`.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The configuration could not be read: a syntax error, an unknown key,
+    /// a value of the wrong type or spelling (toml's message gives the line).
+    #[error("configuration{}: {message}", if key.is_empty() { String::new() } else { format!(": {key}") })]
+    ConfigSyntax {
+        /// The dotted key where reading failed (empty when unknown).
+        key: String,
+        /// toml's message, with line and column.
+        message: String,
+    },
+    /// An error about a file's contents, naming the file.
+    #[error("{}: {source}", path.display())]
+    InFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong in it.
+        source: Box<MatchError>,
+    },
+    /// A file could not be read or written.
+    #[error("{}: {message}", path.display())]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// The system's message.
+        message: String,
+    },
+    /// A checkpoint does not belong to this problem, or is damaged.
+    #[error("{problem}")]
+    Checkpoint {
+        /// What is wrong, and what to do.
+        problem: String,
+    },
+    /// Source and target cannot be matched (dimension or cell type differ).
+    #[error("source and target are not the same kind of shape: {0}")]
+    Shapes(String),
+    /// [`Session::result`] before every stage has run.
+    #[error("the registration has not finished: run the session to its end first")]
+    NotFinished,
+    /// Shooting, the signal norm, the kernels or the data attachment refused
+    /// their input.
+    #[error(transparent)]
+    Shoot(#[from] fshape_shoot::ShootError),
+    /// A mesh could not be built.
+    #[error(transparent)]
+    Shape(#[from] fshape_mesh::ShapeError),
+}
+
+impl MatchError {
+    /// The same error, naming the file it came from.
+    pub fn in_file(self, path: &Path) -> MatchError {
+        MatchError::InFile { path: path.to_path_buf(), source: Box::new(self) }
+    }
+}

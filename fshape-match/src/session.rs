@@ -1,0 +1,454 @@
+//! A registration run: the stages of the schedule one after the other,
+//! each warm-started from the last, with a checkpoint after every accepted
+//! iteration. A run stopped anywhere (an observer's [`Control::Stop`], a
+//! kill between two checkpoints) resumes from its checkpoint to the result
+//! an uninterrupted run gives, bit for bit: the optimiser's whole state is
+//! in the checkpoint, and every evaluation is deterministic.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use fshape_mesh::FShape;
+use fshape_shoot::{Energies, Problem, Trajectory};
+use serde::{Deserialize, Serialize};
+
+use crate::optimize::{State, Stop};
+use crate::unknowns::{MatchObjective, Unknowns};
+use crate::{Config, MatchError, Plan, StageSpec};
+
+/// The checkpoint format this version writes and reads.
+pub const CHECKPOINT_FORMAT: u32 = 2;
+
+/// J and its parts after one accepted iteration (or at a stage's start).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Iteration {
+    /// The iteration within its stage (0: the stage's starting point).
+    pub iteration: usize,
+    /// J at the accepted point.
+    pub value: f64,
+    /// The path energy.
+    pub energy: f64,
+    /// Its signal part.
+    pub signal_energy: f64,
+    /// A(x_1, f_1; target).
+    pub attachment: f64,
+    /// The accepted step length.
+    pub step: f64,
+    /// Objective evaluations of the stage so far.
+    pub evaluations: usize,
+}
+
+impl Iteration {
+    fn of(state: &State, parts: &Energies) -> Iteration {
+        Iteration {
+            iteration: state.iteration,
+            value: parts.value,
+            energy: parts.energy,
+            signal_energy: parts.signal_energy,
+            attachment: parts.attachment,
+            step: state.step,
+            evaluations: state.evaluations,
+        }
+    }
+}
+
+/// A finished stage.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StageRecord {
+    /// The stage's position kernel as written.
+    pub kernel_geom: String,
+    /// Why it stopped.
+    pub stop: Stop,
+    /// The same, as a sentence.
+    pub reason: String,
+    /// J's parts at the stage's start.
+    pub initial: Iteration,
+    /// Every accepted iteration.
+    pub iterations: Vec<Iteration>,
+}
+
+/// The stage under way: the optimiser's state and its records so far.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Current {
+    /// The optimiser's state.
+    pub state: State,
+    /// J's parts at the stage's start.
+    pub initial: Iteration,
+    /// Accepted iterations so far.
+    pub iterations: Vec<Iteration>,
+}
+
+/// Everything needed to continue a registration.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// [`CHECKPOINT_FORMAT`] of the version that wrote it.
+    pub format: u32,
+    /// [`fingerprint`] of the inputs: a checkpoint of other inputs is
+    /// refused.
+    pub fingerprint: String,
+    /// Finished stages.
+    pub done: Vec<StageRecord>,
+    /// The stage under way (`None` between stages).
+    pub current: Option<Current>,
+    /// The unknowns at the end of the last finished stage (warm start).
+    pub warm: Option<Vec<f64>>,
+    /// Wall seconds spent on this registration so far, over every run.
+    pub seconds: f64,
+}
+
+/// What an observer wants after an event.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// Go on.
+    Continue,
+    /// Stop now, leaving the checkpoint to resume from.
+    Stop,
+}
+
+/// Sees the run's progress (a progress bar, a log, a Python callback) and
+/// may stop it. Every method has a default that does nothing; `()` is the
+/// observer that watches nothing.
+pub trait Observer {
+    /// Stage `stage` (of `stages`) starts, or resumes with `done`
+    /// iterations already made.
+    fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
+        let _ = (stage, stages, spec, done);
+        Control::Continue
+    }
+    /// An iteration was accepted (and checkpointed).
+    fn iteration(&mut self, stage: usize, record: &Iteration) -> Control {
+        let _ = (stage, record);
+        Control::Continue
+    }
+    /// A stage ended.
+    fn stage_finished(&mut self, stage: usize, record: &StageRecord) {
+        let _ = (stage, record);
+    }
+}
+
+impl Observer for () {}
+
+/// How [`Session::run`] ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Every stage ran to its stopping rule.
+    Finished,
+    /// An observer stopped the run; the checkpoint holds where it was.
+    Interrupted,
+}
+
+/// The registration's result.
+#[derive(Clone, Debug)]
+pub struct MatchResult {
+    /// The initial momenta p_0 (P × n).
+    pub p0: Vec<f64>,
+    /// The signal momentum p^f (P; ζ for the tangential model, 0 for LDDMM).
+    pub pf: Vec<f64>,
+    /// J and its parts at the result, with the last stage's kernel.
+    pub energies: Energies,
+    /// The geodesic from the template.
+    pub trajectory: Trajectory,
+    /// Every stage's records.
+    pub stages: Vec<StageRecord>,
+    /// Accepted iterations, all stages.
+    pub iterations: usize,
+    /// Objective evaluations, all stages.
+    pub evaluations: usize,
+    /// Wall seconds, all runs.
+    pub seconds: f64,
+}
+
+/// FNV-1a, 64 bits, as hex, of the source, the target and the
+/// configuration (as data: coordinates, cells and signals bit for bit, and
+/// the configuration's TOML with every default written out). Only to
+/// recognise a checkpoint of the same inputs; no cryptographic need.
+pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes.iter().chain(&[0xff]) {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    for s in [source, target] {
+        eat(&(s.dim() as u64).to_le_bytes());
+        eat(s.kind().name().as_bytes());
+        eat(&s.points().iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+        eat(&s.cells().iter().flat_map(|c| (*c as u64).to_le_bytes()).collect::<Vec<u8>>());
+        eat(&s.signal().unwrap_or(&[]).iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+    }
+    eat(config.to_toml().as_bytes());
+    format!("{h:016x}")
+}
+
+/// A registration of a source onto a target with a [`Config`], run stage
+/// by stage ([`Session::run`]), resumable ([`Session::resume`]).
+pub struct Session {
+    plan: Plan,
+    problem: Problem,
+    target: FShape,
+    unknowns: Unknowns,
+    checkpoint: Checkpoint,
+    checkpoint_file: Option<PathBuf>,
+    /// The stage whose data term the problem holds.
+    staged: Option<usize>,
+}
+
+/// Records the time and writes the checkpoint to `file`, if any.
+fn save(checkpoint: &mut Checkpoint, file: Option<&Path>, seconds: f64) -> Result<(), MatchError> {
+    checkpoint.seconds = seconds;
+    let Some(path) = file else { return Ok(()) };
+    let bytes = serde_json::to_vec_pretty(checkpoint).map_err(|e| checkpoint_error(e.to_string()))?;
+    fshape_mesh::io::write_atomic(path, &bytes, false)
+        .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })
+}
+
+fn checkpoint_error(problem: impl Into<String>) -> MatchError {
+    MatchError::Checkpoint { problem: problem.into() }
+}
+
+impl Session {
+    /// Checks the configuration and the shapes, builds the problem (signal
+    /// norm analysis, once) and starts an empty checkpoint.
+    pub fn new(source: &FShape, target: &FShape, config: &Config) -> Result<Session, MatchError> {
+        if source.dim() != target.dim() || source.kind() != target.kind() {
+            return Err(MatchError::Shapes(format!(
+                "the source is a {} mesh in R^{}, the target a {} mesh in R^{}",
+                source.kind().name(),
+                source.dim(),
+                target.kind().name(),
+                target.dim()
+            )));
+        }
+        let plan = config.plan()?;
+        let problem = Problem::new(source, plan.model.clone())?;
+        let unknowns = Unknowns::new(&problem, plan.metrics)?;
+        let checkpoint = Checkpoint {
+            format: CHECKPOINT_FORMAT,
+            fingerprint: fingerprint(source, target, config),
+            done: Vec::new(),
+            current: None,
+            warm: None,
+            seconds: 0.0,
+        };
+        Ok(Session { plan, problem, target: target.clone(), unknowns, checkpoint, checkpoint_file: None, staged: None })
+    }
+
+    /// Writes the checkpoint to `path` (atomically, as JSON) after every
+    /// accepted iteration, at the end of every stage and when stopped.
+    pub fn with_checkpoint_file(mut self, path: &Path) -> Session {
+        self.checkpoint_file = Some(path.to_path_buf());
+        self
+    }
+
+    /// Parallel (default) or serial work in every evaluation; the results
+    /// are the same bit for bit.
+    pub fn with_parallel(mut self, parallel: bool) -> Session {
+        self.problem.set_parallel(parallel);
+        self
+    }
+
+    /// Continues from `checkpoint`, after checking that it belongs to these
+    /// inputs (fingerprint), was written by this format, and holds arrays of
+    /// the problem's sizes with finite values.
+    pub fn resume(mut self, checkpoint: Checkpoint) -> Result<Session, MatchError> {
+        self.validate(&checkpoint)?;
+        self.checkpoint = checkpoint;
+        Ok(self)
+    }
+
+    /// [`Session::resume`] from a checkpoint file; errors name the file.
+    pub fn resume_from_file(self, path: &Path) -> Result<Session, MatchError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })?;
+        let checkpoint: Checkpoint = serde_json::from_str(&text)
+            .map_err(|e| checkpoint_error(format!("not a readable checkpoint ({e})")).in_file(path))?;
+        self.resume(checkpoint).map_err(|e| e.in_file(path))
+    }
+
+    fn validate(&self, c: &Checkpoint) -> Result<(), MatchError> {
+        if c.format != CHECKPOINT_FORMAT {
+            return Err(checkpoint_error(format!(
+                "the checkpoint is of format {} (this version reads format {CHECKPOINT_FORMAT}); start again without resuming",
+                c.format
+            )));
+        }
+        if c.fingerprint != self.checkpoint.fingerprint {
+            return Err(checkpoint_error(
+                "the checkpoint was written for other inputs (source, target or configuration changed); remove it or start without resuming",
+            ));
+        }
+        let stages = self.plan.stages.len();
+        if c.done.len() > stages {
+            return Err(checkpoint_error(format!(
+                "the checkpoint has {} finished stages, but the schedule has {stages}",
+                c.done.len()
+            )));
+        }
+        let n = self.unknowns.len();
+        let vector = |what: &str, v: &[f64]| -> Result<(), MatchError> {
+            if v.len() != n {
+                return Err(checkpoint_error(format!(
+                    "the checkpoint's {what} has {} values, the problem has {n} unknowns",
+                    v.len()
+                )));
+            }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(checkpoint_error(format!("the checkpoint's {what}[{i}] is not finite")));
+            }
+            Ok(())
+        };
+        if let Some(w) = &c.warm {
+            vector("warm", w)?;
+        }
+        if !c.done.is_empty() && c.warm.is_none() {
+            return Err(checkpoint_error("the checkpoint has finished stages but no warm start (warm is missing)"));
+        }
+        if let Some(cur) = &c.current {
+            if c.done.len() == stages {
+                return Err(checkpoint_error("the checkpoint has a stage under way after the last stage"));
+            }
+            let s = &cur.state;
+            vector("current.state.x", &s.x)?;
+            vector("current.state.grad", &s.grad)?;
+            if s.s.len() != s.y.len() {
+                return Err(checkpoint_error(format!(
+                    "the checkpoint's current.state has {} steps s but {} gradient differences y",
+                    s.s.len(),
+                    s.y.len()
+                )));
+            }
+            for (k, (a, b)) in s.s.iter().zip(&s.y).enumerate() {
+                vector(&format!("current.state.s[{k}]"), a)?;
+                vector(&format!("current.state.y[{k}]"), b)?;
+            }
+            let scalars = [("value", s.value), ("grad_norm0", s.grad_norm0), ("step", s.step)];
+            if let Some((what, v)) = scalars.iter().find(|(_, v)| !v.is_finite()) {
+                return Err(checkpoint_error(format!("the checkpoint's current.state.{what} is {v}")));
+            }
+            if s.values.is_empty() || s.values.iter().any(|v| !v.is_finite()) {
+                return Err(checkpoint_error(
+                    "the checkpoint's current.state.values must be finite values, J at the start first",
+                ));
+            }
+        }
+        if !(c.seconds >= 0.0 && c.seconds.is_finite()) {
+            return Err(checkpoint_error(format!("the checkpoint's seconds is {}", c.seconds)));
+        }
+        Ok(())
+    }
+
+    /// The checked plan.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// The problem (template, model, current target).
+    pub fn problem(&self) -> &Problem {
+        &self.problem
+    }
+
+    /// The packing of the unknowns.
+    pub fn unknowns(&self) -> &Unknowns {
+        &self.unknowns
+    }
+
+    /// The checkpoint as of now.
+    pub fn checkpoint(&self) -> &Checkpoint {
+        &self.checkpoint
+    }
+
+    /// Whether every stage has run.
+    pub fn is_finished(&self) -> bool {
+        self.checkpoint.done.len() == self.plan.stages.len()
+    }
+
+    fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
+        if self.staged != Some(k) {
+            self.problem.set_target(&self.target, self.plan.stages[k].kernel.clone())?;
+            self.staged = Some(k);
+        }
+        Ok(())
+    }
+
+    /// Runs the remaining stages (all of them on a new session) until each
+    /// stops by its rule, or until `observer` says [`Control::Stop`].
+    pub fn run(&mut self, observer: &mut impl Observer) -> Result<Outcome, MatchError> {
+        let start = Instant::now();
+        let earlier = self.checkpoint.seconds;
+        let clock = move || earlier + start.elapsed().as_secs_f64();
+        let stages = self.plan.stages.len();
+        while self.checkpoint.done.len() < stages {
+            let k = self.checkpoint.done.len();
+            self.stage_target(k)?;
+            let settings = self.plan.settings;
+            let mut objective = MatchObjective::new(&self.problem, self.unknowns.clone());
+            let mut current = match self.checkpoint.current.take() {
+                Some(c) => c,
+                None => {
+                    let x0 = self.checkpoint.warm.clone().unwrap_or_else(|| vec![0.0; self.unknowns.len()]);
+                    let state = State::start(x0, &mut objective)?;
+                    let parts = objective.last.expect("the starting point was evaluated");
+                    Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
+                }
+            };
+            let spec = &self.plan.stages[k];
+            if observer.stage_started(k, stages, spec, current.iterations.len()) == Control::Stop {
+                self.checkpoint.current = Some(current);
+                save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;
+                return Ok(Outcome::Interrupted);
+            }
+            let stop = loop {
+                if let Some(stop) = current.state.iterate(&settings, &mut objective)? {
+                    break stop;
+                }
+                // The accepted point is the last one evaluated.
+                let parts = objective.last.expect("an accepted step was evaluated");
+                let record = Iteration::of(&current.state, &parts);
+                current.iterations.push(record.clone());
+                let control = observer.iteration(k, &record);
+                self.checkpoint.current = Some(current);
+                save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;
+                if control == Control::Stop {
+                    return Ok(Outcome::Interrupted);
+                }
+                current = self.checkpoint.current.take().expect("just set");
+            };
+            let record = StageRecord {
+                kernel_geom: spec.label.clone(),
+                stop,
+                reason: stop.describe().into(),
+                initial: current.initial,
+                iterations: current.iterations,
+            };
+            self.checkpoint.warm = Some(current.state.x);
+            observer.stage_finished(k, &record);
+            self.checkpoint.done.push(record);
+            save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;
+        }
+        Ok(Outcome::Finished)
+    }
+
+    /// The result of a finished run: the final momenta, shot once more with
+    /// the last stage's data term.
+    pub fn result(&mut self) -> Result<MatchResult, MatchError> {
+        if !self.is_finished() {
+            return Err(MatchError::NotFinished);
+        }
+        self.stage_target(self.plan.stages.len() - 1)?;
+        let x = self.checkpoint.warm.as_ref().ok_or(MatchError::NotFinished)?;
+        let (p0, pf) = self.unknowns.unpack(x);
+        let (energies, trajectory) = self.problem.objective(&p0, &pf)?;
+        let done = &self.checkpoint.done;
+        Ok(MatchResult {
+            p0,
+            pf,
+            energies,
+            trajectory,
+            stages: done.clone(),
+            iterations: done.iter().map(|s| s.iterations.len()).sum(),
+            evaluations: done.iter().map(|s| s.iterations.last().unwrap_or(&s.initial).evaluations).sum(),
+            seconds: self.checkpoint.seconds,
+        })
+    }
+}

@@ -1,0 +1,216 @@
+//! The unknowns of matching and their metrics: J of fshape-shoot as an
+//! objective of [`crate::optimize`].
+//!
+//! The optimiser sees one flat vector of unknowns: p_0 (P × n), then, when
+//! the signal has a control (metamorphosis: p^f; tangential: ζ), P more
+//! values. The paper measures the signal control in the L²(x_0) metric;
+//! here that is a change of variables with the lumped mass D_0 of the
+//! template: p^f = D_0^{−1/2} q. A Euclidean step in q is then an L²(x_0)
+//! gradient step in p^f (q − t∂J/∂q ⇔ p^f − t D_0⁻¹∂J/∂p^f), so L-BFGS and
+//! its line search work in one consistent metric. The same change of
+//! variables is offered for p_0 (`momentum`: p_0 = D_0^{−1/2} q per
+//! coordinate): both momenta are densities on the template, and measuring
+//! only one of them by the mass scales the two blocks of unknowns by
+//! 1/√(vertex mass) against each other (a factor ~35 on the digits' squares,
+//! where L-BFGS then moved the signal only; docs/experiments.md).
+
+use fshape_fem::{Norm, SignalNorm};
+use fshape_shoot::{Energies, ModelKind, Problem, ShootError};
+
+use crate::optimize::{Settings, State, Stop};
+
+/// The metric in which one block of unknowns is optimised (configuration
+/// spellings `l2`, `euclidean`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Metric {
+    /// L²(x_0) with the lumped mass of the template (the paper's, for p^f).
+    L2,
+    /// The Euclidean metric of the vertex values.
+    Euclidean,
+}
+
+/// The metrics of the two blocks of unknowns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Metrics {
+    /// Of p_0 (default Euclidean).
+    pub momentum: Metric,
+    /// Of p^f or ζ (default L², the paper's).
+    pub signal: Metric,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        Metrics { momentum: Metric::Euclidean, signal: Metric::L2 }
+    }
+}
+
+impl From<Metric> for Metrics {
+    /// `signal` for p^f, Euclidean for p_0.
+    fn from(signal: Metric) -> Self {
+        Metrics { signal, ..Metrics::default() }
+    }
+}
+
+/// The packing of (p_0, p^f) into the optimiser's unknowns.
+#[derive(Clone, Debug)]
+pub struct Unknowns {
+    /// P·n and P.
+    pn: usize,
+    p: usize,
+    /// p^f = scale ⊙ q (empty: no signal control, LDDMM).
+    scale: Vec<f64>,
+    /// p_0 = scale_p ⊙ q_0 (P·n values).
+    scale_p: Vec<f64>,
+}
+
+impl Unknowns {
+    /// The packing for `problem` with its blocks in `metrics` (a
+    /// [`Metric`] alone sets the signal block's).
+    pub fn new(problem: &Problem, metrics: impl Into<Metrics>) -> Result<Unknowns, ShootError> {
+        let metrics = metrics.into();
+        let t = problem.template();
+        let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
+        let inv_sqrt_mass = || -> Result<Vec<f64>, ShootError> {
+            let masses = SignalNorm::try_new(t, Norm::L2Lumped)?.assemble(t.points())?;
+            if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
+                return Err(fshape_fem::FemError::Singular { vertex: v }.into());
+            }
+            Ok(masses.iter().map(|m| 1.0 / m.sqrt()).collect())
+        };
+        let scale = match (problem.model().kind(), metrics.signal) {
+            (ModelKind::Lddmm, _) => Vec::new(),
+            (_, Metric::Euclidean) => vec![1.0; p],
+            (_, Metric::L2) => inv_sqrt_mass()?,
+        };
+        let scale_p = match metrics.momentum {
+            Metric::Euclidean => vec![1.0; pn],
+            Metric::L2 => inv_sqrt_mass()?.iter().flat_map(|s| std::iter::repeat_n(*s, dim)).collect(),
+        };
+        Ok(Unknowns { pn, p, scale, scale_p })
+    }
+
+    /// Number of unknowns.
+    pub fn len(&self) -> usize {
+        self.pn + self.scale.len()
+    }
+
+    /// Whether there are none (an empty template).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The unknowns of (p_0, p^f).
+    pub fn pack(&self, p0: &[f64], pf: &[f64]) -> Vec<f64> {
+        let mut x: Vec<f64> = p0.iter().zip(&self.scale_p).map(|(v, s)| v / s).collect();
+        x.extend(pf.iter().zip(&self.scale).map(|(v, s)| v / s));
+        x
+    }
+
+    /// (p_0, p^f) of the unknowns (p^f all 0 without a signal control).
+    pub fn unpack(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let p0 = x[..self.pn].iter().zip(&self.scale_p).map(|(q, s)| q * s).collect();
+        let pf = if self.scale.is_empty() {
+            vec![0.0; self.p]
+        } else {
+            x[self.pn..].iter().zip(&self.scale).map(|(q, s)| q * s).collect()
+        };
+        (p0, pf)
+    }
+}
+
+/// J and its gradient in the unknowns; the last evaluation's parts are
+/// kept for reports.
+pub struct MatchObjective<'p> {
+    problem: &'p Problem,
+    unknowns: Unknowns,
+    /// The parts of J at the last evaluation.
+    pub last: Option<Energies>,
+    /// Evaluations so far (the first one's errors are always reported).
+    evaluations: usize,
+}
+
+impl<'p> MatchObjective<'p> {
+    /// J of `problem` in `unknowns`.
+    pub fn new(problem: &'p Problem, unknowns: Unknowns) -> Self {
+        MatchObjective { problem, unknowns, last: None, evaluations: 0 }
+    }
+
+    /// The packing.
+    pub fn unknowns(&self) -> &Unknowns {
+        &self.unknowns
+    }
+}
+
+impl crate::optimize::Objective for MatchObjective<'_> {
+    type Error = ShootError;
+
+    /// p_0, then the signal's control (when there is one).
+    fn blocks(&self) -> Vec<usize> {
+        if self.unknowns.scale.is_empty() { Vec::new() } else { vec![self.unknowns.pn] }
+    }
+
+    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
+        let (p0, pf) = self.unknowns.unpack(x);
+        self.evaluations += 1;
+        let g = match self.problem.objective_grad(&p0, &pf) {
+            Ok(g) => g,
+            // After the first point, a shooting that diverges, or folds the
+            // mesh until a cell has no area, is a step that went too far:
+            // the line search steps back (a non-finite value), the run goes
+            // on. At the first point, and for errors of the setup itself,
+            // the error is the answer.
+            Err(e)
+                if self.evaluations > 1
+                    && !matches!(
+                        e,
+                        ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget
+                    ) =>
+            {
+                return Ok((f64::NAN, vec![f64::NAN; x.len()]));
+            }
+            Err(e) => return Err(e),
+        };
+        self.last = Some(g.objective);
+        let mut grad: Vec<f64> = g.p0.iter().zip(&self.unknowns.scale_p).map(|(v, s)| v * s).collect();
+        grad.extend(g.pf.iter().zip(&self.unknowns.scale).map(|(v, s)| v * s));
+        Ok((g.objective.value, grad))
+    }
+}
+
+/// Minimises J from (p_0, p^f) with `settings`; `each` sees the optimiser
+/// state and J's parts after every accepted step. Returns the final state
+/// (its `x` unpacks with [`Unknowns::unpack`]) and why it stopped.
+pub fn minimize(
+    problem: &Problem,
+    metric: impl Into<Metrics>,
+    p0: &[f64],
+    pf: &[f64],
+    settings: &Settings,
+    mut each: impl FnMut(&State, &Energies),
+) -> Result<(State, Stop, Unknowns), ShootError> {
+    let unknowns = Unknowns::new(problem, metric)?;
+    let mut objective = MatchObjective::new(problem, unknowns.clone());
+    let mut state = State::start(unknowns.pack(p0, pf), &mut objective)?;
+    let stop = resume(&mut state, &mut objective, settings, &mut each)?;
+    Ok((state, stop, unknowns))
+}
+
+/// Continues a minimisation from a saved state.
+pub fn resume(
+    state: &mut State,
+    objective: &mut MatchObjective<'_>,
+    settings: &Settings,
+    mut each: impl FnMut(&State, &Energies),
+) -> Result<Stop, ShootError> {
+    loop {
+        if let Some(stop) = state.iterate(settings, objective)? {
+            return Ok(stop);
+        }
+        // The accepted point is the last one evaluated in a search that
+        // ends on acceptance; report the objective there.
+        if let Some(parts) = objective.last {
+            each(state, &parts);
+        }
+    }
+}

@@ -1,0 +1,32 @@
+//! Integration tests of fshape-match (one binary, modules in `tests/matching/`).
+
+#[path = "matching/config.rs"]
+mod config;
+#[path = "matching/objective.rs"]
+mod objective;
+#[path = "matching/optimize.rs"]
+mod optimize;
+#[path = "matching/session.rs"]
+mod session;
+
+use fshape_match::Config;
+use fshape_mesh::FShape;
+use fshape_mesh::test_support::random_vector_field;
+use fshape_shoot::Model;
+
+/// A model from the lines of a `[model]` section plus defaults elsewhere.
+pub fn model(model_lines: &str, deformation_lines: &str, integrator: &str, steps: usize) -> Model {
+    let text = format!(
+        "[model]\n{model_lines}\n[deformation]\nwidths = [0.6, 0.3]\n{deformation_lines}\n\
+         [integrator]\nscheme = \"{integrator}\"\nsteps = {steps}\n"
+    );
+    Config::parse(&text).unwrap().model().unwrap()
+}
+
+/// Random momenta (p_0, p^f) for a shape.
+pub fn momenta(s: &FShape, scale: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    (
+        random_vector_field(s.n_vertices(), s.dim(), scale, seed),
+        random_vector_field(s.n_vertices(), 1, scale, seed + 100),
+    )
+}

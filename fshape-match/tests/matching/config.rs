@@ -1,0 +1,125 @@
+//! The configuration file: defaults, unknown keys, checked values.
+
+use fshape_match::Config;
+use fshape_shoot::{Integrator, ModelKind};
+
+#[test]
+fn defaults_are_documented_values() {
+    let c = Config::parse("[deformation]\nwidths = [0.2, 0.1]\n").unwrap();
+    let m = c.model().unwrap();
+    assert_eq!(m.kind(), ModelKind::Metamorphosis);
+    assert_eq!(m.norm(), fshape_fem::Norm::L2Lumped);
+    assert_eq!((m.gamma_v(), m.gamma_f(), m.gamma_w()), (1.0, 1.0, 1.0));
+    assert_eq!((m.integrator(), m.steps(), m.max_drift()), (Integrator::Rk4, 10, 0.5));
+    assert!(m.kernel().taper().is_none());
+    // Weights default to 1: k(0) = 2 for two widths.
+    assert_eq!(m.kernel().value(0.0), 2.0);
+}
+
+#[test]
+fn unknown_keys_and_bad_values_are_refused_by_name() {
+    for (text, needle) in [
+        ("[deformation]\nwidths = [0.2]\nwidht = 1\n", "widht"),
+        ("[deformation]\nwidths = [0.2]\n[modle]\n", "modle"),
+        ("[deformation]\nwidths = [0.2]\n[model]\ngamma_v = 0\n", "model.gamma_v"),
+        ("[deformation]\nwidths = [0.2]\n[model]\nkind = \"magic\"\n", "model.kind"),
+        ("[deformation]\nwidths = [0.2]\n[model]\nnorm = \"h2\"\n", "model.norm"),
+        ("[deformation]\nwidths = [0.2]\n[model]\nnorm = \"h1\"\nlength = -1\n", "model.length"),
+        ("[deformation]\nwidths = [-0.2]\n", "deformation"),
+        ("[deformation]\nwidths = [0.2, 0.1]\nweights = [1]\n", "deformation"),
+        ("[deformation]\nwidths = [0.2]\ntolerance = 3\n", "deformation.tolerance"),
+        ("[deformation]\nwidths = [0.2]\n[integrator]\nsteps = 0\n", "integrator.steps"),
+        ("[deformation]\nwidths = [0.2]\n[integrator]\nscheme = \"rk5\"\n", "integrator.scheme"),
+        ("[model]\ngamma_v = 1\n", "deformation"),
+    ] {
+        let err = Config::parse(text).and_then(|c| c.model()).expect_err(text).to_string();
+        assert!(err.contains(needle), "{text:?}: {err}");
+    }
+}
+
+#[test]
+fn values_of_the_wrong_type_or_spelling_name_their_key_and_line() {
+    let base = "[deformation]\nwidths = [0.2]\n";
+    for (extra, key, line) in [
+        ("[model]\nkind = \"magic\"\n", "model.kind", 4),
+        ("[model]\ngamma_v = \"one\"\n", "model.gamma_v", 4),
+        ("[integrator]\n\nscheme = \"rk5\"\n", "integrator.scheme", 5),
+        ("[attachment]\nkernel_geom = \"gaussian:0\"\n", "attachment.kernel_geom", 4),
+        ("[attachment]\nkernel_geom = \"gaussian:1\"\nkernel_grass = \"bient\"\n", "attachment.kernel_grass", 5),
+        (
+            "[attachment]\nkernel_geom = \"gaussian:1\"\nkernel_signal = \"gaussian:-2\"\n",
+            "attachment.kernel_signal",
+            5,
+        ),
+        ("[optimizer]\nmethod = \"newton\"\n", "optimizer.method", 4),
+        ("[optimizer]\nsignal_metric = \"h1\"\n", "optimizer.signal_metric", 4),
+        ("[schedule]\nkernel_geom = [\"gaussian:0.4\", \"gaussian:-1\"]\n", "schedule.kernel_geom[1]", 4),
+    ] {
+        let text = format!("{base}{extra}");
+        let e = Config::parse(&text).expect_err(&text).to_string();
+        assert!(e.contains(key) && e.contains(&format!("line {line}")), "{extra:?}: {e}");
+    }
+    // A kernel is parsed once, when read: its width is checked there.
+    let e = Config::parse(&format!("{base}[attachment]\nkernel_geom = \"gaussian:0\"\n")).unwrap_err().to_string();
+    assert!(e.contains("position kernel"), "{e}");
+}
+
+#[test]
+fn a_config_written_with_serde_reads_back_to_the_same_value() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/configs/bunny.toml");
+    let shipped = Config::read(&path).unwrap();
+    let mut full = shipped.clone();
+    full.model.kind = fshape_shoot::ModelKind::Tangential;
+    full.integrator.scheme = Integrator::Midpoint;
+    full.optimizer.method = fshape_match::MethodKind::GradientDescent;
+    full.optimizer.signal_metric = fshape_match::Metric::Euclidean;
+    full.schedule = Some(fshape_match::ScheduleSection {
+        kernel_geom: ["gaussian:0.2", "cauchy:0.1"].map(|k| fshape_match::PositionKernel::parse(k).unwrap()).to_vec(),
+    });
+    for c in [shipped, full] {
+        let text = c.to_toml();
+        assert_eq!(Config::parse(&text).unwrap(), c, "{text}");
+    }
+    // The spellings users write are the ones serde writes.
+    let text = Config::read(&path).unwrap().to_toml();
+    for needle in [
+        "kind = \"metamorphosis\"",
+        "norm = \"h1\"",
+        "scheme = \"rk4\"",
+        "method = \"lbfgs\"",
+        "kernel_geom = \"gaussian:0.05\"",
+    ] {
+        assert!(text.contains(needle), "{needle} in {text}");
+    }
+}
+
+#[test]
+fn the_shipped_bunny_config_parses() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/configs/bunny.toml");
+    let c = Config::read(&path).unwrap();
+    let m = c.model().unwrap();
+    assert_eq!(m.steps(), 10);
+    c.attachment_kernel().unwrap();
+}
+
+#[test]
+fn the_bunny_setting_is_centred_scaled_and_textured_as_the_issue_states() {
+    use fshape_mesh::io::{ReadOptions, read_mesh};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/stanford_bunny/bunny_qslim_2581v.ply.gz");
+    let bunny = read_mesh(&path, &ReadOptions::default()).unwrap();
+    let (template, target) = fshape_match::demo::bunny_setting(&bunny).unwrap();
+    assert_eq!((target.n_vertices(), template.n_vertices()), (2581, 10242));
+    assert!((target.bounding_box().diagonal() - 1.0).abs() < 1e-12);
+    let n = target.n_vertices() as f64;
+    for k in 0..3 {
+        let mean: f64 = target.points().chunks_exact(3).map(|p| p[k]).sum::<f64>() / n;
+        assert!(mean.abs() < 1e-12, "centroid coordinate {k} = {mean}");
+    }
+    // The signal at one vertex, by the formula in the target coordinates.
+    let b = target.bounding_box();
+    let (px, py) = (b.max[0] - b.min[0], b.max[1] - b.min[1]);
+    let p = target.point(100);
+    assert!((target.signal().unwrap()[100] - ((3.0 * p[0] / px).sin() + p[1] / py)).abs() < 1e-14);
+    let r = template.point(7).iter().map(|v| v * v).sum::<f64>().sqrt();
+    assert!((r - 0.35).abs() < 1e-12 && template.signal().unwrap().iter().all(|&v| v == 0.0));
+}

@@ -1,0 +1,171 @@
+//! The session: stages in order, an observer that sees and stops, resume
+//! to the same bits, and checkpoints checked before use.
+
+use fshape_match::{
+    CHECKPOINT_FORMAT, Checkpoint, Config, Control, Iteration, MatchError, Observer, Outcome, Session, StageRecord,
+    StageSpec,
+};
+use fshape_mesh::FShape;
+use fshape_mesh::test_support::perturbed_icosphere;
+
+fn inputs() -> (FShape, FShape, Config) {
+    let source = perturbed_icosphere(1, 0.0, 1);
+    let n = source.n_vertices();
+    let source = source.with_signal(Some(vec![0.0; n])).unwrap();
+    let target = perturbed_icosphere(1, 0.08, 2);
+    let signal: Vec<f64> = target.points().chunks_exact(3).map(|p| 0.5 * p[0]).collect();
+    let target = target.with_signal(Some(signal)).unwrap();
+    let mut config = Config::parse(
+        "[model]\ngamma_w = 10.0\n[deformation]\nwidths = [0.5]\n\
+         [attachment]\nkernel_geom = \"gaussian:0.3\"\nkernel_signal = \"gaussian:1.0\"\n\
+         [schedule]\nkernel_geom = [\"gaussian:0.6\", \"gaussian:0.3\"]\n",
+    )
+    .unwrap();
+    config.integrator.steps = 5;
+    config.optimizer.max_iterations = 6;
+    (source, target, config)
+}
+
+/// Records every event; stops after `stop_after` iterations.
+#[derive(Default)]
+struct Recorder {
+    events: Vec<String>,
+    iterations: Vec<Iteration>,
+    stop_after: Option<usize>,
+}
+
+impl Observer for Recorder {
+    fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
+        self.events.push(format!("start {stage}/{stages} {} {done}", spec.label));
+        Control::Continue
+    }
+    fn iteration(&mut self, stage: usize, record: &Iteration) -> Control {
+        self.events.push(format!("iteration {stage} {}", record.iteration));
+        self.iterations.push(record.clone());
+        match self.stop_after {
+            Some(n) if self.iterations.len() >= n => Control::Stop,
+            _ => Control::Continue,
+        }
+    }
+    fn stage_finished(&mut self, stage: usize, record: &StageRecord) {
+        self.events.push(format!("finish {stage} {:?}", record.stop));
+    }
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+#[test]
+fn stages_run_in_order_and_the_observer_sees_each_iteration() {
+    let (source, target, config) = inputs();
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    let mut rec = Recorder::default();
+    assert!(matches!(session.result(), Err(MatchError::NotFinished)));
+    assert_eq!(session.run(&mut rec).unwrap(), Outcome::Finished);
+    let result = session.result().unwrap();
+    assert_eq!(result.stages.len(), 2);
+    assert_eq!(rec.events[0], "start 0/2 gaussian:0.6 0");
+    assert!(rec.events.iter().any(|e| e == "start 1/2 gaussian:0.3 0"));
+    assert_eq!(rec.iterations.len(), result.iterations);
+    // Each stage's records are the observer's, in order.
+    let recorded: Vec<&Iteration> = result.stages.iter().flat_map(|s| &s.iterations).collect();
+    assert!(recorded.iter().zip(&rec.iterations).all(|(a, b)| *a == b));
+    // The second stage starts where the first ended, and the fit improves.
+    assert!(
+        result.energies.attachment < 0.5 * result.stages[1].initial.attachment.max(result.stages[0].initial.attachment)
+    );
+    assert_eq!(result.energies.value.to_bits(), result.stages[1].iterations.last().unwrap().value.to_bits());
+}
+
+#[test]
+fn a_stopped_session_resumes_to_the_same_bits() {
+    let (source, target, config) = inputs();
+    let mut whole = Session::new(&source, &target, &config).unwrap();
+    whole.run(&mut ()).unwrap();
+    let expected = whole.result().unwrap();
+    for stop_after in [1, 6, 8] {
+        let dir = std::env::temp_dir().join(format!("fshape-match-resume-{}-{stop_after}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("checkpoint.json");
+        let mut first = Session::new(&source, &target, &config).unwrap().with_checkpoint_file(&file);
+        let mut rec = Recorder { stop_after: Some(stop_after), ..Recorder::default() };
+        assert_eq!(first.run(&mut rec).unwrap(), Outcome::Interrupted);
+        // A new session (a new process, in practice) from the file.
+        let mut second = Session::new(&source, &target, &config).unwrap().resume_from_file(&file).unwrap();
+        assert_eq!(second.run(&mut ()).unwrap(), Outcome::Finished);
+        let got = second.result().unwrap();
+        assert_eq!(bits(&got.p0), bits(&expected.p0), "stopped after {stop_after}");
+        assert_eq!(bits(&got.pf), bits(&expected.pf));
+        assert_eq!(got.stages, expected.stages);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+/// A checkpoint after three iterations, and the session it belongs to.
+fn checkpoint_after_three() -> (Checkpoint, impl Fn() -> Session) {
+    let (source, target, config) = inputs();
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    session.run(&mut Recorder { stop_after: Some(3), ..Recorder::default() }).unwrap();
+    let ck = session.checkpoint().clone();
+    (ck, move || Session::new(&source, &target, &config).unwrap())
+}
+
+#[test]
+fn a_damaged_or_foreign_checkpoint_is_refused_with_what_is_wrong() {
+    let (good, fresh) = checkpoint_after_three();
+    assert!(good.current.is_some());
+    fresh().resume(good.clone()).unwrap();
+    let n = good.current.as_ref().unwrap().state.x.len();
+    type Damage = fn(&mut Checkpoint);
+    let cases: [(Damage, &str); 9] = [
+        (|c| c.current.as_mut().unwrap().state.x.truncate(5), "current.state.x has 5 values"),
+        (|c| c.current.as_mut().unwrap().state.grad.pop().map(drop).unwrap_or(()), "current.state.grad has"),
+        (|c| c.current.as_mut().unwrap().state.s[0].truncate(1), "current.state.s[0] has 1 values"),
+        (|c| drop(c.current.as_mut().unwrap().state.y.pop_back()), "steps s but"),
+        (|c| c.current.as_mut().unwrap().state.x[7] = f64::NAN, "current.state.x[7] is not finite"),
+        (|c| c.current.as_mut().unwrap().state.value = f64::INFINITY, "current.state.value"),
+        (|c| c.fingerprint = "0123456789abcdef".into(), "written for other inputs"),
+        (|c| c.format = CHECKPOINT_FORMAT + 1, "format"),
+        (|c| c.warm = Some(vec![0.0; 3]), "warm has 3 values"),
+    ];
+    for (damage, needle) in cases {
+        let mut bad = good.clone();
+        damage(&mut bad);
+        let e = match fresh().resume(bad) {
+            Ok(_) => panic!("{needle}: accepted"),
+            Err(e) => e,
+        };
+        assert!(matches!(e, MatchError::Checkpoint { .. }), "{e}");
+        assert!(e.to_string().contains(needle), "{needle}: {e}");
+    }
+    assert!(n > 5);
+}
+
+#[test]
+fn a_checkpoint_file_cut_short_or_with_short_arrays_names_the_file() {
+    let (good, fresh) = checkpoint_after_three();
+    let dir = std::env::temp_dir().join(format!("fshape-match-damaged-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("checkpoint.json");
+    // Truncated bytes: not JSON any more.
+    let text = serde_json::to_string_pretty(&good).unwrap();
+    std::fs::write(&file, &text[..text.len() / 2]).unwrap();
+    let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
+    assert!(e.contains(&file.display().to_string()) && e.contains("not a readable checkpoint"), "{e}");
+    // Valid JSON whose arrays were cut short (the issue's case).
+    let mut short = good.clone();
+    short.current.as_mut().unwrap().state.x.truncate(10);
+    std::fs::write(&file, serde_json::to_string(&short).unwrap()).unwrap();
+    let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
+    assert!(e.contains(&file.display().to_string()) && e.contains("current.state.x has 10 values"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn source_and_target_of_different_kinds_are_refused() {
+    let (source, _, config) = inputs();
+    let curve = fshape_mesh::generate::circle(20, 1.0);
+    let e = Session::new(&source, &curve, &config).err().expect("refused");
+    assert!(matches!(e, MatchError::Shapes(_)), "{e}");
+}
