@@ -27,7 +27,7 @@
 
 use pulp::{Arch, Simd, WithSimd};
 
-use crate::profile::GaussTerms;
+use crate::profile::{GaussTerms, quintic_taper, quintic_taper_derivatives};
 use crate::{BlockPairs, Taper};
 
 /// Lanes per block: 16 f64 lanes: two AVX-512 registers per lane array. The shooting's fused
@@ -104,9 +104,10 @@ pub fn exp_lanes(x: [f64; L]) -> [f64; L] {
     out
 }
 
-/// |x_l − y|² for the L targets held by axis in `x`.
+/// |x_l − y|² for the L targets held by axis in `x` (y: at least D
+/// coordinates), summed over the axes in order.
 #[inline(always)]
-pub(crate) fn sq_dist_lanes<const D: usize>(x: &[[f64; L]; D], y: &[f64]) -> [f64; L] {
+pub fn sq_dist_lanes<const D: usize>(x: &[[f64; L]; D], y: &[f64]) -> [f64; L] {
     let mut u = [0.0; L];
     for k in 0..D {
         for l in 0..L {
@@ -217,9 +218,10 @@ fn taper_lanes(t: Taper, u: &[f64; L]) -> ([f64; L], [f64; L], [f64; L]) {
     let (mut s, mut ds, mut dds) = ([0.0; L], [0.0; L], [0.0; L]);
     for l in 0..L {
         let x = ((u[l] - t.u_in) * inv).clamp(0.0, 1.0);
-        s[l] = 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
-        ds[l] = -30.0 * x * x * (1.0 - x) * (1.0 - x) * inv;
-        dds[l] = -60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) * inv * inv;
+        let (dx, ddx) = quintic_taper_derivatives(x);
+        s[l] = quintic_taper!(x);
+        ds[l] = dx * inv;
+        dds[l] = ddx * inv * inv;
     }
     (s, ds, dds)
 }

@@ -52,7 +52,7 @@ pub use sums::{KernelSums, Pair, SpatialIndex, SumWorkspace};
 /// block of [`L`](lanes::L) targets is held as `[f64; L]` arrays, and plain loops over
 /// the lanes inside a `pulp::WithSimd` body compile to SIMD.
 pub mod lanes {
-    pub use crate::fast::{L, exp_lanes};
+    pub use crate::fast::{L, exp_lanes, sq_dist_lanes};
 }
 
 /// Why a kernel or a kernel sum could not be set up.

@@ -36,7 +36,7 @@
 
 use pulp::{Arch, Simd, WithSimd};
 
-use crate::profile::GaussTerms;
+use crate::profile::{GaussTerms, quintic_taper};
 use crate::{BlockPairs, SourceRun, Taper};
 
 /// Targets per block, as f32 lanes: 32 (two AVX-512 registers) measured
@@ -194,7 +194,7 @@ impl<const D: usize, const BD: usize> Block<'_, D, BD> {
             if let Some((u_in, inv)) = taper {
                 for l in 0..L {
                     let x = ((u[l] - u_in) * inv).clamp(0.0, 1.0);
-                    k0[l] *= 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+                    k0[l] *= quintic_taper!(x);
                 }
             }
             let b = &self.bs[j];

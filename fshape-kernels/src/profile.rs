@@ -36,6 +36,24 @@ enum Term {
     Cauchy { c: f64 },
 }
 
+/// s(x) = 1 − (6x⁵ − 15x⁴ + 10x³) of the quintic taper, x = (u − u_in) /
+/// (u_out − u_in) ∈ [0, 1]: the one formula every evaluation path uses,
+/// written once for f64 and f32 (the literals take the type of `x`).
+macro_rules! quintic_taper {
+    ($x:expr) => {{
+        let x = $x;
+        1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
+    }};
+}
+pub(crate) use quintic_taper;
+
+/// ds/dx and d²s/dx² of [`quintic_taper!`] (multiply by 1/(u_out − u_in)
+/// once or twice for the derivatives in u).
+#[inline(always)]
+pub(crate) fn quintic_taper_derivatives(x: f64) -> (f64, f64) {
+    (-30.0 * x * x * (1.0 - x) * (1.0 - x), -60.0 * x * (1.0 - x) * (1.0 - 2.0 * x))
+}
+
 /// The C² taper of a truncated kernel: the profile is multiplied by
 /// s(u) = 1 − S((u − u_in)/(u_out − u_in)), with S the quintic smoothstep
 /// 6t⁵ − 15t⁴ + 10t³ (zero first and second derivatives at both ends), so
@@ -78,8 +96,8 @@ impl Taper {
         let (mut s, mut ds) = ([0.0; L], [0.0; L]);
         for l in 0..L {
             let x = ((u[l] - self.u_in) * inv).clamp(0.0, 1.0);
-            s[l] = 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
-            ds[l] = -30.0 * x * x * (1.0 - x) * (1.0 - x) * inv;
+            s[l] = quintic_taper!(x);
+            ds[l] = quintic_taper_derivatives(x).0 * inv;
         }
         (s, ds)
     }
@@ -212,10 +230,10 @@ impl Kernel {
             Some(t) if u > t.u_in => {
                 let h = t.u_out - t.u_in;
                 let x = (u - t.u_in) / h;
-                // s = 1 − (6x⁵ − 15x⁴ + 10x³), s' and s'' in u.
-                let s = 1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
-                let ds = -30.0 * x * x * (1.0 - x) * (1.0 - x) / h;
-                let dds = -60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (h * h);
+                // s, s' and s'' in u.
+                let s = quintic_taper!(x);
+                let (dx, ddx) = quintic_taper_derivatives(x);
+                let (ds, dds) = (dx / h, ddx / (h * h));
                 [k[0] * s, k[1] * s + k[0] * ds, k[2] * s + 2.0 * k[1] * ds + k[0] * dds]
             }
             _ => k,

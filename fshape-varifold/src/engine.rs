@@ -19,7 +19,7 @@
 #![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
 
 use fshape_kernels::BlockPairs;
-use fshape_kernels::lanes::{L, exp_lanes};
+use fshape_kernels::lanes::{L, exp_lanes, sq_dist_lanes};
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::{CellFeatures, GrassKernel, SignalKernel, VarifoldError, VarifoldKernel};
@@ -59,13 +59,7 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
         let acc = &mut self.acc;
         for j in 0..self.sr.len() {
             let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
-            let mut u2 = [0.0; L];
-            for k in 0..D {
-                for l in 0..L {
-                    let d = self.tc[k][l] - cj[k];
-                    u2[l] += d * d;
-                }
-            }
+            let u2 = sq_dist_lanes(self.tc, cj);
             let (kp, kp1) = self.k.position().lanes(&u2, self.tapered);
             // k_f and its derivative, and f_i − f_j.
             let mut df = [0.0; L];
@@ -145,13 +139,7 @@ impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
         };
         for j in 0..self.sr.len() {
             let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
-            let mut u2 = [0.0; L];
-            for k in 0..D {
-                for l in 0..L {
-                    let d = self.tc[k][l] - cj[k];
-                    u2[l] += d * d;
-                }
-            }
+            let u2 = sq_dist_lanes(self.tc, cj);
             let mut df = [0.0; L];
             let fj = self.sf.get(j).copied().unwrap_or(0.0);
             for l in 0..L {
