@@ -108,7 +108,14 @@ impl Unknowns {
     }
 
     /// (p_0, p^f) of the unknowns (p^f all 0 without a signal control).
+    ///
+    /// # Panics
+    ///
+    /// If `x` does not have [`Unknowns::len`] values (a checkpoint is
+    /// checked for this before its values reach here).
+    #[track_caller]
     pub fn unpack(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        assert_eq!(x.len(), self.len(), "unknowns of another problem");
         let p0 = x[..self.pn].iter().zip(&self.scale_p).map(|(q, s)| q * s).collect();
         let pf = if self.scale.is_empty() {
             vec![0.0; self.p]
@@ -178,9 +185,11 @@ impl crate::optimize::Objective for MatchObjective<'_> {
     }
 }
 
-/// Minimises J from (p_0, p^f) with `settings`; `each` sees the optimiser
-/// state and J's parts after every accepted step. Returns the final state
-/// (its `x` unpacks with [`Unknowns::unpack`]) and why it stopped.
+/// Minimises J from (p_0, p^f) with `settings`, in one stage and in
+/// memory (a [`crate::Session`] adds stages, checkpoints and resume);
+/// `each` sees the optimiser state and J's parts after every accepted
+/// step. Returns the final state (its `x` unpacks with
+/// [`Unknowns::unpack`]) and why it stopped.
 pub fn minimize(
     problem: &Problem,
     metric: impl Into<Metrics>,
@@ -192,25 +201,15 @@ pub fn minimize(
     let unknowns = Unknowns::new(problem, metric)?;
     let mut objective = MatchObjective::new(problem, unknowns.clone());
     let mut state = State::start(unknowns.pack(p0, pf), &mut objective)?;
-    let stop = resume(&mut state, &mut objective, settings, &mut each)?;
-    Ok((state, stop, unknowns))
-}
-
-/// Continues a minimisation from a saved state.
-pub fn resume(
-    state: &mut State,
-    objective: &mut MatchObjective<'_>,
-    settings: &Settings,
-    mut each: impl FnMut(&State, &Energies),
-) -> Result<Stop, ShootError> {
-    loop {
-        if let Some(stop) = state.iterate(settings, objective)? {
-            return Ok(stop);
+    let stop = loop {
+        if let Some(stop) = state.iterate(settings, &mut objective)? {
+            break stop;
         }
         // The accepted point is the last one evaluated in a search that
         // ends on acceptance; report the objective there.
         if let Some(parts) = objective.last {
-            each(state, &parts);
+            each(&state, &parts);
         }
-    }
+    };
+    Ok((state, stop, unknowns))
 }

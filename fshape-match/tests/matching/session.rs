@@ -169,3 +169,18 @@ fn source_and_target_of_different_kinds_are_refused() {
     let e = Session::new(&source, &curve, &config).err().expect("refused");
     assert!(matches!(e, MatchError::Shapes(_)), "{e}");
 }
+
+#[test]
+fn a_serial_session_gives_the_bits_of_a_parallel_one() {
+    let (source, target, mut config) = inputs();
+    config.optimizer.max_iterations = 3;
+    let mut results = Vec::new();
+    for parallel in [true, false] {
+        let mut s = Session::new(&source, &target, &config).unwrap().with_parallel(parallel);
+        s.run(&mut ()).unwrap();
+        results.push(s.result().unwrap());
+    }
+    assert_eq!(bits(&results[0].p0), bits(&results[1].p0));
+    assert_eq!(bits(&results[0].pf), bits(&results[1].pf));
+    assert_eq!(results[0].stages, results[1].stages);
+}

@@ -89,3 +89,22 @@ fn interpolation_takes_any_time_without_panicking() {
         assert_eq!((x.len(), f.len()), (traj.points(0).len(), template.n_vertices()));
     }
 }
+
+#[test]
+fn one_parallel_switch_reaches_the_attachment_and_the_flow_with_the_same_bits() {
+    let (template, target) = surfaces();
+    let (p0, pf) = momenta(&template, 0.2, 13);
+    let kernel = fshape_varifold::VarifoldKernel::parse("gaussian:0.4", Some("gaussian:0.7"), "binet").unwrap();
+    let m = model("norm = \"h1\"\nlength = 0.5", "tolerance = 1e-6", "rk4", 4);
+    let parallel = Problem::new(&template, m.clone()).unwrap().with_target(&target, kernel.clone()).unwrap();
+    // Switched off after the target is set: the attachment follows.
+    let serial = Problem::new(&template, m).unwrap().with_target(&target, kernel).unwrap().with_parallel(false);
+    assert!(parallel.parallel() && !serial.parallel());
+    let (a, b) = (parallel.objective_grad(&p0, &pf).unwrap(), serial.objective_grad(&p0, &pf).unwrap());
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(a.objective.value.to_bits(), b.objective.value.to_bits());
+    assert_eq!((bits(&a.p0), bits(&a.pf)), (bits(&b.p0), bits(&b.pf)));
+    let y0: Vec<f64> = target.points()[..30].to_vec();
+    let (fa, fb) = (parallel.flow_points(&a.trajectory, &y0).unwrap(), serial.flow_points(&b.trajectory, &y0).unwrap());
+    assert_eq!(fa.iter().map(|v| bits(v)).collect::<Vec<_>>(), fb.iter().map(|v| bits(v)).collect::<Vec<_>>());
+}
