@@ -51,6 +51,10 @@ struct Summary<'a> {
     /// otherwise).
     geodesic_distance: f64,
     hamiltonian: Vec<f64>,
+    /// How close the matched shape is to the target (fractions of the
+    /// target's diagonal and signal range), and the template was.
+    quality: fshape_match::Quality,
+    quality_before: fshape_match::Quality,
     iterations: usize,
     evaluations: usize,
     seconds: f64,
@@ -197,6 +201,8 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         final_attachment: e.attachment,
         geodesic_distance: e.energy.max(0.0).sqrt(),
         hamiltonian: traj.hamiltonian.clone(),
+        quality: result.quality,
+        quality_before: result.initial_quality,
         iterations: result.iterations,
         evaluations: result.evaluations,
         seconds: result.seconds + after.elapsed().as_secs_f64(),
@@ -218,6 +224,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         outputs.len(),
         a.out.display()
     );
+    println!("  match: {} (template: {})", result.quality.describe(), result.initial_quality.describe());
     Ok(())
 }
 

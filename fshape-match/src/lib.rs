@@ -36,6 +36,7 @@ use std::path::{Path, PathBuf};
 mod config;
 pub mod demo;
 pub mod optimize;
+pub mod quality;
 mod session;
 pub mod unknowns;
 
@@ -43,6 +44,7 @@ pub use config::{
     AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind, ModelSection,
     NormKind, OptimizerSection, Plan, PositionKernel, ScheduleSection, SignalKernelSpec, StageSpec,
 };
+pub use quality::{Quality, quality};
 pub use session::{
     CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, MatchResult, Observer, Outcome, Session, StageRecord,
     fingerprint,

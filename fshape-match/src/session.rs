@@ -156,6 +156,10 @@ pub struct MatchResult {
     pub evaluations: usize,
     /// Wall seconds, all runs.
     pub seconds: f64,
+    /// How close the matched shape (x_1, f_1) is to the target.
+    pub quality: crate::Quality,
+    /// How close the template was, for comparison.
+    pub initial_quality: crate::Quality,
 }
 
 /// FNV-1a, 64 bits, as hex, of the source, the target and the
@@ -439,6 +443,14 @@ impl Session {
         let x = self.checkpoint.warm.as_ref().ok_or(MatchError::NotFinished)?;
         let (p0, pf) = self.unknowns.unpack(x);
         let (energies, trajectory) = self.problem.objective(&p0, &pf)?;
+        let template = self.problem.template();
+        let last = trajectory.steps();
+        let matched = template
+            .clone()
+            .with_points(trajectory.points(last).to_vec())?
+            .with_signal(Some(trajectory.signal(last).to_vec()))?;
+        let quality = crate::quality(&matched, &self.target)?;
+        let initial_quality = crate::quality(template, &self.target)?;
         let done = &self.checkpoint.done;
         Ok(MatchResult {
             p0,
@@ -449,6 +461,8 @@ impl Session {
             iterations: done.iter().map(|s| s.iterations.len()).sum(),
             evaluations: done.iter().map(|s| s.iterations.last().unwrap_or(&s.initial).evaluations).sum(),
             seconds: self.checkpoint.seconds,
+            quality,
+            initial_quality,
         })
     }
 }

@@ -6,6 +6,8 @@ mod config;
 mod objective;
 #[path = "matching/optimize.rs"]
 mod optimize;
+#[path = "matching/quality.rs"]
+mod quality;
 #[path = "matching/session.rs"]
 mod session;
 

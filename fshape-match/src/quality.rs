@@ -1,0 +1,338 @@
+//! How close a registration came: distances between the matched shape and
+//! the target, and the signal error, as numbers a user can judge without
+//! reading J.
+//!
+//! Both shapes are sampled by area (or length): every triangle at the
+//! centroids of its four midpoint sub-triangles, every segment at its
+//! quarter points, each sample weighted by its share of the cell's volume.
+//! From each sample the exact closest point on the other shape is found
+//! (point-to-triangle or point-to-segment distances, over the cells that a
+//! k-d tree of cell centres proves to be candidates). Reported, as
+//! fractions of the target's bounding-box diagonal:
+//!
+//! - the mean symmetric closest-point distance: the area-weighted mean of
+//!   d(x, Y) over X and of d(y, X) over Y, averaged;
+//! - its 95th percentile (both sides pooled, each with half the weight);
+//! - the share of the target's area within 1 % of the diagonal of X.
+//!
+//! And the signal error: at each target sample, the matched signal
+//! interpolated at its closest point on X minus the target's signal there;
+//! its area-weighted root mean square as a fraction of the target signal's
+//! range (max − min over the vertices).
+
+use fshape_mesh::{CellKind, FShape};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::MatchError;
+
+/// How close a shape is to a target (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Quality {
+    /// The target's bounding-box diagonal, in the shapes' units (the unit
+    /// of the distances below).
+    pub diagonal: f64,
+    /// Mean symmetric closest-point distance / diagonal.
+    pub mean_distance: f64,
+    /// 95th percentile of the closest-point distances / diagonal.
+    pub p95_distance: f64,
+    /// Largest closest-point distance (Hausdorff) / diagonal.
+    pub max_distance: f64,
+    /// Share of the target's area (or length) within 1 % of the diagonal
+    /// of the shape.
+    pub target_within_1pct: f64,
+    /// RMS of the signal error at closest points / the target signal's
+    /// range; `None` when the target has no signal or a constant one.
+    pub signal_rms: Option<f64>,
+    /// The target signal's range (max − min), in its units (0 without one).
+    pub signal_range: f64,
+}
+
+impl Quality {
+    /// One line for reports: percentages of the diagonal and of the range.
+    pub fn describe(&self) -> String {
+        let mut s = format!(
+            "mean distance {:.3}% of the diagonal (95th percentile {:.3}%, max {:.3}%), {:.1}% of the target within 1%",
+            100.0 * self.mean_distance,
+            100.0 * self.p95_distance,
+            100.0 * self.max_distance,
+            100.0 * self.target_within_1pct
+        );
+        if let Some(e) = self.signal_rms {
+            s.push_str(&format!(", signal error {:.2}% of its range (rms)", 100.0 * e));
+        }
+        s
+    }
+}
+
+/// Area-weighted samples of a shape: positions (3-D, z = 0 in the plane),
+/// weights, and for each its cell and barycentric coordinates.
+struct Samples {
+    points: Vec<[f64; 3]>,
+    weights: Vec<f64>,
+    cells: Vec<usize>,
+    bary: Vec<[f64; 3]>,
+}
+
+fn point3(shape: &FShape, v: usize) -> [f64; 3] {
+    let p = shape.point(v);
+    [p[0], p[1], if shape.dim() == 3 { p[2] } else { 0.0 }]
+}
+
+fn corners(shape: &FShape, c: usize) -> [[f64; 3]; 3] {
+    let k = shape.kind().n_corners();
+    let ids = &shape.cells()[c * k..(c + 1) * k];
+    let a = point3(shape, ids[0]);
+    let b = point3(shape, ids[1]);
+    [a, b, if k == 3 { point3(shape, ids[2]) } else { b }]
+}
+
+fn combine(p: &[[f64; 3]; 3], w: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|k| w[0] * p[0][k] + w[1] * p[1][k] + w[2] * p[2][k])
+}
+
+fn samples(shape: &FShape) -> Samples {
+    let vol = shape.cell_volumes();
+    let pattern: &[[f64; 3]] = match shape.kind() {
+        CellKind::Triangle => &[
+            [4.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0],
+            [1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0],
+            [1.0 / 6.0, 1.0 / 6.0, 4.0 / 6.0],
+            [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
+        ],
+        CellKind::Segment => &[[0.75, 0.25, 0.0], [0.25, 0.75, 0.0]],
+    };
+    let mut s = Samples { points: Vec::new(), weights: Vec::new(), cells: Vec::new(), bary: Vec::new() };
+    for (c, &v) in vol.iter().enumerate() {
+        let p = corners(shape, c);
+        for w in pattern {
+            s.points.push(combine(&p, *w));
+            s.weights.push(v / pattern.len() as f64);
+            s.cells.push(c);
+            s.bary.push(*w);
+        }
+    }
+    s
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Barycentric coordinates of the point of segment [a, b] closest to p.
+fn closest_on_segment(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    let ab = sub(b, a);
+    let len2 = dot(ab, ab);
+    let t = if len2 > 0.0 { (dot(sub(p, a), ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    [1.0 - t, t, 0.0]
+}
+
+/// Barycentric coordinates of the point of triangle abc closest to p
+/// (Ericson, Real-Time Collision Detection, 5.1.5: Voronoi regions of the
+/// vertices, then of the edges, then the face).
+fn closest_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = sub(p, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = sub(p, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = va + vb + vc;
+    if denom.abs() <= f64::MIN_POSITIVE {
+        // A degenerate triangle: its closest point lies on an edge.
+        let (e0, e1, e2) = (closest_on_segment(p, a, b), closest_on_segment(p, b, c), closest_on_segment(p, c, a));
+        let candidates = [[e0[0], e0[1], 0.0], [0.0, e1[0], e1[1]], [e2[1], 0.0, e2[0]]];
+        let d = |w: &[f64; 3]| {
+            let q = sub(p, combine(&[a, b, c], *w));
+            dot(q, q)
+        };
+        return candidates.into_iter().min_by(|x, y| d(x).total_cmp(&d(y))).expect("three edges");
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    [1.0 - v - w, v, w]
+}
+
+/// The exact closest point of a shape to query points.
+pub struct ClosestPoints<'a> {
+    shape: &'a FShape,
+    tree: ImmutableKdTree<f64, 3>,
+    /// Largest distance from a cell's centre to one of its corners.
+    reach: f64,
+}
+
+/// The closest point of a shape to one query point: its squared distance,
+/// cell and barycentric coordinates in that cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Closest {
+    /// |q − closest point|.
+    pub distance: f64,
+    /// The cell holding the closest point.
+    pub cell: usize,
+    /// Its barycentric coordinates (the third is 0 for a segment).
+    pub bary: [f64; 3],
+}
+
+impl<'a> ClosestPoints<'a> {
+    /// A k-d tree of `shape`'s cell centres.
+    pub fn new(shape: &'a FShape) -> Result<Self, MatchError> {
+        if shape.n_cells() == 0 {
+            return Err(MatchError::Shapes("a shape without cells has no closest points".into()));
+        }
+        let mut centres = Vec::with_capacity(shape.n_cells());
+        let mut reach: f64 = 0.0;
+        let k = shape.kind().n_corners();
+        for c in 0..shape.n_cells() {
+            let p = corners(shape, c);
+            let centre = if k == 3 { combine(&p, [1.0 / 3.0; 3]) } else { combine(&p, [0.5, 0.5, 0.0]) };
+            for q in &p[..k] {
+                let d = sub(*q, centre);
+                reach = reach.max(dot(d, d).sqrt());
+            }
+            centres.push(centre);
+        }
+        let tree = ImmutableKdTree::new_from_slice(&centres)
+            .map_err(|e| MatchError::Shapes(format!("closest points: {e:?}")))?;
+        Ok(ClosestPoints { shape, tree, reach })
+    }
+
+    fn to_cell(&self, q: [f64; 3], c: usize) -> Closest {
+        let p = corners(self.shape, c);
+        let bary = if self.shape.kind() == CellKind::Triangle {
+            closest_on_triangle(q, p[0], p[1], p[2])
+        } else {
+            closest_on_segment(q, p[0], p[1])
+        };
+        let d = sub(q, combine(&p, bary));
+        Closest { distance: dot(d, d).sqrt(), cell: c, bary }
+    }
+
+    /// The closest point of the shape to `q` (3-D; z = 0 for planar
+    /// shapes). Exact: the nearest cell centre bounds the distance, and
+    /// every cell that could be closer has its centre within that bound
+    /// plus the largest centre-to-corner distance. Ties go to the lower
+    /// cell index.
+    pub fn closest(&self, q: [f64; 3]) -> Closest {
+        let first = self.tree.query(&q).nearest_one::<SquaredEuclidean<f64>>().execute();
+        let mut best = self.to_cell(q, first.item as usize);
+        let r = best.distance + self.reach;
+        let mut candidates: Vec<usize> = Vec::new();
+        self.tree
+            .query(&q)
+            .within::<SquaredEuclidean<f64>>(r * r * (1.0 + 1e-12) + f64::MIN_POSITIVE)
+            .unsorted()
+            .visit(|h| candidates.push(h.item as usize));
+        candidates.sort_unstable();
+        for c in candidates {
+            let t = self.to_cell(q, c);
+            if t.distance < best.distance || (t.distance == best.distance && c < best.cell) {
+                best = t;
+            }
+        }
+        best
+    }
+}
+
+fn signal_at(shape: &FShape, cell: usize, bary: [f64; 3]) -> Option<f64> {
+    let f = shape.signal()?;
+    let k = shape.kind().n_corners();
+    let ids = &shape.cells()[cell * k..(cell + 1) * k];
+    Some(ids.iter().zip(bary).map(|(&v, w)| w * f[v]).sum())
+}
+
+/// The weighted `q`-quantile of values with weights.
+fn quantile(mut pairs: Vec<(f64, f64)>, q: f64) -> f64 {
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let mut acc = 0.0;
+    for (v, w) in &pairs {
+        acc += w;
+        if acc >= q * total {
+            return *v;
+        }
+    }
+    pairs.last().map_or(0.0, |p| p.0)
+}
+
+/// How close `shape` is to `target` (module docs). Deterministic: samples
+/// are evaluated in parallel but summed in order.
+pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
+    if shape.dim() != target.dim() || shape.kind() != target.kind() {
+        return Err(MatchError::Shapes("quality: the shapes differ in dimension or cell type".into()));
+    }
+    let diagonal = target.bounding_box().diagonal();
+    if !(diagonal > 0.0 && diagonal.is_finite()) {
+        return Err(MatchError::Shapes(format!("quality: the target's bounding-box diagonal is {diagonal}")));
+    }
+    let (to_target, to_shape) = (ClosestPoints::new(target)?, ClosestPoints::new(shape)?);
+    let (xs, ys) = (samples(shape), samples(target));
+    let dx: Vec<Closest> = xs.points.par_iter().map(|p| to_target.closest(*p)).collect();
+    let dy: Vec<Closest> = ys.points.par_iter().map(|p| to_shape.closest(*p)).collect();
+    let (wx, wy): (f64, f64) = (xs.weights.iter().sum(), ys.weights.iter().sum());
+    if !(wx > 0.0 && wy > 0.0) {
+        return Err(MatchError::Shapes("quality: a shape has no area (or length)".into()));
+    }
+    let mean = |d: &[Closest], w: &[f64], total: f64| d.iter().zip(w).map(|(c, w)| c.distance * w).sum::<f64>() / total;
+    let mean_distance = 0.5 * (mean(&dx, &xs.weights, wx) + mean(&dy, &ys.weights, wy)) / diagonal;
+    let pooled: Vec<(f64, f64)> = dx
+        .iter()
+        .zip(&xs.weights)
+        .map(|(c, w)| (c.distance, 0.5 * w / wx))
+        .chain(dy.iter().zip(&ys.weights).map(|(c, w)| (c.distance, 0.5 * w / wy)))
+        .collect();
+    let max_distance = pooled.iter().map(|p| p.0).fold(0.0, f64::max) / diagonal;
+    let p95_distance = quantile(pooled, 0.95) / diagonal;
+    let within: f64 = dy.iter().zip(&ys.weights).filter(|(c, _)| c.distance <= 0.01 * diagonal).map(|(_, w)| w).sum();
+    let range = target.signal().map_or(0.0, |f| {
+        let (lo, hi) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+        if hi >= lo { hi - lo } else { 0.0 }
+    });
+    let signal_rms = if range > 0.0 && shape.signal().is_some() {
+        let mut sum = 0.0;
+        for (i, c) in dy.iter().enumerate() {
+            let ft = signal_at(target, ys.cells[i], ys.bary[i]).unwrap_or(0.0);
+            let fs = signal_at(shape, c.cell, c.bary).unwrap_or(0.0);
+            sum += ys.weights[i] * (fs - ft) * (fs - ft);
+        }
+        Some((sum / wy).sqrt() / range)
+    } else {
+        None
+    };
+    Ok(Quality {
+        diagonal,
+        mean_distance,
+        p95_distance,
+        max_distance,
+        target_within_1pct: within / wy,
+        signal_rms,
+        signal_range: range,
+    })
+}

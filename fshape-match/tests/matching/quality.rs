@@ -1,0 +1,112 @@
+//! Match quality: exact values on parallel planes, the closest-point search
+//! against a brute-force oracle of another construction, identical shapes.
+
+use fshape_match::quality::ClosestPoints;
+use fshape_match::{Quality, quality};
+use fshape_mesh::test_support::{perturbed_icosphere, random_curve};
+use fshape_mesh::{CellKind, FShape};
+
+/// The Delaunay square [-1, 1]² at height z in R³, with signal x + c.
+fn square_at(z: f64, c: f64) -> FShape {
+    let sq = fshape_mesh::generate::square(300, 4);
+    let pts: Vec<f64> = sq.points().chunks_exact(2).flat_map(|p| [p[0], p[1], z]).collect();
+    let f: Vec<f64> = pts.chunks_exact(3).map(|p| p[0] + c).collect();
+    FShape::try_new(3, CellKind::Triangle, pts, sq.cells().to_vec(), Some(f)).unwrap()
+}
+
+#[test]
+fn parallel_squares_are_at_their_offset_and_a_shifted_signal_at_its_shift() {
+    let target = square_at(0.0, 0.0);
+    let diag = 8f64.sqrt();
+    for (h, c) in [(0.01, 0.1), (0.05, -0.3)] {
+        let q: Quality = quality(&square_at(h, c), &target).unwrap();
+        assert!((q.diagonal - diag).abs() < 1e-12);
+        for v in [q.mean_distance, q.p95_distance, q.max_distance] {
+            assert!((v - h / diag).abs() < 1e-12, "{v} against {}", h / diag);
+        }
+        assert_eq!(q.target_within_1pct, if h <= 0.01 * diag { 1.0 } else { 0.0 });
+        // The signal x + c against x on a square whose x spans [-1, 1].
+        assert!((q.signal_range - 2.0).abs() < 1e-12);
+        assert!((q.signal_rms.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{:?}", q.signal_rms);
+    }
+}
+
+#[test]
+fn a_shape_matches_itself() {
+    let s = perturbed_icosphere(2, 0.1, 5);
+    let f: Vec<f64> = s.points().chunks_exact(3).map(|p| p[2]).collect();
+    let s = s.with_signal(Some(f)).unwrap();
+    let q = quality(&s, &s).unwrap();
+    assert!(q.mean_distance < 1e-15 && q.max_distance < 1e-15, "{q:?}");
+    assert_eq!(q.target_within_1pct, 1.0);
+    assert!(q.signal_rms.unwrap() < 1e-15);
+    // Without a signal on the target there is no signal error.
+    assert_eq!(quality(&s, &s.clone().with_signal(None).unwrap()).unwrap().signal_rms, None);
+}
+
+/// Distance from p to triangle abc by another construction than the
+/// library's: the projection onto the plane if it falls inside, else the
+/// nearest of the three edges.
+fn oracle_triangle(p: [f64; 3], t: [[f64; 3]; 3]) -> f64 {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let seg = |a: [f64; 3], b: [f64; 3]| {
+        let ab = sub(b, a);
+        let t = (dot(sub(p, a), ab) / dot(ab, ab)).clamp(0.0, 1.0);
+        let q = sub(p, [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]]);
+        dot(q, q).sqrt()
+    };
+    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+    let nn = dot(n, n);
+    let h = dot(sub(p, t[0]), n) / nn;
+    let proj = [p[0] - h * n[0], p[1] - h * n[1], p[2] - h * n[2]];
+    let inside = (0..3).all(|k| dot(cross(sub(t[(k + 1) % 3], t[k]), sub(proj, t[k])), n) >= 0.0);
+    let edges = seg(t[0], t[1]).min(seg(t[1], t[2])).min(seg(t[2], t[0]));
+    if inside { (h.abs() * nn.sqrt()).min(edges) } else { edges }
+}
+
+#[test]
+fn the_closest_point_search_agrees_with_brute_force() {
+    let mut rng = fshape_mesh::generate::SplitMix64(17);
+    // Triangles in R³.
+    let s = perturbed_icosphere(2, 0.2, 8);
+    let cp = ClosestPoints::new(&s).unwrap();
+    let p3 = |v: usize| -> [f64; 3] { std::array::from_fn(|k| s.point(v)[k]) };
+    for _ in 0..400 {
+        let q = [rng.range(-1.5, 1.5), rng.range(-1.5, 1.5), rng.range(-1.5, 1.5)];
+        let brute = s
+            .cells()
+            .chunks_exact(3)
+            .map(|c| oracle_triangle(q, [p3(c[0]), p3(c[1]), p3(c[2])]))
+            .fold(f64::INFINITY, f64::min);
+        let got = cp.closest(q).distance;
+        assert!((got - brute).abs() <= 1e-12 * (1.0 + brute), "{q:?}: {got} against {brute}");
+    }
+    // Segments in the plane.
+    let curve = random_curve(2, 30, 3);
+    let cp = ClosestPoints::new(&curve).unwrap();
+    for _ in 0..400 {
+        let q = [rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), 0.0];
+        let brute = curve
+            .cells()
+            .chunks_exact(2)
+            .map(|c| {
+                let (a, b) = (curve.point(c[0]), curve.point(c[1]));
+                let ab = [b[0] - a[0], b[1] - a[1]];
+                let t =
+                    (((q[0] - a[0]) * ab[0] + (q[1] - a[1]) * ab[1]) / (ab[0] * ab[0] + ab[1] * ab[1])).clamp(0.0, 1.0);
+                ((q[0] - a[0] - t * ab[0]).powi(2) + (q[1] - a[1] - t * ab[1]).powi(2)).sqrt()
+            })
+            .fold(f64::INFINITY, f64::min);
+        let got = cp.closest(q).distance;
+        assert!((got - brute).abs() <= 1e-12 * (1.0 + brute), "{q:?}: {got} against {brute}");
+    }
+}
+
+#[test]
+fn shapes_of_different_kinds_have_no_quality() {
+    let e = quality(&perturbed_icosphere(1, 0.0, 1), &random_curve(3, 10, 1)).unwrap_err();
+    assert!(e.to_string().contains("differ"), "{e}");
+}
