@@ -3,16 +3,27 @@
 //!
 //! The optimiser sees one flat vector of unknowns: p_0 (P × n), then, when
 //! the signal has a control (metamorphosis: p^f; tangential: ζ), P more
-//! values. The paper measures the signal control in the L²(x_0) metric;
-//! here that is a change of variables with the lumped mass D_0 of the
-//! template: p^f = D_0^{−1/2} q. A Euclidean step in q is then an L²(x_0)
-//! gradient step in p^f (q − t∂J/∂q ⇔ p^f − t D_0⁻¹∂J/∂p^f), so L-BFGS and
-//! its line search work in one consistent metric. The same change of
-//! variables is offered for p_0 (`momentum`: p_0 = D_0^{−1/2} q per
-//! coordinate): both momenta are densities on the template, and measuring
-//! only one of them by the mass scales the two blocks of unknowns by
-//! 1/√(vertex mass) against each other (a factor ~35 on the digits' squares,
-//! where L-BFGS then moved the signal only; docs/experiments.md).
+//! values. A metric on a block is a change of variables with the lumped
+//! mass D_0 = diag(m) of the template, so that a Euclidean step in the new
+//! unknowns q is a gradient step in that metric, and L-BFGS and its line
+//! search work in one consistent metric. Which change depends on what the
+//! block is:
+//!
+//! - **p^f and p_0 are momenta: densities** (covectors). They pair with
+//!   nodal values by the plain sum (⟨p^f, δf⟩ = Σ p^f_i δf_i), so
+//!   p^f_i ≈ ρ(x_i) m_i for a density ρ, and ∂J/∂p^f_i behaves like a
+//!   function's values. The L² metric of densities is
+//!   ‖ρ‖² = Σ ρ_i² m_i = p^fᵀ D_0⁻¹ p^f, whose gradient is D_0 ∂J/∂p^f:
+//!   the paper's step (4), which makes the signal velocity
+//!   ḟ = D_s⁻¹ p^f/γ_f of a step the same function whatever the mesh. As a
+//!   change of variables: p^f = D_0^{1/2} q.
+//! - **ζ (tangential model) is a function** on the template: its L² metric
+//!   is ζᵀ D_0 ζ, the gradient D_0⁻¹ ∂J/∂ζ, the change ζ = D_0^{−1/2} q.
+//!
+//! `Metric::Euclidean` keeps the plain vertex values. (Until this version
+//! the momenta took the function's change, D_0^{−1/2}, which made a step's
+//! signal velocity scale like 1/m²: `tests/matching/objective.rs` tells the
+//! two apart on a graded mesh.)
 
 use fshape_fem::{Norm, SignalNorm};
 use fshape_shoot::{Energies, ModelKind, Problem, ShootError};
@@ -71,21 +82,23 @@ impl Unknowns {
         let metrics = metrics.into();
         let t = problem.template();
         let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
-        let inv_sqrt_mass = || -> Result<Vec<f64>, ShootError> {
+        // √m per vertex for densities, 1/√m for functions.
+        let mass_scale = |density: bool| -> Result<Vec<f64>, ShootError> {
             let masses = SignalNorm::try_new(t, Norm::L2Lumped)?.assemble(t.points())?;
             if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
                 return Err(fshape_fem::FemError::Singular { vertex: v }.into());
             }
-            Ok(masses.iter().map(|m| 1.0 / m.sqrt()).collect())
+            Ok(masses.iter().map(|m| if density { m.sqrt() } else { 1.0 / m.sqrt() }).collect())
         };
         let scale = match (problem.model().kind(), metrics.signal) {
             (ModelKind::Lddmm, _) => Vec::new(),
             (_, Metric::Euclidean) => vec![1.0; p],
-            (_, Metric::L2) => inv_sqrt_mass()?,
+            (ModelKind::Metamorphosis, Metric::L2) => mass_scale(true)?,
+            (ModelKind::Tangential, Metric::L2) => mass_scale(false)?,
         };
         let scale_p = match metrics.momentum {
             Metric::Euclidean => vec![1.0; pn],
-            Metric::L2 => inv_sqrt_mass()?.iter().flat_map(|s| std::iter::repeat_n(*s, dim)).collect(),
+            Metric::L2 => mass_scale(true)?.iter().flat_map(|s| std::iter::repeat_n(*s, dim)).collect(),
         };
         Ok(Unknowns { pn, p, scale, scale_p })
     }

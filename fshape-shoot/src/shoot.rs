@@ -87,21 +87,41 @@ impl Trajectory {
     }
 
     /// Vertex positions at step k (flat).
+    ///
+    /// # Panics
+    ///
+    /// If k > [`Trajectory::steps`].
+    #[track_caller]
     pub fn points(&self, k: usize) -> &[f64] {
         &self.node(k)[self.layout.x()]
     }
 
     /// Signal at step k.
+    ///
+    /// # Panics
+    ///
+    /// If k > [`Trajectory::steps`].
+    #[track_caller]
     pub fn signal(&self, k: usize) -> &[f64] {
         &self.node(k)[self.layout.f()]
     }
 
     /// Momenta p at step k.
+    ///
+    /// # Panics
+    ///
+    /// If k > [`Trajectory::steps`].
+    #[track_caller]
     pub fn momenta(&self, k: usize) -> &[f64] {
         &self.node(k)[self.layout.mom()]
     }
 
     /// Signal momentum p^f at step k.
+    ///
+    /// # Panics
+    ///
+    /// If k > [`Trajectory::steps`].
+    #[track_caller]
     pub fn signal_momentum(&self, k: usize) -> &[f64] {
         &self.node(k)[self.layout.pf()]
     }

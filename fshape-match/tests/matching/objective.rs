@@ -141,3 +141,137 @@ fn optimizer_and_schedule_errors_name_their_key() {
     let e = Config::parse(&format!("{base}[optimizer]\nmax_iteration = 3\n")).unwrap_err().to_string();
     assert!(e.contains("max_iteration"), "{e}");
 }
+
+#[test]
+fn a_diverging_trial_point_is_a_step_too_far_but_a_diverging_start_is_an_error() {
+    use fshape_match::optimize::Objective;
+    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    let shape = perturbed_icosphere(1, 0.05, 3).with_signal(Some(vec![0.0; 42])).unwrap();
+    let problem = Problem::new(&shape, model("", "", "rk4", 5)).unwrap().with_target(&shape, kernel(0.4)).unwrap();
+    let unknowns = Unknowns::new(&problem, Metrics::default()).unwrap();
+    let huge: Vec<f64> = (0..unknowns.len()).map(|i| if i % 2 == 0 { 1e6 } else { -1e6 }).collect();
+    // As the first point: the error itself, naming the divergence.
+    let mut first = MatchObjective::new(&problem, unknowns.clone());
+    let e = first.value_grad(&huge).expect_err("a diverging start").to_string();
+    assert!(e.contains("diverged"), "{e}");
+    // As a trial point after a good start: a non-finite value the line
+    // search steps back from.
+    let mut objective = MatchObjective::new(&problem, unknowns.clone());
+    let (j0, _) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+    assert!(j0.is_finite());
+    let (j, g) = objective.value_grad(&huge).unwrap();
+    assert!(j.is_nan() && g.iter().all(|v| v.is_nan()));
+}
+
+/// The Delaunay square with its vertices moved by φ(t) = 0.2t + 0.8t³ on
+/// each axis: edges 13 times shorter near the centre than at the sides
+/// (cell areas differ by ~170).
+fn graded_square(n: usize, seed: u64) -> fshape_mesh::FShape {
+    let sq = fshape_mesh::generate::square(n, seed);
+    let phi = |t: f64| 0.2 * t + 0.8 * t * t * t;
+    let pts: Vec<f64> = sq.points().iter().map(|&t| phi(t)).collect();
+    sq.with_points(pts).unwrap()
+}
+
+#[test]
+fn the_first_signal_step_is_the_same_function_on_a_graded_mesh_in_the_l2_metric() {
+    use fshape_match::optimize::Objective;
+    use fshape_match::quality::ClosestPoints;
+    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    let target = fshape_mesh::generate::square(2500, 7);
+    let f: Vec<f64> = target.points().chunks_exact(2).map(|p| 0.5 * (2.0 * p[0]).sin() + 0.3 * p[1]).collect();
+    let target = target.with_signal(Some(f)).unwrap();
+    let uniform = fshape_mesh::generate::square(1500, 1);
+    let graded = graded_square(1500, 2);
+    let areas = |s: &fshape_mesh::FShape| s.vertex_volumes();
+    let (ma, mb) = (areas(&uniform), areas(&graded));
+    let ratio = mb.iter().cloned().fold(0.0, f64::max) / mb.iter().cloned().fold(f64::INFINITY, f64::min);
+    assert!(ratio > 50.0, "the graded mesh is strongly non-uniform ({ratio})");
+    let kernel = VarifoldKernel::parse("gaussian:0.2", Some("gaussian:1.0"), "binet").unwrap();
+    // The signal velocity ḟ = D_0⁻¹ δp^f of the first steepest-descent step
+    // (δq = −∂J/∂q) of each metric, at every vertex.
+    type Step = fn(&[f64], &[f64], &[f64]) -> Vec<f64>;
+    let velocity = |template: &fshape_mesh::FShape, m: &[f64], metric: Metric, step: Option<Step>| -> Vec<f64> {
+        let n = template.n_vertices();
+        let template = template.clone().with_signal(Some(vec![0.0; n])).unwrap();
+        let problem = Problem::new(&template, model("gamma_w = 10.0", "", "rk4", 4))
+            .unwrap()
+            .with_target(&target, kernel.clone())
+            .unwrap();
+        let unknowns = Unknowns::new(&problem, Metrics { momentum: Metric::Euclidean, signal: metric }).unwrap();
+        let mut objective = MatchObjective::new(&problem, unknowns.clone());
+        let (_, gq) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+        let dq: Vec<f64> = gq.iter().map(|g| -g).collect();
+        let (_, dpf) = unknowns.unpack(&dq);
+        match step {
+            None => dpf.iter().zip(m).map(|(p, m)| p / m).collect(),
+            // The step of a metric the code no longer offers, from ∂J/∂p^f.
+            Some(f) => {
+                let g = problem.objective_grad(&vec![0.0; 2 * n], &vec![0.0; n]).unwrap().pf;
+                f(&g, m, &dpf)
+            }
+        }
+    };
+    // ‖ḟ_A − ḟ_B‖ / ‖ḟ_A‖ over the uniform mesh's area, ḟ_B interpolated
+    // linearly at the uniform mesh's vertices.
+    let on_b = ClosestPoints::new(&graded).unwrap();
+    let difference = |va: &[f64], vb: &[f64]| -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for (i, p) in uniform.points().chunks_exact(2).enumerate() {
+            let c = on_b.closest([p[0], p[1], 0.0]);
+            let ids = &graded.cells()[3 * c.cell..3 * c.cell + 3];
+            let interp: f64 = ids.iter().zip(c.bary).map(|(&v, w)| w * vb[v]).sum();
+            num += ma[i] * (va[i] - interp).powi(2);
+            den += ma[i] * va[i] * va[i];
+        }
+        (num / den).sqrt()
+    };
+    let l2 = difference(&velocity(&uniform, &ma, Metric::L2, None), &velocity(&graded, &mb, Metric::L2, None));
+    let euclid =
+        difference(&velocity(&uniform, &ma, Metric::Euclidean, None), &velocity(&graded, &mb, Metric::Euclidean, None));
+    // The metric the code had before: δp^f = −D_0⁻¹ ∂J/∂p^f.
+    let old: Step = |g, m, _| g.iter().zip(m).map(|(g, m)| -g / m / m).collect();
+    let before =
+        difference(&velocity(&uniform, &ma, Metric::L2, Some(old)), &velocity(&graded, &mb, Metric::L2, Some(old)));
+    eprintln!(
+        "relative difference of the first step's signal velocity: L2 {l2:.3}, Euclidean {euclid:.3}, D0^-1 {before:.3}"
+    );
+    assert!(l2 < 0.05, "the L2 step depends on the mesh: {l2}");
+    assert!(euclid > 0.5 && before > 0.5, "the other metrics do not depend on it? {euclid}, {before}");
+}
+
+#[test]
+fn the_first_momentum_step_moves_space_alike_on_a_graded_mesh_in_the_l2_metric() {
+    use fshape_match::optimize::Objective;
+    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    // The target: the square stretched along x, signal 0 like the templates.
+    let target = fshape_mesh::generate::square(2500, 7);
+    let pts: Vec<f64> = target.points().chunks_exact(2).flat_map(|p| [1.15 * p[0], p[1]]).collect();
+    let target = target.with_points(pts).unwrap();
+    let uniform = fshape_mesh::generate::square(1500, 1);
+    let graded = graded_square(1500, 2);
+    let kernel = VarifoldKernel::parse("gaussian:0.2", None, "binet").unwrap();
+    let deformation = fshape_kernels::Kernel::gaussian(0.3).unwrap();
+    // The velocity K δp_0 of the first steepest-descent step, at the
+    // uniform mesh's vertices.
+    let velocity = |template: &fshape_mesh::FShape, metric: Metric| -> Vec<f64> {
+        let model = model("kind = \"lddmm\"\ngamma_w = 10.0", "", "rk4", 4).with_kernel(deformation.clone());
+        let problem = Problem::new(template, model).unwrap().with_target(&target, kernel.clone()).unwrap();
+        let unknowns = Unknowns::new(&problem, Metrics { momentum: metric, signal: Metric::L2 }).unwrap();
+        let mut objective = MatchObjective::new(&problem, unknowns.clone());
+        let (_, gq) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+        let dq: Vec<f64> = gq.iter().map(|g| -g).collect();
+        let (dp0, _) = unknowns.unpack(&dq);
+        let sums = fshape_kernels::KernelSums::try_new(&deformation, template.points(), 2).unwrap();
+        sums.conv(uniform.points(), &dp0, 2).unwrap()
+    };
+    let difference = |a: &[f64], b: &[f64]| -> f64 {
+        let num: f64 = a.iter().zip(b).map(|(u, v)| (u - v).powi(2)).sum();
+        (num / a.iter().map(|u| u * u).sum::<f64>()).sqrt()
+    };
+    let l2 = difference(&velocity(&uniform, Metric::L2), &velocity(&graded, Metric::L2));
+    let euclid = difference(&velocity(&uniform, Metric::Euclidean), &velocity(&graded, Metric::Euclidean));
+    eprintln!("relative difference of the first step's velocity field: L2 {l2:.3}, Euclidean {euclid:.3}");
+    assert!(l2 < 0.1, "the L2 step depends on the mesh: {l2}");
+    assert!(euclid > 3.0 * l2, "the Euclidean step does not depend on it? {euclid}");
+}
