@@ -115,6 +115,9 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
         config.model.norm = NormKind::L2Lumped;
         config.model.gamma_f = 1.0 / ratio;
         config.model.gamma_w = a.gamma_w;
+        // The paper's weights, in the data's units (not yet retuned for
+        // scale-free weights).
+        config.model.normalize = false;
         config.deformation.tolerance = Some(1e-6);
         config.attachment = Some(attachment(p3, f, Some(1e-6))?);
         config.optimizer.max_iterations = a.max_iterations;
@@ -154,6 +157,9 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
         let mut config = shipped.clone();
         config.model.norm = norm;
         config.model.gamma_w = a.gamma_w;
+        // Weights in the data's units (not yet retuned for scale-free
+        // weights).
+        config.model.normalize = false;
         config.optimizer.max_iterations = a.max_iterations;
         config.schedule = Some(schedule(&[0.2, 0.1, 0.05])?);
         let header = format!(
@@ -224,6 +230,8 @@ pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
         config.model.length = CORTEX_LENGTH_MM;
         config.model.gamma_f = 0.01;
         config.model.gamma_w = a.gamma_w;
+        // Weights in millimetres (not yet retuned for scale-free weights).
+        config.model.normalize = false;
         config.deformation.tolerance = Some(1e-6);
         config.attachment = Some(attachment(5.0, 1.0, Some(1e-6))?);
         config.optimizer.max_iterations = a.max_iterations;

@@ -660,6 +660,14 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     let start = std::time::Instant::now();
     let config = Config::read(a.config)?;
     let model = config.model()?;
+    if config.model.normalize {
+        anyhow::bail!(
+            "{}: [model] normalize = true makes the weights relative to a registration's target, and shooting \
+             has none: set normalize = false (the weights are then taken as written), or shoot a registration's \
+             momenta with the shoot.toml that fshape match wrote next to them",
+            a.config.display()
+        );
+    }
     if let Some(t) = a.times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
         anyhow::bail!("--times: {t} is outside [0, 1]");
     }

@@ -40,6 +40,10 @@ struct Summary<'a> {
     gamma_v: f64,
     gamma_f: f64,
     gamma_w: f64,
+    /// The scales the weights were normalised by (`null`: as written), and
+    /// the weights the model used.
+    scales: Option<fshape_match::Scales>,
+    effective_weights: [f64; 3],
     steps: usize,
     metrics: Metrics,
     stages: &'a [StageRecord],
@@ -147,6 +151,14 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let (mut outputs, mut files) = crate::trajectory_files(&template, traj, a.times, a.out)?;
     let dim = template.dim();
     let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
+    // The configuration with the weights the model used, for `fshape shoot`.
+    let shoot = format!(
+        "# {} with the weights fshape match used (normalize = false): shoot p0.csv and pf.csv with it.\n\n{}",
+        a.config.display(),
+        config.resolved(session.plan().scales).to_toml()
+    );
+    outputs.push((a.out.join("shoot.toml"), shoot.into_bytes()));
+    files.push("shoot.toml".into());
     outputs.push((a.out.join("p0.csv"), io::csv::vectors_text(names, p0).into_bytes()));
     files.push("p0.csv".into());
     let kind = model.kind();
@@ -190,9 +202,11 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         config: a.config.display().to_string(),
         model: kind.name(),
         norm: model.norm().name(),
-        gamma_v: model.gamma_v(),
-        gamma_f: model.gamma_f(),
-        gamma_w: model.gamma_w(),
+        gamma_v: config.model.gamma_v,
+        gamma_f: config.model.gamma_f,
+        gamma_w: config.model.gamma_w,
+        scales: session.plan().scales,
+        effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
         steps: model.steps(),
         metrics,
         stages: &result.stages,

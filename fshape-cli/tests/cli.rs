@@ -269,7 +269,7 @@ fn shoot_inputs(tag: &str) -> (String, String, String, String) {
     std::fs::write(&pfp, pf).unwrap();
     std::fs::write(
         &cfg,
-        "[model]\nnorm = \"h1\"\nlength = 0.5\n[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 8\n",
+        "[model]\nnorm = \"h1\"\nlength = 0.5\nnormalize = false\n[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 8\n",
     )
     .unwrap();
     let s = |p: PathBuf| p.display().to_string();
@@ -428,7 +428,7 @@ fn match_inputs(tag: &str, max_iterations: usize) -> (String, String, String) {
     std::fs::write(
         &c,
         format!(
-            "[model]\nnorm = \"h1\"\nlength = 0.2\ngamma_w = 50.0\n[deformation]\nwidths = [0.4, 0.2]\n\
+            "[model]\nnorm = \"h1\"\nlength = 0.2\ngamma_w = 400.0\n[deformation]\nwidths = [0.4, 0.2]\n\
              [integrator]\nsteps = 5\n[attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
              [optimizer]\nmax_iterations = {max_iterations}\n[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.1\"]\n"
         ),
@@ -463,16 +463,46 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     // (J falls within each stage; A alone may rise as H falls.)
     assert!(a1 < 0.2 * first, "attachment {first} -> {a0} -> {a1}");
     assert!(summary["geodesic_distance"].as_f64().unwrap() > 0.0);
-    // The end state reads back and is closer to the target than the start.
+    // The end state reads back, and the match quality says it is closer to
+    // the target than the template was, in shape and in signal, and the
+    // same as the end state's own quality.
     let target = read_mesh(t.as_ref(), &ReadOptions::default()).unwrap();
     let end = read_mesh(&out.join("state_004.ply"), &ReadOptions::default()).unwrap();
-    let start = read_mesh(&out.join("state_000.ply"), &ReadOptions::default()).unwrap();
-    let dist = |a: &fshape_mesh::FShape| {
-        a.points().iter().zip(target.points()).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt()
-    };
-    assert!(dist(&end) < 0.5 * dist(&start), "{} vs {}", dist(&end), dist(&start));
+    let (q, q0) = (&summary["quality"], &summary["quality_before"]);
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap();
+    assert!(num(q, "mean_distance") < 0.5 * num(q0, "mean_distance"), "{q} against {q0}");
+    assert!(num(q, "signal_rms") < num(q0, "signal_rms"), "{q} against {q0}");
+    let own = fshape_match::quality(&end, &target).unwrap();
+    assert!((own.mean_distance - num(q, "mean_distance")).abs() < 1e-9, "{own:?}");
     let p0 = fshape_mesh::io::csv::read_vectors(&out.join("p0.csv"), 3).unwrap();
     assert_eq!(p0.len(), 3 * target.n_vertices());
+    // The match's momenta shot again with the shoot.toml it wrote (the
+    // weights its model used) end where the match ended.
+    let again = tmp("match_out_shot");
+    let file = |f: &str| out.join(f).display().to_string();
+    let o = fshape(&[
+        "shoot",
+        &s,
+        "--momentum",
+        &file("p0.csv"),
+        "--signal-momentum",
+        &file("pf.csv"),
+        "--config",
+        &file("shoot.toml"),
+        "--out",
+        &again.display().to_string(),
+        "--times",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let shot = read_mesh(&again.join("state_000.ply"), &ReadOptions::default()).unwrap();
+    let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(u, v)| (u - v).abs() < 1e-9 * (1.0 + v.abs()));
+    assert!(close(shot.points(), end.points()) && close(shot.signal().unwrap(), end.signal().unwrap()));
+    // The match's own config (normalised weights) is refused by shoot, saying why.
+    let o =
+        fshape(&["shoot", &s, "--momentum", &file("p0.csv"), "--config", &c, "--out", &again.display().to_string()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("normalize = false"));
     for f in ["momenta.vtk", "energy.svg", "energy.png", "trajectory.pvd", "checkpoint.json"] {
         assert!(out.join(f).exists(), "{f}");
     }
@@ -537,7 +567,7 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     assert_eq!(std::fs::read(whole.join("p0.csv")).unwrap(), std::fs::read(parts.join("p0.csv")).unwrap());
     assert_eq!(stages(&whole), stages(&parts));
     // A checkpoint of other inputs is refused by name.
-    std::fs::write(&c, std::fs::read_to_string(&c).unwrap().replace("gamma_w = 50.0", "gamma_w = 5.0")).unwrap();
+    std::fs::write(&c, std::fs::read_to_string(&c).unwrap().replace("gamma_w = 400.0", "gamma_w = 5.0")).unwrap();
     let o = fshape(&["match", &s, &t, "--config", &c, "--out", &parts.display().to_string(), "--resume"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(

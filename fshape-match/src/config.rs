@@ -11,6 +11,7 @@
 //! gamma_v = 1.0            # weight γ_V of the deformation energy (default 1)
 //! gamma_f = 1.0            # weight γ_f of the signal energy      (default 1)
 //! gamma_w = 1.0            # weight γ_W of the data attachment    (default 1)
+//! normalize = true         # weights relative to the data's scale (default true; see below)
 //!
 //! [deformation]
 //! widths = [0.2, 0.1]      # Gaussian widths σ_i, exp(−u/(2σ²))   (required)
@@ -44,6 +45,29 @@
 //! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
 //! ```
 //!
+//! **Scale-free weights** (`normalize = true`, the default). The three
+//! terms of J have units: the deformation energy (γ_V/2)‖v‖²_V grows like
+//! L² when the shapes are scaled by L (displacements ∝ L, kernel widths
+//! ∝ L), the signal energy (γ_f/2)‖ḟ‖²_{H^s} like S²·L^d (S the signal's
+//! scale, d the cells' dimension: ∫ḟ² over an area L^d), and the data
+//! term A like L^{2d} (a double sum of cell volumes). With normalization
+//! the model uses γ_V/L², γ_f/(S²·L^d) and γ_W/L^{2d}, i.e. J is computed
+//! as if the shapes had diagonal 1 and the signal a standard deviation of
+//! 1, so one set of weights means the same on a unit bunny, a square of
+//! side 2 and a cortex in millimetres. L is the target's bounding-box
+//! diagonal and S the standard deviation of the target's vertex signal
+//! (of the template's when the target's is constant or absent; 1 when
+//! both are). Shooting alone has no target: [`Config::model`] takes the
+//! weights as written, and a registration's output has its effective
+//! weights ([`Config::resolved`]) for shooting its momenta again. Kernel widths and the H¹ length stay in the data's units:
+//! choose them as fractions of the shapes' size. What each weight does:
+//! γ_W/γ_V sets how closely the geometry is fitted (larger: closer, at a
+//! larger deformation); γ_W/γ_f how closely the signal is (larger: a
+//! closer signal, changed more along the path); γ_V/γ_f how the match
+//! shares the work between moving the signal with the shape and changing
+//! it (the paper's ratios 1, 20, 100 on the digits). `normalize = false`
+//! takes the weights as they are, in the data's units.
+//!
 //! Unknown keys are refused by name. A value of the wrong type or
 //! spelling is refused while reading, with its key and line; a number out
 //! of range by [`Config::plan`], with its key.
@@ -53,6 +77,7 @@ use std::path::Path;
 
 use fshape_fem::Norm;
 use fshape_kernels::{Kernel, Profile};
+use fshape_mesh::FShape;
 use fshape_shoot::{Integrator, Model, ModelKind};
 use fshape_varifold::{GrassKernel, SignalKernel, VarifoldKernel};
 use serde::{Deserialize, Serialize};
@@ -116,6 +141,8 @@ pub struct ModelSection {
     pub gamma_f: f64,
     /// γ_W.
     pub gamma_w: f64,
+    /// Weights relative to the data's scale (module docs).
+    pub normalize: bool,
 }
 
 impl Default for ModelSection {
@@ -127,7 +154,50 @@ impl Default for ModelSection {
             gamma_v: 1.0,
             gamma_f: 1.0,
             gamma_w: 1.0,
+            normalize: true,
         }
+    }
+}
+
+/// The scales of the data that normalised weights are relative to
+/// (module docs): L, S and d.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Scales {
+    /// L: the bounding-box diagonal.
+    pub length: f64,
+    /// S: the signal's standard deviation (1 without one).
+    pub signal: f64,
+    /// d: the dimension of the cells (1 curves, 2 surfaces).
+    pub cell_dim: usize,
+}
+
+impl Scales {
+    /// L from `target`, S from the target's signal, else the template's,
+    /// else 1; d from the template.
+    pub fn of(template: &FShape, target: &FShape) -> Result<Scales, MatchError> {
+        let length = target.bounding_box().diagonal();
+        if !(length > 0.0 && length.is_finite()) {
+            return Err(bad(
+                "model.normalize",
+                format!("the shapes' bounding-box diagonal is {length}; normalize = false"),
+            ));
+        }
+        let std = |s: &FShape| -> Option<f64> {
+            let f = s.signal().filter(|f| !f.is_empty())?;
+            let n = f.len() as f64;
+            let mean = f.iter().sum::<f64>() / n;
+            let sd = (f.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt();
+            (sd > 0.0 && sd.is_finite()).then_some(sd)
+        };
+        let signal = std(target).or_else(|| std(template)).unwrap_or(1.0);
+        Ok(Scales { length, signal, cell_dim: template.kind().dim() })
+    }
+
+    /// The effective (γ_V, γ_f, γ_W) of the written ones: γ_V/L²,
+    /// γ_f/(S²·L^d), γ_W/L^{2d}.
+    pub fn effective(&self, gamma_v: f64, gamma_f: f64, gamma_w: f64) -> (f64, f64, f64) {
+        let (l, d) = (self.length, self.cell_dim as i32);
+        (gamma_v / (l * l), gamma_f / (self.signal * self.signal * l.powi(d)), gamma_w / l.powi(2 * d))
     }
 }
 
@@ -341,8 +411,10 @@ pub struct StageSpec {
 /// optimiser settings and the metrics of the unknowns.
 #[derive(Clone, Debug)]
 pub struct Plan {
-    /// The model.
+    /// The model (with the effective weights when normalised).
     pub model: Model,
+    /// The scales the weights were normalised by (`None`: as written).
+    pub scales: Option<Scales>,
     /// The stages, coarse to fine (at least one).
     pub stages: Vec<StageSpec>,
     /// Optimiser settings (per stage).
@@ -409,8 +481,21 @@ impl Config {
         toml::to_string(self).expect("a Config always serialises")
     }
 
-    /// The validated model.
+    /// The validated model with the weights as written, whatever
+    /// `normalize` says (use [`Config::model_for`] for shapes).
     pub fn model(&self) -> Result<Model, MatchError> {
+        self.model_scaled(None)
+    }
+
+    /// The validated model for matching `template` onto `target`: with
+    /// `normalize`, the weights relative to the data's [`Scales`], which
+    /// are returned too.
+    pub fn model_for(&self, template: &FShape, target: &FShape) -> Result<(Model, Option<Scales>), MatchError> {
+        let scales = if self.model.normalize { Some(Scales::of(template, target)?) } else { None };
+        Ok((self.model_scaled(scales)?, scales))
+    }
+
+    fn model_scaled(&self, scales: Option<Scales>) -> Result<Model, MatchError> {
         let m = &self.model;
         let d = &self.deformation;
         for (key, v) in [("model.gamma_v", m.gamma_v), ("model.gamma_f", m.gamma_f), ("model.gamma_w", m.gamma_w)] {
@@ -433,10 +518,14 @@ impl Config {
         if self.integrator.max_drift.is_nan() || self.integrator.max_drift <= 0.0 {
             return Err(bad("integrator.max_drift", format!("must be positive, got {}", self.integrator.max_drift)));
         }
+        let (gamma_v, gamma_f, gamma_w) = match scales {
+            Some(s) => s.effective(m.gamma_v, m.gamma_f, m.gamma_w),
+            None => (m.gamma_v, m.gamma_f, m.gamma_w),
+        };
         let model = Model::new(kernel)
             .with_kind(m.kind)
             .with_norm(norm)
-            .and_then(|model| model.with_weights(m.gamma_v, m.gamma_f, m.gamma_w))
+            .and_then(|model| model.with_weights(gamma_v, gamma_f, gamma_w))
             .and_then(|model| model.with_integrator(self.integrator.scheme, self.integrator.steps))
             .and_then(|model| model.with_max_drift(self.integrator.max_drift))
             .map_err(|e| bad("model", e.to_string()))?;
@@ -519,11 +608,26 @@ impl Config {
         Ok((settings, metrics))
     }
 
-    /// Everything checked at once: the model, the stages, the optimiser.
-    pub fn plan(&self) -> Result<Plan, MatchError> {
-        let model = self.model()?;
+    /// This configuration with the weights a model normalised by `scales`
+    /// uses, written out (`normalize = false`): what shooting the
+    /// registration's momenta again needs.
+    pub fn resolved(&self, scales: Option<Scales>) -> Config {
+        let mut c = self.clone();
+        if let (true, Some(s)) = (c.model.normalize, scales) {
+            let (v, f, w) = s.effective(c.model.gamma_v, c.model.gamma_f, c.model.gamma_w);
+            (c.model.gamma_v, c.model.gamma_f, c.model.gamma_w) = (v, f, w);
+        }
+        c.model.normalize = false;
+        c
+    }
+
+    /// Everything checked at once for matching `template` onto `target`:
+    /// the model (normalised by their scales if asked), the stages, the
+    /// optimiser.
+    pub fn plan(&self, template: &FShape, target: &FShape) -> Result<Plan, MatchError> {
+        let (model, scales) = self.model_for(template, target)?;
         let stages = self.schedule()?;
         let (settings, metrics) = self.optimizer()?;
-        Ok(Plan { model, stages, settings, metrics })
+        Ok(Plan { model, scales, stages, settings, metrics })
     }
 }

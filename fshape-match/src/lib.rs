@@ -42,7 +42,7 @@ pub mod unknowns;
 
 pub use config::{
     AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind, ModelSection,
-    NormKind, OptimizerSection, Plan, PositionKernel, ScheduleSection, SignalKernelSpec, StageSpec,
+    NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec, StageSpec,
 };
 pub use quality::{Quality, quality};
 pub use session::{

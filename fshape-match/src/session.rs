@@ -224,9 +224,9 @@ impl Session {
                 target.dim()
             )));
         }
-        let plan = config.plan()?;
+        let plan = config.plan(source, target)?;
         let problem = Problem::new(source, plan.model.clone())?;
-        let unknowns = Unknowns::new(&problem, plan.metrics)?;
+        let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales)?;
         let checkpoint = Checkpoint {
             format: CHECKPOINT_FORMAT,
             fingerprint: fingerprint(source, target, config),

@@ -79,6 +79,19 @@ impl Unknowns {
     /// The packing for `problem` with its blocks in `metrics` (a
     /// [`Metric`] alone sets the signal block's).
     pub fn new(problem: &Problem, metrics: impl Into<Metrics>) -> Result<Unknowns, ShootError> {
+        Unknowns::scaled(problem, metrics, None)
+    }
+
+    /// The packing of a problem whose weights were normalised by `scales`
+    /// ([`crate::Scales`]): the unknowns are then those of the shapes
+    /// rescaled to diagonal 1 and signal deviation 1 (p_0 times L, p^f
+    /// times S, ζ divided by S, and the metric's L^{d/2} for the mass), so
+    /// that the optimiser takes the same steps at any scale of the data.
+    pub fn scaled(
+        problem: &Problem,
+        metrics: impl Into<Metrics>,
+        scales: Option<crate::Scales>,
+    ) -> Result<Unknowns, ShootError> {
         let metrics = metrics.into();
         let t = problem.template();
         let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
@@ -90,16 +103,30 @@ impl Unknowns {
             }
             Ok(masses.iter().map(|m| if density { m.sqrt() } else { 1.0 / m.sqrt() }).collect())
         };
-        let scale = match (problem.model().kind(), metrics.signal) {
+        let kind = problem.model().kind();
+        let mut scale = match (kind, metrics.signal) {
             (ModelKind::Lddmm, _) => Vec::new(),
             (_, Metric::Euclidean) => vec![1.0; p],
             (ModelKind::Metamorphosis, Metric::L2) => mass_scale(true)?,
             (ModelKind::Tangential, Metric::L2) => mass_scale(false)?,
         };
-        let scale_p = match metrics.momentum {
+        let mut scale_p = match metrics.momentum {
             Metric::Euclidean => vec![1.0; pn],
             Metric::L2 => mass_scale(true)?.iter().flat_map(|s| std::iter::repeat_n(*s, dim)).collect(),
         };
+        if let Some(sc) = scales {
+            // In the rescaled data: p_0' = L p_0, p^f' = S p^f, ζ' = ζ/S,
+            // and the mass m' = m / L^d in the L² metrics.
+            let half_d = sc.length.powf(0.5 * sc.cell_dim as f64);
+            let l2 = |m: Metric| if m == Metric::L2 { half_d } else { 1.0 };
+            let c0 = 1.0 / (sc.length * l2(metrics.momentum));
+            let cf = match kind {
+                ModelKind::Tangential => sc.signal * l2(metrics.signal),
+                _ => 1.0 / (sc.signal * l2(metrics.signal)),
+            };
+            scale_p.iter_mut().for_each(|v| *v *= c0);
+            scale.iter_mut().for_each(|v| *v *= cf);
+        }
         Ok(Unknowns { pn, p, scale, scale_p })
     }
 

@@ -184,3 +184,87 @@ fn a_serial_session_gives_the_bits_of_a_parallel_one() {
     assert_eq!(bits(&results[0].pf), bits(&results[1].pf));
     assert_eq!(results[0].stages, results[1].stages);
 }
+
+/// The inputs with lengths times `l` and signals times `s`, and every
+/// width (deformation, k_p, k_f) scaled to match.
+fn scaled_inputs(l: f64, s: f64) -> (FShape, FShape, Config) {
+    let (source, target, mut config) = inputs();
+    let scale = |shape: FShape| {
+        let pts: Vec<f64> = shape.points().iter().map(|v| v * l).collect();
+        let f: Vec<f64> = shape.signal().unwrap().iter().map(|v| v * s).collect();
+        shape.with_points(pts).unwrap().with_signal(Some(f)).unwrap()
+    };
+    config.deformation.widths = config.deformation.widths.iter().map(|w| w * l).collect();
+    let a = config.attachment.as_mut().unwrap();
+    a.kernel_geom = fshape_match::PositionKernel::parse(&format!("gaussian:{}", 0.3 * l)).unwrap();
+    a.kernel_signal = Some(fshape_match::SignalKernelSpec::parse(&format!("gaussian:{s}")).unwrap());
+    config.schedule = Some(fshape_match::ScheduleSection {
+        kernel_geom: [0.6, 0.3]
+            .map(|w| fshape_match::PositionKernel::parse(&format!("gaussian:{}", w * l)).unwrap())
+            .to_vec(),
+    });
+    (scale(source), scale(target), config)
+}
+
+#[test]
+fn normalised_weights_give_the_same_registration_at_any_scale() {
+    // The default model and metrics, p_0 in its L² metric, and the
+    // tangential model (whose signal control is a function, not a density).
+    type Variant = fn(&mut Config);
+    let variants: [(&str, Variant); 3] = [
+        ("default", |_| {}),
+        ("momentum l2", |c| c.optimizer.momentum_metric = fshape_match::Metric::L2),
+        ("tangential", |c| c.model.kind = fshape_shoot::ModelKind::Tangential),
+    ];
+    for (name, variant) in variants {
+        let run = |l: f64, s: f64, normalize: bool| {
+            let (source, target, mut config) = scaled_inputs(l, s);
+            config.model.normalize = normalize;
+            variant(&mut config);
+            let mut session = Session::new(&source, &target, &config).unwrap();
+            session.run(&mut ()).unwrap();
+            session.result().unwrap()
+        };
+        let unit = run(1.0, 1.0, true);
+        // Powers of two: the scaled computations round alike, so the runs
+        // take the same steps.
+        for (l, s) in [(8.0, 0.25), (0.125, 16.0)] {
+            let other = run(l, s, true);
+            let values = |r: &fshape_match::MatchResult| -> Vec<f64> {
+                r.stages
+                    .iter()
+                    .flat_map(|st| std::iter::once(&st.initial).chain(&st.iterations))
+                    .map(|i| i.value)
+                    .collect()
+            };
+            let (a, b) = (values(&unit), values(&other));
+            assert_eq!(a.len(), b.len(), "{name}, L = {l}, S = {s}: the same number of iterations");
+            for (u, v) in a.iter().zip(&b) {
+                assert!((u - v).abs() <= 1e-9 * u.abs(), "{name}, L = {l}, S = {s}: J {u} against {v}");
+            }
+            let (qa, qb) = (unit.quality, other.quality);
+            assert!((qa.mean_distance - qb.mean_distance).abs() < 1e-9, "{name}");
+            assert!((qa.signal_rms.unwrap() - qb.signal_rms.unwrap()).abs() < 1e-9, "{name}");
+            // Without normalisation the same weights fit differently.
+            let absolute = run(l, s, false);
+            assert!((absolute.quality.mean_distance - qa.mean_distance).abs() > 1e-3 * qa.mean_distance, "{name}, {l}");
+        }
+    }
+}
+
+#[test]
+fn the_scales_are_the_targets_diagonal_and_signal_deviation() {
+    let (source, target, config) = inputs();
+    let session = Session::new(&source, &target, &config).unwrap();
+    let s = session.plan().scales.expect("normalised by default");
+    assert_eq!(s.length, target.bounding_box().diagonal());
+    let f = target.signal().unwrap();
+    let mean = f.iter().sum::<f64>() / f.len() as f64;
+    let sd = (f.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / f.len() as f64).sqrt();
+    assert!((s.signal - sd).abs() < 1e-15 && s.cell_dim == 2);
+    let m = &session.plan().model;
+    let (l, gw) = (s.length, config.model.gamma_w);
+    assert!((m.gamma_w() - gw / l.powi(4)).abs() < 1e-12 * m.gamma_w());
+    assert!((m.gamma_v() - config.model.gamma_v / (l * l)).abs() < 1e-15);
+    assert!((m.gamma_f() - config.model.gamma_f / (sd * sd * l * l)).abs() < 1e-12 * m.gamma_f());
+}
