@@ -19,6 +19,13 @@ use crate::MatchError;
 ///
 /// Model parameters are in `data/configs/bunny.toml`.
 pub fn bunny_setting(bunny: &FShape) -> Result<(FShape, FShape), MatchError> {
+    bunny_setting_at_level(bunny, 5)
+}
+
+/// [`bunny_setting`] with the icosphere of the given level as template
+/// (3: 642 vertices, 4: 2562, 5: 10242, the paper's), for quick
+/// experiments and coarse stages.
+pub fn bunny_setting_at_level(bunny: &FShape, level: u32) -> Result<(FShape, FShape), MatchError> {
     if bunny.dim() != 3 || bunny.kind().dim() != 2 || bunny.n_vertices() == 0 {
         return Err(MatchError::Shapes(format!(
             "the bunny must be a non-empty triangle surface in R^3, got a {} mesh in R^{} with {} vertices",
@@ -45,7 +52,7 @@ pub fn bunny_setting(bunny: &FShape) -> Result<(FShape, FShape), MatchError> {
     let (px, py) = (range(0), range(1));
     let signal = pts.chunks_exact(3).map(|p| (3.0 * p[0] / px).sin() + p[1] / py).collect();
     let target = bunny.clone().with_points(pts)?.with_signal(Some(signal))?;
-    let sphere = icosphere(5, 0.35);
+    let sphere = icosphere(level, 0.35);
     let n_sphere = sphere.n_vertices();
     let template = sphere.with_signal(Some(vec![0.0; n_sphere]))?;
     Ok((template, target))
