@@ -53,7 +53,7 @@ fn attachment(geom: f64, signal: f64, tolerance: Option<f64>) -> Result<Attachme
 
 /// `[schedule]` of Gaussian position kernels, coarse to fine.
 fn schedule(widths: &[f64]) -> Result<ScheduleSection> {
-    Ok(ScheduleSection { kernel_geom: widths.iter().map(|&w| gaussian(w)).collect::<Result<_>>()? })
+    Ok(ScheduleSection::new(widths.iter().map(|&w| gaussian(w)).collect::<Result<_>>()?))
 }
 
 /// Writes `config` (after the comment lines of `header`) to

@@ -5,8 +5,9 @@
 //! compared with this one in one run on one machine.
 //!
 //! ```sh
-//! cargo run --release -p fshape-match --example time_to_quality -- [LEVEL] [NORM] [GAMMA_W] [GAMMA_F] [BUDGETS]
-//! # defaults: 3 h1 1e3 0.1 25,50,100  (LEVEL: the template icosphere, 5 = the paper's 10242 vertices)
+//! cargo run --release -p fshape-match --example time_to_quality -- [LEVEL] [NORM] [GAMMA_W] [GAMMA_F] [BUDGETS] [COARSE]
+//! # defaults: 3 h1 1e3 0.1 25,50,100  (LEVEL: the template icosphere, 5 = the paper's 10242 vertices;
+//! # COARSE, e.g. midpoint:5: the integrator of the first two stages)
 //! ```
 
 use std::path::Path;
@@ -39,12 +40,24 @@ fn main() -> Result<()> {
     config.model.norm = norm;
     config.model.normalize = true;
     (config.model.gamma_f, config.model.gamma_w) = (gamma_f, gamma_w);
-    config.schedule = Some(fshape_match::ScheduleSection {
-        kernel_geom: ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
+    let mut schedule = fshape_match::ScheduleSection::new(
+        ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
             .iter()
             .map(|k| fshape_match::PositionKernel::parse(k))
             .collect::<Result<_, _>>()?,
-    });
+    );
+    // COARSE: the integrator of the first two stages, `scheme:steps`
+    // (e.g. midpoint:5); the last keeps the model's (RK4, 10 steps).
+    if let Some(coarse) = args.get(5) {
+        let (scheme, steps) = coarse.split_once(':').context("COARSE: scheme:steps")?;
+        let scheme: fshape_shoot::Integrator =
+            serde_json::from_value(serde_json::json!(scheme)).context("COARSE scheme")?;
+        let steps: usize = steps.parse().context("COARSE steps")?;
+        let last = (config.integrator.scheme, config.integrator.steps);
+        schedule.scheme = Some(vec![scheme, scheme, last.0]);
+        schedule.steps = Some(vec![steps, steps, last.1]);
+    }
+    config.schedule = Some(schedule);
     println!(
         "bunny, template level {level} ({} vertices), {:?}, gamma_W {gamma_w:e}, gamma_f {gamma_f}, {} threads",
         template.n_vertices(),

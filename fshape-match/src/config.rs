@@ -43,6 +43,8 @@
 //!
 //! [schedule]                        # coarse to fine (default: one stage, [attachment])
 //! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
+//! scheme = ["midpoint", "midpoint", "rk4"]  # per stage (default [integrator]'s; the last must be it)
+//! steps = [5, 5, 10]                        # per stage (likewise)
 //! ```
 //!
 //! **Scale-free weights** (`normalize = true`, the default). The three
@@ -395,6 +397,22 @@ impl Default for OptimizerSection {
 pub struct ScheduleSection {
     /// The position kernel of each stage, coarse to fine.
     pub kernel_geom: Vec<PositionKernel>,
+    /// The integrator of each stage (default: `[integrator] scheme` for
+    /// all); the last must be `[integrator]`'s: the model asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scheme: Option<Vec<Integrator>>,
+    /// The time steps of each stage (default: `[integrator] steps` for
+    /// all); the last must be `[integrator]`'s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<Vec<usize>>,
+}
+
+impl ScheduleSection {
+    /// Stages with these position kernels, each with `[integrator]`'s
+    /// scheme and steps.
+    pub fn new(kernel_geom: Vec<PositionKernel>) -> ScheduleSection {
+        ScheduleSection { kernel_geom, scheme: None, steps: None }
+    }
 }
 
 /// One stage of the schedule: what it is called in reports and its data
@@ -405,6 +423,9 @@ pub struct StageSpec {
     pub label: String,
     /// The data attachment kernel of the stage.
     pub kernel: VarifoldKernel,
+    /// The stage's integrator and time steps (coarse stages may shoot
+    /// more cheaply; the last stage's are the model's).
+    pub integrator: (Integrator, usize),
 }
 
 /// Everything a registration needs, checked: the model, the stages, the
@@ -559,18 +580,40 @@ impl Config {
         match &self.schedule {
             None => {
                 let geom = &self.attachment_section()?.kernel_geom;
-                Ok(vec![StageSpec { label: geom.text().to_string(), kernel: self.attachment_kernel()? }])
+                let integrator = (self.integrator.scheme, self.integrator.steps);
+                Ok(vec![StageSpec { label: geom.text().to_string(), kernel: self.attachment_kernel()?, integrator }])
             }
             Some(s) if s.kernel_geom.is_empty() => Err(bad("schedule.kernel_geom", "needs at least one kernel")),
-            Some(s) => s
-                .kernel_geom
-                .iter()
-                .enumerate()
-                .map(|(i, g)| {
-                    let kernel = self.attachment_with(g, &format!("schedule.kernel_geom[{i}]"))?;
-                    Ok(StageSpec { label: g.text().to_string(), kernel })
-                })
-                .collect(),
+            Some(s) => {
+                let n = s.kernel_geom.len();
+                let per_stage = |key: &str, len: Option<usize>| match len {
+                    Some(len) if len != n => Err(bad(
+                        format!("schedule.{key}"),
+                        format!("{len} values for {n} stages (one per kernel_geom)"),
+                    )),
+                    _ => Ok(()),
+                };
+                per_stage("scheme", s.scheme.as_ref().map(Vec::len))?;
+                per_stage("steps", s.steps.as_ref().map(Vec::len))?;
+                let scheme = |i: usize| s.scheme.as_ref().map_or(self.integrator.scheme, |v| v[i]);
+                let steps = |i: usize| s.steps.as_ref().map_or(self.integrator.steps, |v| v[i]);
+                if scheme(n - 1) != self.integrator.scheme || steps(n - 1) != self.integrator.steps {
+                    return Err(bad(
+                        "schedule",
+                        "the last stage must use [integrator]'s scheme and steps (the model asked for; coarser ones are for the stages before)",
+                    ));
+                }
+                if let Some(i) = (0..n).find(|&i| steps(i) == 0) {
+                    return Err(bad(format!("schedule.steps[{i}]"), "must be at least 1"));
+                }
+                (0..n)
+                    .map(|i| {
+                        let g = &s.kernel_geom[i];
+                        let kernel = self.attachment_with(g, &format!("schedule.kernel_geom[{i}]"))?;
+                        Ok(StageSpec { label: g.text().to_string(), kernel, integrator: (scheme(i), steps(i)) })
+                    })
+                    .collect()
+            }
         }
     }
 

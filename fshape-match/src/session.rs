@@ -369,7 +369,9 @@ impl Session {
 
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
         if self.staged != Some(k) {
-            self.problem.set_target(&self.target, self.plan.stages[k].kernel.clone())?;
+            let stage = &self.plan.stages[k];
+            self.problem.set_target(&self.target, stage.kernel.clone())?;
+            self.problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
             self.staged = Some(k);
         }
         Ok(())

@@ -219,6 +219,14 @@ impl Problem {
         Ok(())
     }
 
+    /// Replaces the integrator and its number of steps (a coarse-to-fine
+    /// schedule may shoot its coarse stages more cheaply); the rest of the
+    /// model is kept.
+    pub fn set_integrator(&mut self, integrator: crate::Integrator, steps: usize) -> Result<(), ShootError> {
+        self.model = self.model.clone().with_integrator(integrator, steps)?;
+        Ok(())
+    }
+
     /// Parallel (default) or serial work everywhere below: kernel sums and
     /// FEM operations in the shooting and its adjoint, the data attachment
     /// (this target and any later one) and [`Problem::flow_points`]. Serial

@@ -198,11 +198,9 @@ fn scaled_inputs(l: f64, s: f64) -> (FShape, FShape, Config) {
     let a = config.attachment.as_mut().unwrap();
     a.kernel_geom = fshape_match::PositionKernel::parse(&format!("gaussian:{}", 0.3 * l)).unwrap();
     a.kernel_signal = Some(fshape_match::SignalKernelSpec::parse(&format!("gaussian:{s}")).unwrap());
-    config.schedule = Some(fshape_match::ScheduleSection {
-        kernel_geom: [0.6, 0.3]
-            .map(|w| fshape_match::PositionKernel::parse(&format!("gaussian:{}", w * l)).unwrap())
-            .to_vec(),
-    });
+    config.schedule = Some(fshape_match::ScheduleSection::new(
+        [0.6, 0.3].map(|w| fshape_match::PositionKernel::parse(&format!("gaussian:{}", w * l)).unwrap()).to_vec(),
+    ));
     (scale(source), scale(target), config)
 }
 
@@ -267,4 +265,42 @@ fn the_scales_are_the_targets_diagonal_and_signal_deviation() {
     assert!((m.gamma_w() - gw / l.powi(4)).abs() < 1e-12 * m.gamma_w());
     assert!((m.gamma_v() - config.model.gamma_v / (l * l)).abs() < 1e-15);
     assert!((m.gamma_f() - config.model.gamma_f / (sd * sd * l * l)).abs() < 1e-12 * m.gamma_f());
+}
+
+#[test]
+fn coarse_stages_may_shoot_with_a_cheaper_integrator_and_the_last_is_the_model() {
+    let (source, target, mut config) = inputs();
+    let mut schedule = config.schedule.clone().unwrap();
+    schedule.scheme = Some(vec![fshape_shoot::Integrator::Euler, fshape_shoot::Integrator::Rk4]);
+    schedule.steps = Some(vec![2, 5]);
+    config.schedule = Some(schedule.clone());
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    let stages = &session.plan().stages;
+    assert_eq!(
+        (stages[0].integrator, stages[1].integrator),
+        ((fshape_shoot::Integrator::Euler, 2), (fshape_shoot::Integrator::Rk4, 5))
+    );
+    session.run(&mut ()).unwrap();
+    let r = session.result().unwrap();
+    // The result is shot with the model asked for (RK4, 5 steps), and the
+    // last stage's iterations are that model's J.
+    assert_eq!(r.trajectory.steps(), 5);
+    assert_eq!(r.energies.value.to_bits(), r.stages[1].iterations.last().unwrap().value.to_bits());
+    // A coarse first stage is a different optimisation from the plain one.
+    let mut plain = Session::new(&source, &target, &inputs().2).unwrap();
+    plain.run(&mut ()).unwrap();
+    assert_ne!(plain.result().unwrap().stages[0].iterations, r.stages[0].iterations);
+    // Lists of the wrong length, or a last stage other than [integrator],
+    // are refused by name.
+    for (scheme, steps, key) in [
+        (Some(vec![fshape_shoot::Integrator::Euler]), None, "schedule.scheme"),
+        (None, Some(vec![2, 5, 5]), "schedule.steps"),
+        (None, Some(vec![2, 4]), "last stage"),
+        (None, Some(vec![0, 5]), "schedule.steps[0]"),
+    ] {
+        let mut c = config.clone();
+        c.schedule = Some(fshape_match::ScheduleSection { scheme, steps, ..schedule.clone() });
+        let e = Session::new(&source, &target, &c).err().expect("refused").to_string();
+        assert!(e.contains(key), "{key}: {e}");
+    }
 }
