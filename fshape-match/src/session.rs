@@ -394,7 +394,7 @@ impl Session {
                 None => {
                     let x0 = self.checkpoint.warm.clone().unwrap_or_else(|| vec![0.0; self.unknowns.len()]);
                     let state = State::start(x0, &mut objective)?;
-                    let parts = objective.last.expect("the starting point was evaluated");
+                    let parts = objective.parts_of(state.value).expect("the starting point was evaluated");
                     Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
                 }
             };
@@ -408,8 +408,9 @@ impl Session {
                 if let Some(stop) = current.state.iterate(&settings, &mut objective)? {
                     break stop;
                 }
-                // The accepted point is the last one evaluated.
-                let parts = objective.last.expect("an accepted step was evaluated");
+                // The accepted point's parts: a line search may accept a
+                // point before its last evaluation.
+                let parts = objective.parts_of(current.state.value).expect("an accepted step was evaluated");
                 let record = Iteration::of(&current.state, &parts);
                 current.iterations.push(record.clone());
                 let control = observer.iteration(k, &record);

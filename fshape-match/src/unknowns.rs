@@ -173,6 +173,10 @@ pub struct MatchObjective<'p> {
     unknowns: Unknowns,
     /// The parts of J at the last evaluation.
     pub last: Option<Energies>,
+    /// The parts of every evaluation since [`MatchObjective::parts_of`]
+    /// last found one (a line search evaluates several points and may
+    /// accept one before the last).
+    recent: Vec<Energies>,
     /// Evaluations so far (the first one's errors are always reported).
     evaluations: usize,
 }
@@ -180,7 +184,17 @@ pub struct MatchObjective<'p> {
 impl<'p> MatchObjective<'p> {
     /// J of `problem` in `unknowns`.
     pub fn new(problem: &'p Problem, unknowns: Unknowns) -> Self {
-        MatchObjective { problem, unknowns, last: None, evaluations: 0 }
+        MatchObjective { problem, unknowns, last: None, recent: Vec::new(), evaluations: 0 }
+    }
+
+    /// J's parts at the evaluated point whose J is `value` (bit for bit:
+    /// the accepted point of a line search, whose value the optimiser's
+    /// state holds), searched among the evaluations since the last call,
+    /// which are then forgotten.
+    pub fn parts_of(&mut self, value: f64) -> Option<Energies> {
+        let found = self.recent.iter().rev().find(|e| e.value.to_bits() == value.to_bits()).copied();
+        self.recent.clear();
+        found
     }
 
     /// The packing.
@@ -219,6 +233,7 @@ impl crate::optimize::Objective for MatchObjective<'_> {
             Err(e) => return Err(e),
         };
         self.last = Some(g.objective);
+        self.recent.push(g.objective);
         let mut grad: Vec<f64> = g.p0.iter().zip(&self.unknowns.scale_p).map(|(v, s)| v * s).collect();
         grad.extend(g.pf.iter().zip(&self.unknowns.scale).map(|(v, s)| v * s));
         Ok((g.objective.value, grad))
@@ -245,9 +260,8 @@ pub fn minimize(
         if let Some(stop) = state.iterate(settings, &mut objective)? {
             break stop;
         }
-        // The accepted point is the last one evaluated in a search that
-        // ends on acceptance; report the objective there.
-        if let Some(parts) = objective.last {
+        // The accepted point's parts (not always the last evaluated).
+        if let Some(parts) = objective.parts_of(state.value) {
             each(&state, &parts);
         }
     };
