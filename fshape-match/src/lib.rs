@@ -37,6 +37,7 @@ mod config;
 pub mod demo;
 pub mod optimize;
 pub mod quality;
+pub mod resolution;
 mod session;
 pub mod unknowns;
 

@@ -8,6 +8,8 @@ mod objective;
 mod optimize;
 #[path = "matching/quality.rs"]
 mod quality;
+#[path = "matching/resolution.rs"]
+mod resolution;
 #[path = "matching/session.rs"]
 mod session;
 
