@@ -11,14 +11,23 @@
 //! (tested).
 
 use fshape_mesh::FShape;
+use fshape_shoot::ModelKind;
 
 use crate::MatchError;
 use crate::quality::ClosestPoints;
 
 /// The momenta (p_0: P_c × n, p^f: P_c) of `coarse` carried to `fine`
 /// (the same surface at another resolution): fine areas times the coarse
-/// densities interpolated at the fine vertices.
-pub fn prolongate(coarse: &FShape, fine: &FShape, p0: &[f64], pf: &[f64]) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
+/// densities interpolated at the fine vertices. For the tangential model
+/// (`kind`) the signal control ζ is a function and is interpolated as one.
+pub fn prolongate(
+    coarse: &FShape,
+    fine: &FShape,
+    p0: &[f64],
+    pf: &[f64],
+    kind: ModelKind,
+) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
+    let signal_density = kind != ModelKind::Tangential;
     let (nc, dim) = (coarse.n_vertices(), coarse.dim());
     if fine.dim() != dim || fine.kind() != coarse.kind() {
         return Err(MatchError::Shapes("prolongation: the templates differ in dimension or cell type".into()));
@@ -35,7 +44,8 @@ pub fn prolongate(coarse: &FShape, fine: &FShape, p0: &[f64], pf: &[f64]) -> Res
         return Err(MatchError::Shapes(format!("prolongation: coarse vertex {v} has no area (unused or degenerate)")));
     }
     let density0: Vec<f64> = p0.iter().enumerate().map(|(i, p)| p / mc[i / dim]).collect();
-    let densityf: Vec<f64> = pf.iter().zip(&mc).map(|(p, m)| p / m).collect();
+    let densityf: Vec<f64> =
+        if signal_density { pf.iter().zip(&mc).map(|(p, m)| p / m).collect() } else { pf.to_vec() };
     let closest = ClosestPoints::new(coarse)?;
     let k = coarse.kind().n_corners();
     let (mut q0, mut qf) = (Vec::with_capacity(fine.n_vertices() * dim), Vec::with_capacity(fine.n_vertices()));
@@ -48,7 +58,7 @@ pub fn prolongate(coarse: &FShape, fine: &FShape, p0: &[f64], pf: &[f64]) -> Res
             q0.push(m * rho);
         }
         let rho: f64 = ids.iter().zip(c.bary).map(|(&u, w)| w * densityf[u]).sum();
-        qf.push(m * rho);
+        qf.push(if signal_density { m * rho } else { rho });
     }
     Ok((q0, qf))
 }

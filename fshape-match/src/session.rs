@@ -185,17 +185,34 @@ pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String 
     format!("{h:016x}")
 }
 
+/// FNV-1a of a text, as hex (combines fingerprints).
+fn fingerprint_text(text: &str) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in text.as_bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
 /// A registration of a source onto a target with a [`Config`], run stage
 /// by stage ([`Session::run`]), resumable ([`Session::resume`]).
 pub struct Session {
     plan: Plan,
     problem: Problem,
+    source: FShape,
     target: FShape,
     unknowns: Unknowns,
     checkpoint: Checkpoint,
     checkpoint_file: Option<PathBuf>,
     /// The stage whose data term the problem holds.
     staged: Option<usize>,
+    /// A coarser template per stage (`None`: the source), empty for none.
+    stage_templates: Vec<Option<FShape>>,
+    /// The template the problem holds: the stage whose template it is, or
+    /// `None` for the source.
+    on_template: Option<usize>,
+    parallel: bool,
 }
 
 /// Records the time and writes the checkpoint to `file`, if any.
@@ -235,7 +252,19 @@ impl Session {
             warm: None,
             seconds: 0.0,
         };
-        Ok(Session { plan, problem, target: target.clone(), unknowns, checkpoint, checkpoint_file: None, staged: None })
+        Ok(Session {
+            plan,
+            problem,
+            source: source.clone(),
+            target: target.clone(),
+            unknowns,
+            checkpoint,
+            checkpoint_file: None,
+            staged: None,
+            stage_templates: Vec::new(),
+            on_template: None,
+            parallel: true,
+        })
     }
 
     /// Writes the checkpoint to `path` (atomically, as JSON) after every
@@ -249,7 +278,64 @@ impl Session {
     /// are the same bit for bit.
     pub fn with_parallel(mut self, parallel: bool) -> Session {
         self.problem.set_parallel(parallel);
+        self.parallel = parallel;
         self
+    }
+
+    /// Runs stage k on a coarser template `templates[k]` (the same surface
+    /// at a lower resolution, with its signal), or on the source where it
+    /// is `None`; the last stage is always the source. Between stages on
+    /// different templates the momenta are carried over as densities
+    /// ([`crate::resolution::prolongate`]). The templates enter the
+    /// checkpoint's fingerprint: call this before [`Session::resume`].
+    pub fn with_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Session, MatchError> {
+        let n = self.plan.stages.len();
+        if templates.len() != n {
+            return Err(MatchError::Shapes(format!("{} stage templates for {n} stages", templates.len())));
+        }
+        if templates.last().is_some_and(Option::is_some) {
+            return Err(MatchError::Shapes(
+                "the last stage runs on the source: its stage template must be None".into(),
+            ));
+        }
+        for (k, t) in templates.iter().enumerate() {
+            if let Some(t) = t
+                && (t.dim() != self.source.dim() || t.kind() != self.source.kind() || t.n_cells() == 0)
+            {
+                return Err(MatchError::Shapes(format!(
+                    "stage {k}'s template is not a non-empty mesh of the source's kind and dimension"
+                )));
+            }
+        }
+        let mut print = self.checkpoint.fingerprint.clone();
+        for t in templates.iter().flatten() {
+            print = fingerprint(t, t, &Config::new(vec![1.0])) + &print;
+        }
+        self.checkpoint.fingerprint = fingerprint_text(&print);
+        self.stage_templates = templates;
+        Ok(self)
+    }
+
+    /// The template of stage k and its key (the stage, or `None` for the
+    /// source).
+    fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
+        match self.stage_templates.get(k) {
+            Some(Some(t)) => (Some(k), t),
+            _ => (None, &self.source),
+        }
+    }
+
+    /// The number of unknowns of stage k.
+    fn unknowns_len(&self, k: usize) -> usize {
+        let t = self.template_of(k).1;
+        let signal = if self.plan.model.kind() == fshape_shoot::ModelKind::Lddmm { 0 } else { t.n_vertices() };
+        t.n_vertices() * t.dim() + signal
+    }
+
+    /// The packing of stage k's unknowns (a problem on its template).
+    fn unknowns_of(&self, k: usize) -> Result<Unknowns, MatchError> {
+        let problem = Problem::new(self.template_of(k).1, self.plan.model.clone())?;
+        Ok(Unknowns::scaled(&problem, self.plan.metrics, self.plan.scales)?)
     }
 
     /// Continues from `checkpoint`, after checking that it belongs to these
@@ -289,8 +375,11 @@ impl Session {
                 c.done.len()
             )));
         }
-        let n = self.unknowns.len();
+        let done = c.done.len();
         let vector = |what: &str, v: &[f64]| -> Result<(), MatchError> {
+            // The warm start is the last finished stage's, the rest the
+            // stage under way's.
+            let n = if what == "warm" { self.unknowns_len(done.saturating_sub(1)) } else { self.unknowns_len(done) };
             if v.len() != n {
                 return Err(checkpoint_error(format!(
                     "the checkpoint's {what} has {} values, the problem has {n} unknowns",
@@ -368,6 +457,14 @@ impl Session {
     }
 
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
+        let (key, template) = self.template_of(k);
+        if key != self.on_template {
+            let problem = Problem::new(template, self.plan.model.clone())?.with_parallel(self.parallel);
+            self.unknowns = Unknowns::scaled(&problem, self.plan.metrics, self.plan.scales)?;
+            self.problem = problem;
+            self.on_template = key;
+            self.staged = None;
+        }
         if self.staged != Some(k) {
             let stage = &self.plan.stages[k];
             self.problem.set_target(&self.target, stage.kernel.clone())?;
@@ -392,7 +489,23 @@ impl Session {
             let mut current = match self.checkpoint.current.take() {
                 Some(c) => c,
                 None => {
-                    let x0 = self.checkpoint.warm.clone().unwrap_or_else(|| vec![0.0; self.unknowns.len()]);
+                    let x0 = match &self.checkpoint.warm {
+                        None => vec![0.0; self.unknowns.len()],
+                        Some(w) if k > 0 && self.template_of(k - 1).0 != self.template_of(k).0 => {
+                            // A finer template: carry the momenta over.
+                            let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
+                            let kind = self.plan.model.kind();
+                            let (p0, pf) = crate::resolution::prolongate(
+                                self.template_of(k - 1).1,
+                                self.template_of(k).1,
+                                &p0,
+                                &pf,
+                                kind,
+                            )?;
+                            self.unknowns.pack(&p0, &pf)
+                        }
+                        Some(w) => w.clone(),
+                    };
                     let state = State::start(x0, &mut objective)?;
                     let parts = objective.parts_of(state.value).expect("the starting point was evaluated");
                     Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }

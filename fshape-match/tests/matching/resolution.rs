@@ -34,7 +34,7 @@ fn prolongated_momenta_keep_the_velocity_field_and_shoot_to_the_same_end() {
     };
     let (coarse, fine) = (with_signal(icosphere(2, 1.0)), with_signal(icosphere(4, 1.0)));
     let (p0c, pfc) = momenta(&coarse);
-    let (p0f, pff) = prolongate(&coarse, &fine, &p0c, &pfc).unwrap();
+    let (p0f, pff) = prolongate(&coarse, &fine, &p0c, &pfc, fshape_shoot::ModelKind::Metamorphosis).unwrap();
     // The same density sampled on the fine mesh directly.
     let (p0d, pfd) = momenta(&fine);
     assert!(

@@ -304,3 +304,78 @@ fn coarse_stages_may_shoot_with_a_cheaper_integrator_and_the_last_is_the_model()
         assert!(e.contains(key), "{key}: {e}");
     }
 }
+
+#[test]
+fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
+    use fshape_mesh::generate::icosphere;
+    let sphere = |level: u32| {
+        let s = icosphere(level, 1.0);
+        let n = s.n_vertices();
+        s.with_signal(Some(vec![0.0; n])).unwrap()
+    };
+    let (_, target, mut config) = inputs();
+    let source = sphere(3);
+    let mut schedule = config.schedule.clone().unwrap();
+    schedule.kernel_geom.insert(0, fshape_match::PositionKernel::parse("gaussian:0.8").unwrap());
+    config.schedule = Some(schedule);
+    let templates = vec![Some(sphere(1)), Some(sphere(2)), None];
+    let session = || Session::new(&source, &target, &config).unwrap().with_stage_templates(templates.clone()).unwrap();
+    let mut whole = session();
+    let mut rec = Recorder::default();
+    whole.run(&mut rec).unwrap();
+    let r = whole.result().unwrap();
+    assert_eq!(r.p0.len(), 3 * source.n_vertices());
+    assert!(r.quality.mean_distance < 0.5 * r.initial_quality.mean_distance, "{:?}", r.quality);
+    // Each stage starts where the last ended: the data term of stage 0's
+    // result on its coarse template, with stage 1's kernel, is what stage 1
+    // starts from on the finer template after the transfer.
+    let mut coarse_run = session();
+    coarse_run.run(&mut Recorder { stop_after: Some(r.stages[0].iterations.len()), ..Recorder::default() }).unwrap();
+    let x0 = coarse_run.checkpoint().current.as_ref().unwrap().state.x.clone();
+    let plan = whole.plan();
+    let coarse = fshape_shoot::Problem::new(&sphere(1), plan.model.clone())
+        .unwrap()
+        .with_target(&target, plan.stages[1].kernel.clone())
+        .unwrap();
+    let unknowns = fshape_match::unknowns::Unknowns::scaled(&coarse, plan.metrics, plan.scales).unwrap();
+    let (p0, pf) = unknowns.unpack(&x0);
+    let on_coarse = coarse.objective(&p0, &pf).unwrap().0.attachment;
+    let n = sphere(2).n_vertices();
+    let at_rest = fshape_shoot::Problem::new(&sphere(2), plan.model.clone())
+        .unwrap()
+        .with_target(&target, plan.stages[1].kernel.clone())
+        .unwrap()
+        .objective(&vec![0.0; 3 * n], &vec![0.0; n])
+        .unwrap()
+        .0
+        .attachment;
+    let start1 = r.stages[1].initial.attachment;
+    eprintln!(
+        "stage 1 starts at A = {start1:.4} on the finer template, {on_coarse:.4} on the coarse one, {at_rest:.4} at rest"
+    );
+    assert!(
+        (start1 - on_coarse).abs() < 0.25 * on_coarse && start1 < at_rest,
+        "{start1} against {on_coarse} ({at_rest} at rest)"
+    );
+    // Stopped on the coarse template, resumed from the file: the same bits.
+    let dir = std::env::temp_dir().join(format!("fshape-match-multires-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("checkpoint.json");
+    let mut first = session().with_checkpoint_file(&file);
+    first.run(&mut Recorder { stop_after: Some(3), ..Recorder::default() }).unwrap();
+    let x = first.checkpoint().current.as_ref().unwrap().state.x.len();
+    assert_eq!(x, 4 * icosphere(1, 1.0).n_vertices(), "stage 0 runs on the level-1 sphere");
+    let mut second = session().resume_from_file(&file).unwrap();
+    second.run(&mut ()).unwrap();
+    let again = second.result().unwrap();
+    assert_eq!(bits(&again.p0), bits(&r.p0));
+    assert_eq!(again.stages, r.stages);
+    // Without the templates, the checkpoint is another problem's.
+    let e =
+        Session::new(&source, &target, &config).unwrap().resume_from_file(&file).err().expect("refused").to_string();
+    assert!(e.contains("other inputs"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+    // The last stage runs on the source.
+    let bad = Session::new(&source, &target, &config).unwrap().with_stage_templates(vec![None, None, Some(sphere(2))]);
+    assert!(bad.is_err());
+}
