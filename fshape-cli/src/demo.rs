@@ -75,6 +75,7 @@ fn run_match(source: &Path, target: &Path, header: &str, config: &Config, run: &
         signal_name: None,
         times: &[0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
         view,
+        stage_templates: &[],
     })
 }
 

@@ -156,6 +156,11 @@ enum Command {
         /// Camera of the PNG renders of surfaces in space: azimuth,elevation in degrees.
         #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
         view: Vec<f64>,
+        /// Coarser versions of SOURCE (same surface, fewer vertices, with
+        /// its signal), one per stage before the last: the coarse stages
+        /// run on them and carry their momenta to the next.
+        #[arg(long, value_delimiter = ',')]
+        stage_templates: Vec<PathBuf>,
     },
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
@@ -236,7 +241,18 @@ fn main() -> ExitCode {
             times: &times,
             signal_name,
         }),
-        Command::Match { source, target, config, out, resume, stop_after, times, signal_name, view } => {
+        Command::Match {
+            source,
+            target,
+            config,
+            out,
+            resume,
+            stop_after,
+            times,
+            signal_name,
+            view,
+            stage_templates,
+        } => {
             let (azimuth, elevation) = match view[..] {
                 [a, e] if a.is_finite() && e.is_finite() => (a, e),
                 _ => {
@@ -255,6 +271,7 @@ fn main() -> ExitCode {
                 signal_name,
                 times: &times,
                 view: (azimuth, elevation),
+                stage_templates: &stage_templates,
             })
         }
         Command::Demo { name, out, data, max_iterations, ratios, gamma_w } => {

@@ -28,6 +28,9 @@ pub struct MatchArgs<'a> {
     pub times: &'a [f64],
     /// Azimuth and elevation of the renders, degrees.
     pub view: (f64, f64),
+    /// Coarser templates of the stages before the last (empty: all stages
+    /// on the source).
+    pub stage_templates: &'a [std::path::PathBuf],
 }
 
 #[derive(Serialize)]
@@ -122,6 +125,17 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
             bail!("{} and {} are not the same kind of shape: {why}", a.source.display(), a.target.display())
         }
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,
+    };
+    let session = if a.stage_templates.is_empty() {
+        session
+    } else {
+        let mut templates = a
+            .stage_templates
+            .iter()
+            .map(|p| crate::load(p, a.signal_name.clone(), None).map(Some))
+            .collect::<Result<Vec<_>>>()?;
+        templates.push(None);
+        session.with_stage_templates(templates).context("--stage-templates")?
     };
     let checkpoint_path = a.out.join("checkpoint.json");
     let session = if a.resume { session.resume_from_file(&checkpoint_path).context("--resume")? } else { session };

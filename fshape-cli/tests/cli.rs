@@ -576,6 +576,44 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
 }
 
 #[test]
+fn match_runs_coarse_stages_on_stage_templates() {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    let (s, t, c) = match_inputs("match_multires", 4);
+    let coarse = fshape_mesh::generate::icosphere(1, 0.5);
+    let f: Vec<f64> = coarse.points().chunks_exact(3).map(|p| p[2]).collect();
+    let coarse_path = tmp("match_multires_coarse.ply");
+    write_mesh(&coarse_path, &coarse.with_signal(Some(f)).unwrap(), Encoding::Binary).unwrap();
+    let coarse_path = coarse_path.display().to_string();
+    let out = tmp("match_multires_out");
+    let o = out.display().to_string();
+    let r = fshape(&["match", &s, &t, "--config", &c, "--out", &o, "--stage-templates", &coarse_path]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stages"].as_array().unwrap().len(), 2);
+    let q = |k: &str| summary[k]["mean_distance"].as_f64().unwrap();
+    assert!(q("quality") < q("quality_before"), "{summary}");
+    // One template per stage before the last, or a clear error.
+    let r = fshape(&[
+        "match",
+        &s,
+        &t,
+        "--config",
+        &c,
+        "--out",
+        &o,
+        "--stage-templates",
+        &format!("{coarse_path},{coarse_path}"),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("3 stage templates for 2 stages"),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+}
+
+#[test]
 fn match_takes_the_view_as_azimuth_comma_elevation_negative_included() {
     let (s, t, c) = match_inputs("match_view", 1);
     let ok = tmp("match_view_ok");

@@ -6,7 +6,8 @@
 //!
 //! ```sh
 //! cargo run --release -p fshape-match --example time_to_quality -- [LEVEL] [NORM] [GAMMA_W] [GAMMA_F] [BUDGETS] [COARSE]
-//! # defaults: 3 h1 1e3 0.1 25,50,100  (LEVEL: the template icosphere, 5 = the paper's 10242 vertices;
+//! # defaults: 3 h1 1e3 0.1 25,50,100  (LEVEL: the template icosphere, 5 = the paper's 10242 vertices,
+//! # or one level per stage, e.g. 3,4,5: the coarse stages on coarser spheres;
 //! # COARSE, e.g. midpoint:5: the integrator of the first two stages)
 //! ```
 
@@ -20,7 +21,8 @@ use fshape_mesh::io::{ReadOptions, read_mesh};
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let arg = |i: usize, default: &str| args.get(i).cloned().unwrap_or_else(|| default.to_string());
-    let level: u32 = arg(0, "3").parse().context("LEVEL")?;
+    let levels: Vec<u32> = arg(0, "3").split(',').map(str::parse).collect::<Result<_, _>>().context("LEVEL")?;
+    let level = *levels.last().context("LEVEL")?;
     let norm = match arg(1, "h1").as_str() {
         "h1" => NormKind::H1,
         "l2-lumped" => NormKind::L2Lumped,
@@ -59,7 +61,7 @@ fn main() -> Result<()> {
     }
     config.schedule = Some(schedule);
     println!(
-        "bunny, template level {level} ({} vertices), {:?}, gamma_W {gamma_w:e}, gamma_f {gamma_f}, {} threads",
+        "bunny, template level {level} ({} vertices), stage levels {levels:?}, {:?}, gamma_W {gamma_w:e}, gamma_f {gamma_f}, {} threads",
         template.n_vertices(),
         norm,
         rayon::current_num_threads()
@@ -73,6 +75,13 @@ fn main() -> Result<()> {
         config.optimizer.max_iterations = budget;
         let start = Instant::now();
         let mut session = Session::new(&template, &target, &config)?;
+        if levels.len() > 1 {
+            anyhow::ensure!(levels.len() == 3, "LEVEL: one level, or one per stage (3)");
+            let coarse = |l: u32| -> Result<Option<fshape_mesh::FShape>> {
+                Ok(if l == level { None } else { Some(demo::bunny_setting_at_level(&bunny, l)?.0) })
+            };
+            session = session.with_stage_templates(vec![coarse(levels[0])?, coarse(levels[1])?, None])?;
+        }
         session.run(&mut ())?;
         let r = session.result()?;
         let seconds = start.elapsed().as_secs_f64();
