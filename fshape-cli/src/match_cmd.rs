@@ -70,7 +70,6 @@ struct Summary<'a> {
 
 /// The progress bar (drawn only on a terminal) and `--stop-after`.
 struct Progress {
-    max_iterations: usize,
     gamma_w: f64,
     /// Iterations this invocation may still make.
     budget: Option<usize>,
@@ -79,7 +78,7 @@ struct Progress {
 
 impl Observer for Progress {
     fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
-        let bar = indicatif::ProgressBar::new(self.max_iterations as u64);
+        let bar = indicatif::ProgressBar::new(spec.max_iterations as u64);
         bar.set_style(
             indicatif::ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} it, ETA {eta} | {msg}")
                 .expect("a valid template")
@@ -143,12 +142,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let mut session = session.with_checkpoint_file(&checkpoint_path);
     let model = session.plan().model.clone();
     let metrics = session.plan().metrics;
-    let mut progress = Progress {
-        max_iterations: session.plan().settings.max_iterations,
-        gamma_w: model.gamma_w(),
-        budget: a.stop_after,
-        bar: None,
-    };
+    let mut progress = Progress { gamma_w: model.gamma_w(), budget: a.stop_after, bar: None };
     if session.run(&mut progress)? == Outcome::Interrupted {
         if let Some(bar) = progress.bar.take() {
             bar.abandon_with_message("stopped by --stop-after; continue with --resume");

@@ -45,6 +45,7 @@
 //! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
 //! scheme = ["midpoint", "midpoint", "rk4"]  # per stage (default [integrator]'s; the last must be it)
 //! steps = [5, 5, 10]                        # per stage (likewise)
+//! max_iterations = [200, 100, 30]           # per stage (default [optimizer]'s)
 //! ```
 //!
 //! **Scale-free weights** (`normalize = true`, the default). The three
@@ -405,13 +406,17 @@ pub struct ScheduleSection {
     /// all); the last must be `[integrator]`'s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub steps: Option<Vec<usize>>,
+    /// The iteration limit of each stage (default: `[optimizer]
+    /// max_iterations` for all): coarse stages may do most of the work.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_iterations: Option<Vec<usize>>,
 }
 
 impl ScheduleSection {
     /// Stages with these position kernels, each with `[integrator]`'s
     /// scheme and steps.
     pub fn new(kernel_geom: Vec<PositionKernel>) -> ScheduleSection {
-        ScheduleSection { kernel_geom, scheme: None, steps: None }
+        ScheduleSection { kernel_geom, scheme: None, steps: None, max_iterations: None }
     }
 }
 
@@ -426,6 +431,8 @@ pub struct StageSpec {
     /// The stage's integrator and time steps (coarse stages may shoot
     /// more cheaply; the last stage's are the model's).
     pub integrator: (Integrator, usize),
+    /// The stage's iteration limit.
+    pub max_iterations: usize,
 }
 
 /// Everything a registration needs, checked: the model, the stages, the
@@ -581,7 +588,13 @@ impl Config {
             None => {
                 let geom = &self.attachment_section()?.kernel_geom;
                 let integrator = (self.integrator.scheme, self.integrator.steps);
-                Ok(vec![StageSpec { label: geom.text().to_string(), kernel: self.attachment_kernel()?, integrator }])
+                let max_iterations = self.optimizer.max_iterations;
+                Ok(vec![StageSpec {
+                    label: geom.text().to_string(),
+                    kernel: self.attachment_kernel()?,
+                    integrator,
+                    max_iterations,
+                }])
             }
             Some(s) if s.kernel_geom.is_empty() => Err(bad("schedule.kernel_geom", "needs at least one kernel")),
             Some(s) => {
@@ -595,6 +608,8 @@ impl Config {
                 };
                 per_stage("scheme", s.scheme.as_ref().map(Vec::len))?;
                 per_stage("steps", s.steps.as_ref().map(Vec::len))?;
+                per_stage("max_iterations", s.max_iterations.as_ref().map(Vec::len))?;
+                let budget = |i: usize| s.max_iterations.as_ref().map_or(self.optimizer.max_iterations, |v| v[i]);
                 let scheme = |i: usize| s.scheme.as_ref().map_or(self.integrator.scheme, |v| v[i]);
                 let steps = |i: usize| s.steps.as_ref().map_or(self.integrator.steps, |v| v[i]);
                 if scheme(n - 1) != self.integrator.scheme || steps(n - 1) != self.integrator.steps {
@@ -610,7 +625,12 @@ impl Config {
                     .map(|i| {
                         let g = &s.kernel_geom[i];
                         let kernel = self.attachment_with(g, &format!("schedule.kernel_geom[{i}]"))?;
-                        Ok(StageSpec { label: g.text().to_string(), kernel, integrator: (scheme(i), steps(i)) })
+                        Ok(StageSpec {
+                            label: g.text().to_string(),
+                            kernel,
+                            integrator: (scheme(i), steps(i)),
+                            max_iterations: budget(i),
+                        })
                     })
                     .collect()
             }

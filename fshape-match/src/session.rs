@@ -12,7 +12,7 @@ use fshape_mesh::FShape;
 use fshape_shoot::{Energies, Problem, Trajectory};
 use serde::{Deserialize, Serialize};
 
-use crate::optimize::{State, Stop};
+use crate::optimize::{Settings, State, Stop};
 use crate::unknowns::{MatchObjective, Unknowns};
 use crate::{Config, MatchError, Plan, StageSpec};
 
@@ -484,7 +484,7 @@ impl Session {
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
             self.stage_target(k)?;
-            let settings = self.plan.settings;
+            let settings = Settings { max_iterations: self.plan.stages[k].max_iterations, ..self.plan.settings };
             let mut objective = MatchObjective::new(&self.problem, self.unknowns.clone());
             let mut current = match self.checkpoint.current.take() {
                 Some(c) => c,

@@ -77,6 +77,7 @@ fn a_config_written_with_serde_reads_back_to_the_same_value() {
         kernel_geom: ["gaussian:0.2", "cauchy:0.1"].map(|k| fshape_match::PositionKernel::parse(k).unwrap()).to_vec(),
         scheme: Some(vec![Integrator::Euler, Integrator::Rk4]),
         steps: Some(vec![3, 10]),
+        max_iterations: Some(vec![50, 20]),
     });
     for c in [shipped, full] {
         let text = c.to_toml();

@@ -379,3 +379,21 @@ fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
     let bad = Session::new(&source, &target, &config).unwrap().with_stage_templates(vec![None, None, Some(sphere(2))]);
     assert!(bad.is_err());
 }
+
+#[test]
+fn each_stage_may_have_its_own_iteration_limit() {
+    let (source, target, mut config) = inputs();
+    let mut schedule = config.schedule.clone().unwrap();
+    schedule.max_iterations = Some(vec![2, 4]);
+    config.schedule = Some(schedule.clone());
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    session.run(&mut ()).unwrap();
+    let r = session.result().unwrap();
+    // The plain run (6 per stage) reaches its cap in both stages, so these
+    // reach theirs.
+    assert_eq!((r.stages[0].iterations.len(), r.stages[1].iterations.len()), (2, 4));
+    schedule.max_iterations = Some(vec![2]);
+    config.schedule = Some(schedule);
+    let e = Session::new(&source, &target, &config).err().expect("refused").to_string();
+    assert!(e.contains("schedule.max_iterations"), "{e}");
+}
