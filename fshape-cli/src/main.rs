@@ -180,8 +180,9 @@ enum Command {
         /// Digits: the ratios γ_V/γ_f to run.
         #[arg(long, value_delimiter = ',', default_value = "1,20,100")]
         ratios: Vec<f64>,
-        /// Weight γ_W of the data attachment [default: 100 for digits and
-        /// bunny, 1e-2 for the cortex (whose areas are in mm²)].
+        /// Weight γ_W of the data attachment [default: 100 for the digits
+        /// and 1e-2 for the cortex, in the data's units; 1e3 for the bunny,
+        /// scale-free].
         #[arg(long)]
         gamma_w: Option<f64>,
     },
@@ -278,7 +279,7 @@ fn main() -> ExitCode {
             let data = data.unwrap_or_else(demo::default_data);
             match name.as_str() {
                 "bunny" => {
-                    let gamma_w = gamma_w.unwrap_or(100.0);
+                    let gamma_w = gamma_w.unwrap_or(1e3);
                     demo::bunny(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w })
                 }
                 "cortex" => {
