@@ -100,7 +100,7 @@ pub enum ShootError {
     /// The Hamiltonian, which a geodesic conserves, drifted by more than
     /// the model's tolerance: the integration is not to be trusted.
     #[error(
-        "shooting diverged: the Hamiltonian drifted by {drift:.3e} of its initial value {initial:.3e} by step {step} \
+        "shooting diverged: the Hamiltonian drifted by {drift:.3e} of its initial value {initial:.3e} at step {step} \
          (tolerance {tolerance:e}); reduce the momenta or add time steps"
     )]
     Drift {
@@ -108,7 +108,7 @@ pub enum ShootError {
         drift: f64,
         /// H_0.
         initial: f64,
-        /// The step where the drift first exceeded the tolerance.
+        /// The first step where the drift is largest.
         step: usize,
         /// The model's tolerance ([`Model::max_drift`]).
         tolerance: f64,

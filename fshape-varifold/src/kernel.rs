@@ -66,11 +66,7 @@ impl VarifoldKernel {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn try_new(position: Kernel, signal: SignalKernel, grass: GrassKernel) -> Result<Self, VarifoldError> {
-        check_width("signal kernel", nums_of(signal))?;
-        if let GrassKernel::OrientedGaussian { sigma } | GrassKernel::UnorientedGaussian { sigma } = grass {
-            check_width("direction kernel", Some(sigma))?;
-        }
-        Ok(VarifoldKernel { position, signal, grass })
+        Ok(VarifoldKernel { position, signal: signal.checked()?, grass: grass.checked()? })
     }
 
     /// The same kernel with k_p smoothly truncated at tolerance τ
@@ -202,8 +198,15 @@ impl SignalKernel {
             (name, nums) if name == "gaussian" && nums.len() == 1 => SignalKernel::Gaussian { sigma: nums[0] },
             _ => return Err(VarifoldError::Parse { what: "signal kernel", input: spec.to_string(), expected: SIG }),
         };
-        check_width("signal kernel", nums_of(k))?;
-        Ok(k)
+        k.checked()
+    }
+
+    /// Itself if its width (if any) is positive and finite.
+    fn checked(self) -> Result<SignalKernel, VarifoldError> {
+        match self {
+            SignalKernel::Gaussian { sigma } => check_width("signal kernel", sigma).map(|()| self),
+            SignalKernel::Constant => Ok(self),
+        }
     }
 }
 
@@ -223,23 +226,20 @@ impl GrassKernel {
             }
             _ => return Err(VarifoldError::Parse { what: "direction kernel", input: spec.to_string(), expected: GR }),
         };
-        if let GrassKernel::OrientedGaussian { sigma } | GrassKernel::UnorientedGaussian { sigma } = k {
-            check_width("direction kernel", Some(sigma))?;
+        k.checked()
+    }
+
+    /// Itself if its width (if any) is positive and finite.
+    fn checked(self) -> Result<GrassKernel, VarifoldError> {
+        match self {
+            GrassKernel::OrientedGaussian { sigma } | GrassKernel::UnorientedGaussian { sigma } => {
+                check_width("direction kernel", sigma).map(|()| self)
+            }
+            GrassKernel::Linear | GrassKernel::Binet => Ok(self),
         }
-        Ok(k)
     }
 }
 
-fn nums_of(k: SignalKernel) -> Option<f64> {
-    match k {
-        SignalKernel::Gaussian { sigma } => Some(sigma),
-        SignalKernel::Constant => None,
-    }
-}
-
-fn check_width(what: &'static str, sigma: Option<f64>) -> Result<(), VarifoldError> {
-    match sigma {
-        Some(sigma) if !(sigma > 0.0 && sigma.is_finite()) => Err(VarifoldError::Width { what, sigma }),
-        _ => Ok(()),
-    }
+fn check_width(what: &'static str, sigma: f64) -> Result<(), VarifoldError> {
+    if sigma > 0.0 && sigma.is_finite() { Ok(()) } else { Err(VarifoldError::Width { what, sigma }) }
 }
