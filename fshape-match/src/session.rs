@@ -162,37 +162,47 @@ pub struct MatchResult {
     pub initial_quality: crate::Quality,
 }
 
-/// FNV-1a, 64 bits, as hex, of the source, the target and the
-/// configuration (as data: coordinates, cells and signals bit for bit, and
-/// the configuration's TOML with every default written out). Only to
-/// recognise a checkpoint of the same inputs; no cryptographic need.
-pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes.iter().chain(&[0xff]) {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
-    for s in [source, target] {
-        eat(&(s.dim() as u64).to_le_bytes());
-        eat(s.kind().name().as_bytes());
-        eat(&s.points().iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
-        eat(&s.cells().iter().flat_map(|c| (*c as u64).to_le_bytes()).collect::<Vec<u8>>());
-        eat(&s.signal().unwrap_or(&[]).iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+/// FNV-1a, 64 bits: only to recognise a checkpoint of the same inputs
+/// (no cryptographic need).
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Fnv {
+        Fnv(0xcbf2_9ce4_8422_2325)
     }
-    eat(config.to_toml().as_bytes());
-    format!("{h:016x}")
+
+    /// Feeds `bytes`, then a separator.
+    fn eat(&mut self, bytes: &[u8]) {
+        for &b in bytes.iter().chain(&[0xff]) {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    /// Feeds a shape as data: dimension, cell type, coordinates, cells and
+    /// signal bit for bit.
+    fn shape(&mut self, s: &FShape) {
+        self.eat(&(s.dim() as u64).to_le_bytes());
+        self.eat(s.kind().name().as_bytes());
+        self.eat(&s.points().iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+        self.eat(&s.cells().iter().flat_map(|c| (*c as u64).to_le_bytes()).collect::<Vec<u8>>());
+        self.eat(&s.signal().unwrap_or(&[]).iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+    }
+
+    fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
 }
 
-/// FNV-1a of a text, as hex (combines fingerprints).
-fn fingerprint_text(text: &str) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in text.as_bytes() {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    format!("{h:016x}")
+/// FNV-1a, as hex, of the source, the target and the configuration (as
+/// data: the shapes bit for bit, and the configuration's TOML with every
+/// default written out).
+pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String {
+    let mut h = Fnv::new();
+    h.shape(source);
+    h.shape(target);
+    h.eat(config.to_toml().as_bytes());
+    h.hex()
 }
 
 /// A registration of a source onto a target with a [`Config`], run stage
@@ -209,6 +219,10 @@ pub struct Session {
     staged: Option<usize>,
     /// A coarser template per stage (`None`: the source), empty for none.
     stage_templates: Vec<Option<FShape>>,
+    /// Per stage, which template it runs on: the first stage with an equal
+    /// template, or `None` for the source (equal templates share a problem
+    /// and need no transfer between them).
+    template_keys: Vec<Option<usize>>,
     /// The template the problem holds: the stage whose template it is, or
     /// `None` for the source.
     on_template: Option<usize>,
@@ -262,6 +276,7 @@ impl Session {
             checkpoint_file: None,
             staged: None,
             stage_templates: Vec::new(),
+            template_keys: Vec::new(),
             on_template: None,
             parallel: true,
         })
@@ -307,20 +322,29 @@ impl Session {
                 )));
             }
         }
-        let mut print = self.checkpoint.fingerprint.clone();
-        for t in templates.iter().flatten() {
-            print = fingerprint(t, t, &Config::new(vec![1.0])) + &print;
+        let mut h = Fnv::new();
+        h.eat(self.checkpoint.fingerprint.as_bytes());
+        for t in &templates {
+            match t {
+                Some(t) => h.shape(t),
+                None => h.eat(b"source"),
+            }
         }
-        self.checkpoint.fingerprint = fingerprint_text(&print);
+        self.checkpoint.fingerprint = h.hex();
+        self.template_keys = (0..n)
+            .map(|k| match &templates[k] {
+                Some(t) if *t != self.source => templates.iter().position(|u| u.as_ref() == Some(t)),
+                _ => None,
+            })
+            .collect();
         self.stage_templates = templates;
         Ok(self)
     }
 
-    /// The template of stage k and its key (the stage, or `None` for the
-    /// source).
+    /// The template of stage k and its key (`template_keys`).
     fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
-        match self.stage_templates.get(k) {
-            Some(Some(t)) => (Some(k), t),
+        match self.template_keys.get(k) {
+            Some(Some(j)) => (Some(*j), self.stage_templates[*j].as_ref().expect("a key names a template")),
             _ => (None, &self.source),
         }
     }
@@ -332,10 +356,10 @@ impl Session {
         t.n_vertices() * t.dim() + signal
     }
 
-    /// The packing of stage k's unknowns (a problem on its template).
+    /// The packing of stage k's unknowns.
     fn unknowns_of(&self, k: usize) -> Result<Unknowns, MatchError> {
-        let problem = Problem::new(self.template_of(k).1, self.plan.model.clone())?;
-        Ok(Unknowns::scaled(&problem, self.plan.metrics, self.plan.scales)?)
+        let t = self.template_of(k).1;
+        Ok(Unknowns::for_template(t, self.plan.model.kind(), self.plan.metrics, self.plan.scales)?)
     }
 
     /// Continues from `checkpoint`, after checking that it belongs to these
@@ -375,11 +399,11 @@ impl Session {
                 c.done.len()
             )));
         }
+        // The warm start is the last finished stage's unknowns, the state
+        // those of the stage under way.
         let done = c.done.len();
-        let vector = |what: &str, v: &[f64]| -> Result<(), MatchError> {
-            // The warm start is the last finished stage's, the rest the
-            // stage under way's.
-            let n = if what == "warm" { self.unknowns_len(done.saturating_sub(1)) } else { self.unknowns_len(done) };
+        let (n_warm, n) = (self.unknowns_len(done.saturating_sub(1)), self.unknowns_len(done));
+        let vector = |what: &str, v: &[f64], n: usize| -> Result<(), MatchError> {
             if v.len() != n {
                 return Err(checkpoint_error(format!(
                     "the checkpoint's {what} has {} values, the problem has {n} unknowns",
@@ -392,7 +416,7 @@ impl Session {
             Ok(())
         };
         if let Some(w) = &c.warm {
-            vector("warm", w)?;
+            vector("warm", w, n_warm)?;
         }
         if !c.done.is_empty() && c.warm.is_none() {
             return Err(checkpoint_error("the checkpoint has finished stages but no warm start (warm is missing)"));
@@ -402,8 +426,8 @@ impl Session {
                 return Err(checkpoint_error("the checkpoint has a stage under way after the last stage"));
             }
             let s = &cur.state;
-            vector("current.state.x", &s.x)?;
-            vector("current.state.grad", &s.grad)?;
+            vector("current.state.x", &s.x, n)?;
+            vector("current.state.grad", &s.grad, n)?;
             if s.s.len() != s.y.len() {
                 return Err(checkpoint_error(format!(
                     "the checkpoint's current.state has {} steps s but {} gradient differences y",
@@ -412,8 +436,8 @@ impl Session {
                 )));
             }
             for (k, (a, b)) in s.s.iter().zip(&s.y).enumerate() {
-                vector(&format!("current.state.s[{k}]"), a)?;
-                vector(&format!("current.state.y[{k}]"), b)?;
+                vector(&format!("current.state.s[{k}]"), a, n)?;
+                vector(&format!("current.state.y[{k}]"), b, n)?;
             }
             let scalars = [("value", s.value), ("grad_norm0", s.grad_norm0), ("step", s.step)];
             if let Some((what, v)) = scalars.iter().find(|(_, v)| !v.is_finite()) {

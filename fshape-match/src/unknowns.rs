@@ -92,8 +92,17 @@ impl Unknowns {
         metrics: impl Into<Metrics>,
         scales: Option<crate::Scales>,
     ) -> Result<Unknowns, ShootError> {
+        Unknowns::for_template(problem.template(), problem.model().kind(), metrics, scales)
+    }
+
+    /// [`Unknowns::scaled`] from the template and the model kind alone.
+    pub fn for_template(
+        t: &fshape_mesh::FShape,
+        kind: ModelKind,
+        metrics: impl Into<Metrics>,
+        scales: Option<crate::Scales>,
+    ) -> Result<Unknowns, ShootError> {
         let metrics = metrics.into();
-        let t = problem.template();
         let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
         // √m per vertex for densities, 1/√m for functions.
         let mass_scale = |density: bool| -> Result<Vec<f64>, ShootError> {
@@ -103,7 +112,6 @@ impl Unknowns {
             }
             Ok(masses.iter().map(|m| if density { m.sqrt() } else { 1.0 / m.sqrt() }).collect())
         };
-        let kind = problem.model().kind();
         let mut scale = match (kind, metrics.signal) {
             (ModelKind::Lddmm, _) => Vec::new(),
             (_, Metric::Euclidean) => vec![1.0; p],

@@ -397,3 +397,35 @@ fn each_stage_may_have_its_own_iteration_limit() {
     let e = Session::new(&source, &target, &config).err().expect("refused").to_string();
     assert!(e.contains("schedule.max_iterations"), "{e}");
 }
+
+/// Stops when stage `at` starts.
+struct StopAtStage(usize);
+
+impl Observer for StopAtStage {
+    fn stage_started(&mut self, stage: usize, _: usize, _: &StageSpec, _: usize) -> Control {
+        if stage == self.0 { Control::Stop } else { Control::Continue }
+    }
+}
+
+#[test]
+fn stages_on_equal_templates_share_them_without_a_transfer() {
+    use fshape_mesh::generate::icosphere;
+    let sphere = |level: u32| {
+        let s = icosphere(level, 1.0);
+        let n = s.n_vertices();
+        s.with_signal(Some(vec![0.0; n])).unwrap()
+    };
+    let (_, target, mut config) = inputs();
+    let mut schedule = config.schedule.clone().unwrap();
+    schedule.kernel_geom.insert(0, fshape_match::PositionKernel::parse("gaussian:0.8").unwrap());
+    config.schedule = Some(schedule);
+    // Two equal coarse templates (separate values), then the source.
+    let mut session = Session::new(&sphere(2), &target, &config)
+        .unwrap()
+        .with_stage_templates(vec![Some(sphere(1)), Some(sphere(1)), None])
+        .unwrap();
+    assert_eq!(session.run(&mut StopAtStage(1)).unwrap(), Outcome::Interrupted);
+    let ck = session.checkpoint();
+    // Stage 1 starts from stage 0's unknowns as they are.
+    assert_eq!(bits(&ck.current.as_ref().unwrap().state.x), bits(ck.warm.as_ref().unwrap()));
+}
