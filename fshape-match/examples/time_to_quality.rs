@@ -5,10 +5,11 @@
 //! compared with this one in one run on one machine.
 //!
 //! ```sh
-//! cargo run --release -p fshape-match --example time_to_quality -- [LEVEL] [NORM] [GAMMA_W] [GAMMA_F] [BUDGETS] [COARSE]
-//! # defaults: 3 h1 1e3 0.1 25,50,100  (LEVEL: the template icosphere, 5 = the paper's 10242 vertices,
+//! cargo run --release -p fshape-match --example time_to_quality -- [LEVEL] [NORM] [GAMMA_W] [GAMMA_F] [BUDGETS] [COARSE] [METRIC] [SIGNAL_METRIC]
+//! # defaults: 3 h1 1e3 0.1 25,50,100 - euclidean  (LEVEL: the template icosphere, 5 = the paper's 10242 vertices,
 //! # or one level per stage, e.g. 3,4,5: the coarse stages on coarser spheres;
-//! # COARSE, e.g. midpoint:5: the integrator of the first two stages)
+//! # COARSE, e.g. midpoint:5: the integrator of the first two stages, - for the model's;
+//! # METRIC, SIGNAL_METRIC: of p_0 and p^f, euclidean, l2 or energy; defaults euclidean, l2)
 //! ```
 
 use std::path::Path;
@@ -50,7 +51,7 @@ fn main() -> Result<()> {
     );
     // COARSE: the integrator of the first two stages, `scheme:steps`
     // (e.g. midpoint:5); the last keeps the model's (RK4, 10 steps).
-    if let Some(coarse) = args.get(5) {
+    if let Some(coarse) = args.get(5).filter(|c| *c != "-") {
         let (scheme, steps) = coarse.split_once(':').context("COARSE: scheme:steps")?;
         let scheme: fshape_shoot::Integrator =
             serde_json::from_value(serde_json::json!(scheme)).context("COARSE scheme")?;
@@ -60,6 +61,10 @@ fn main() -> Result<()> {
         schedule.steps = Some(vec![steps, steps, last.1]);
     }
     config.schedule = Some(schedule);
+    config.optimizer.momentum_metric =
+        serde_json::from_value(serde_json::json!(arg(6, "euclidean"))).context("METRIC: euclidean, l2 or energy")?;
+    config.optimizer.signal_metric =
+        serde_json::from_value(serde_json::json!(arg(7, "l2"))).context("SIGNAL_METRIC: euclidean, l2 or energy")?;
     println!(
         "bunny, template level {level} ({} vertices), stage levels {levels:?}, {:?}, gamma_W {gamma_w:e}, gamma_f {gamma_f}, {} threads",
         template.n_vertices(),
@@ -68,9 +73,9 @@ fn main() -> Result<()> {
     );
     println!();
     println!(
-        "| iterations per stage | stops | evaluations | seconds | mean distance | 95th pct. | max | target within 1% | signal error |"
+        "| iterations per stage | stops | evaluations | seconds | J | mean distance | 95th pct. | max | target within 1% | signal error |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for budget in budgets {
         config.optimizer.max_iterations = budget;
         let start = Instant::now();
@@ -88,9 +93,10 @@ fn main() -> Result<()> {
         let stops: Vec<String> = r.stages.iter().map(|s| format!("{:?}", s.stop)).collect();
         let q = r.quality;
         println!(
-            "| {budget} | {} | {} | {seconds:.1} | {:.3}% | {:.3}% | {:.3}% | {:.1}% | {:.2}% |",
+            "| {budget} | {} | {} | {seconds:.1} | {:.4e} | {:.3}% | {:.3}% | {:.3}% | {:.1}% | {:.2}% |",
             stops.join(", "),
             r.evaluations,
+            r.energies.value,
             100.0 * q.mean_distance,
             100.0 * q.p95_distance,
             100.0 * q.max_distance,

@@ -9,8 +9,8 @@
 //! norm = "h1"              # l2-lumped | l2 | h1                  (default l2-lumped)
 //! length = 1.0             # ℓ of the H1 norm, in mesh units      (default 1)
 //! gamma_v = 1.0            # weight γ_V of the deformation energy (default 1)
-//! gamma_f = 1.0            # weight γ_f of the signal energy      (default 1)
-//! gamma_w = 1.0            # weight γ_W of the data attachment    (default 1)
+//! gamma_f = 0.1            # weight γ_f of the signal energy      (default 0.1)
+//! gamma_w = 1000.0         # weight γ_W of the data attachment    (default 1000)
 //! normalize = true         # weights relative to the data's scale (default true; see below)
 //!
 //! [deformation]
@@ -38,14 +38,16 @@
 //! gradient_tolerance = 1e-3         # stop at |∇J| ≤ tol·|∇J at start|  (default 1e-3)
 //! decrease_tolerance = 1e-6         # stop when J fell by ≤ tol·|J|...  (default 1e-6)
 //! decrease_window = 10              # ...over this many iterations      (default 10)
-//! signal_metric = "l2"              # metric of p^f: l2 (L²(x_0), the paper's) | euclidean (default l2)
-//! momentum_metric = "euclidean"     # metric of p_0: euclidean | l2     (default euclidean)
+//! signal_metric = "l2"              # metric of p^f: l2 (L²(x_0), the paper's) | euclidean | energy (default l2)
+//! momentum_metric = "euclidean"     # metric of p_0: euclidean | l2 | energy (default euclidean)
 //!
 //! [schedule]                        # coarse to fine (default: one stage, [attachment])
 //! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
 //! scheme = ["midpoint", "midpoint", "rk4"]  # per stage (default [integrator]'s; the last must be it)
 //! steps = [5, 5, 10]                        # per stage (likewise)
 //! max_iterations = [200, 100, 30]           # per stage (default [optimizer]'s)
+//! decrease_tolerance = [1e-2, 1e-2, 1e-3]    # per stage (default [optimizer]'s)
+//! decrease_window = [10, 10, 3]              # per stage (default [optimizer]'s)
 //! ```
 //!
 //! **Scale-free weights** (`normalize = true`, the default). The three
@@ -155,8 +157,8 @@ impl Default for ModelSection {
             norm: NormKind::L2Lumped,
             length: 1.0,
             gamma_v: 1.0,
-            gamma_f: 1.0,
-            gamma_w: 1.0,
+            gamma_f: 0.1,
+            gamma_w: 1e3,
             normalize: true,
         }
     }
@@ -367,9 +369,9 @@ pub struct OptimizerSection {
     pub decrease_tolerance: f64,
     /// Window of the decrease test.
     pub decrease_window: usize,
-    /// Metric of p^f: l2 | euclidean.
+    /// Metric of p^f: l2 | euclidean | energy.
     pub signal_metric: Metric,
-    /// Metric of p_0: euclidean | l2.
+    /// Metric of p_0: euclidean | l2 | energy.
     pub momentum_metric: Metric,
 }
 
@@ -410,13 +412,28 @@ pub struct ScheduleSection {
     /// max_iterations` for all): coarse stages may do most of the work.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_iterations: Option<Vec<usize>>,
+    /// The relative-decrease tolerance of each stage (default:
+    /// `[optimizer] decrease_tolerance` for all).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decrease_tolerance: Option<Vec<f64>>,
+    /// The window of each stage's decrease test (default: `[optimizer]
+    /// decrease_window` for all): a short final stage needs a short window.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decrease_window: Option<Vec<usize>>,
 }
 
 impl ScheduleSection {
     /// Stages with these position kernels, each with `[integrator]`'s
     /// scheme and steps.
     pub fn new(kernel_geom: Vec<PositionKernel>) -> ScheduleSection {
-        ScheduleSection { kernel_geom, scheme: None, steps: None, max_iterations: None }
+        ScheduleSection {
+            kernel_geom,
+            scheme: None,
+            steps: None,
+            max_iterations: None,
+            decrease_tolerance: None,
+            decrease_window: None,
+        }
     }
 }
 
@@ -433,6 +450,8 @@ pub struct StageSpec {
     pub integrator: (Integrator, usize),
     /// The stage's iteration limit.
     pub max_iterations: usize,
+    /// The stage's relative-decrease tolerance and window.
+    pub decrease: (f64, usize),
 }
 
 /// Everything a registration needs, checked: the model, the stages, the
@@ -594,6 +613,7 @@ impl Config {
                     kernel: self.attachment_kernel()?,
                     integrator,
                     max_iterations,
+                    decrease: (self.optimizer.decrease_tolerance, self.optimizer.decrease_window),
                 }])
             }
             Some(s) if s.kernel_geom.is_empty() => Err(bad("schedule.kernel_geom", "needs at least one kernel")),
@@ -609,6 +629,17 @@ impl Config {
                 per_stage("scheme", s.scheme.as_ref().map(Vec::len))?;
                 per_stage("steps", s.steps.as_ref().map(Vec::len))?;
                 per_stage("max_iterations", s.max_iterations.as_ref().map(Vec::len))?;
+                per_stage("decrease_tolerance", s.decrease_tolerance.as_ref().map(Vec::len))?;
+                per_stage("decrease_window", s.decrease_window.as_ref().map(Vec::len))?;
+                let tolerance =
+                    |i: usize| s.decrease_tolerance.as_ref().map_or(self.optimizer.decrease_tolerance, |v| v[i]);
+                let window = |i: usize| s.decrease_window.as_ref().map_or(self.optimizer.decrease_window, |v| v[i]);
+                if let Some(i) = (0..n).find(|&i| !(tolerance(i) >= 0.0 && tolerance(i).is_finite())) {
+                    return Err(bad(
+                        format!("schedule.decrease_tolerance[{i}]"),
+                        format!("must be finite and at least 0, got {}", tolerance(i)),
+                    ));
+                }
                 let budget = |i: usize| s.max_iterations.as_ref().map_or(self.optimizer.max_iterations, |v| v[i]);
                 let scheme = |i: usize| s.scheme.as_ref().map_or(self.integrator.scheme, |v| v[i]);
                 let steps = |i: usize| s.steps.as_ref().map_or(self.integrator.steps, |v| v[i]);
@@ -630,6 +661,7 @@ impl Config {
                             kernel,
                             integrator: (scheme(i), steps(i)),
                             max_iterations: budget(i),
+                            decrease: (tolerance(i), window(i)),
                         })
                     })
                     .collect()
@@ -657,6 +689,12 @@ impl Config {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(bad(key, format!("must be finite and at least 0, got {v}")));
             }
+        }
+        if o.signal_metric == Metric::Energy && self.model.kind == fshape_shoot::ModelKind::Tangential {
+            return Err(bad(
+                "optimizer.signal_metric",
+                "the energy metric is the metamorphosis momentum's; the tangential model's ζ takes l2 or euclidean",
+            ));
         }
         let metrics = Metrics { signal: o.signal_metric, momentum: o.momentum_metric };
         let settings = Settings {

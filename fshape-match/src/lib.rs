@@ -36,6 +36,7 @@ use std::path::{Path, PathBuf};
 mod config;
 pub mod demo;
 pub mod optimize;
+pub mod precondition;
 pub mod quality;
 pub mod resolution;
 mod session;

@@ -22,6 +22,10 @@
 //! γ), so the update keeps its guarantees (N&W 7.2: any positive definite
 //! H₀ is allowed); a single γ instead makes the first block's curvature
 //! set the step of the other, which left one block frozen in the demos.
+//! An objective may also give the shape of H₀ ([`Objective::precondition`],
+//! M⁻¹, positive definite and block-diagonal): then H₀ = diag(γ_b M_b⁻¹)
+//! with γ_b = s_bᵀy_b / y_bᵀM_b⁻¹y_b, and the first direction is −M⁻¹∇J
+//! (matching: the energy metric of the momenta, [`crate::precondition`]).
 
 use std::collections::VecDeque;
 
@@ -147,6 +151,13 @@ pub trait Objective {
     fn blocks(&self) -> Vec<usize> {
         Vec::new()
     }
+    /// Applies the shape M⁻¹ of L-BFGS's initial inverse Hessian (positive
+    /// definite, block-diagonal in [`Objective::blocks`]) to `v`: the
+    /// direction without correction pairs is −M⁻¹∇J, and each block's
+    /// γ_b M_b⁻¹ starts the two-loop recursion. Default: the identity.
+    fn precondition(&self, v: &mut [f64]) {
+        let _ = v;
+    }
 }
 
 impl<E, F: FnMut(&[f64]) -> Result<(f64, Vec<f64>), E>> Objective for F {
@@ -214,16 +225,18 @@ impl State {
     /// most a move of length 1 (1/‖∇J‖) and at most 1. A step too long
     /// (a shooting that folds the mesh) costs one halving per evaluation, a
     /// step too short one doubling, so a scale-aware start saves both.
-    fn first_step(&self) -> f64 {
-        let g = norm(&self.grad);
-        let linear = if self.value != 0.0 { self.value.abs() / (g * g) } else { f64::INFINITY };
-        linear.min(1.0 / g).min(1.0)
+    /// `d`: the first direction, −M⁻¹∇J (−∇J without a preconditioner).
+    fn first_step(&self, d: &[f64]) -> f64 {
+        let slope = -dot(d, &self.grad);
+        let linear = if self.value != 0.0 { self.value.abs() / slope } else { f64::INFINITY };
+        linear.min(1.0 / norm(d)).min(1.0)
     }
 
-    /// The L-BFGS direction −H∇J (two-loop recursion); −∇J without pairs.
+    /// The L-BFGS direction −H∇J (two-loop recursion); −M⁻¹∇J without
+    /// pairs (`precondition` applies M⁻¹, [`Objective::precondition`]).
     /// `blocks`: starts of the blocks after the first, each scaled by its
     /// own γ (module docs); empty for one γ.
-    fn lbfgs_direction(&self, blocks: &[usize]) -> Vec<f64> {
+    fn lbfgs_direction(&self, blocks: &[usize], precondition: impl Fn(&mut [f64])) -> Vec<f64> {
         let mut q = self.grad.clone();
         let k = self.s.len();
         let mut alpha = vec![0.0; k];
@@ -234,9 +247,14 @@ impl State {
                 *qj -= alpha[i] * yj;
             }
         }
+        // H_0 = diag(γ_b M_b⁻¹), γ_b = s_bᵀy_b / y_bᵀM_b⁻¹y_b (M = I: N&W's
+        // γ = sᵀy/yᵀy).
+        precondition(&mut q);
         if k > 0 {
             let (s, y) = (&self.s[k - 1], &self.y[k - 1]);
-            let gamma = dot(s, y) / dot(y, y);
+            let mut my = y.clone();
+            precondition(&mut my);
+            let gamma = dot(s, y) / dot(y, &my);
             // Block bounds 0 < b₁ < … < n; starts out of order or range
             // are skipped rather than trusted.
             let n = q.len();
@@ -249,7 +267,7 @@ impl State {
             bounds.push(n);
             for w in bounds.windows(2) {
                 let (a, b) = (w[0], w[1]);
-                let (sy, yy) = (dot(&s[a..b], &y[a..b]), dot(&y[a..b], &y[a..b]));
+                let (sy, yy) = (dot(&s[a..b], &y[a..b]), dot(&y[a..b], &my[a..b]));
                 let g = if sy > 0.0 && yy > 0.0 && (sy / yy).is_finite() { sy / yy } else { gamma };
                 q[a..b].iter_mut().for_each(|v| *v *= g);
             }
@@ -274,20 +292,20 @@ impl State {
         let accepted = match settings.method {
             Method::Lbfgs { memory } => {
                 let blocks = if settings.block_scaling { objective.blocks() } else { Vec::new() };
-                let mut d = self.lbfgs_direction(&blocks);
+                let mut d = self.lbfgs_direction(&blocks, |v| objective.precondition(v));
                 let mut slope = dot(&d, &self.grad);
                 if slope >= 0.0 || !slope.is_finite() {
                     // Not a descent direction (should not happen with
                     // curvature-checked pairs): restart from −∇J.
                     self.s.clear();
                     self.y.clear();
-                    d = self.grad.iter().map(|g| -g).collect();
+                    d = self.lbfgs_direction(&blocks, |v| objective.precondition(v));
                     slope = dot(&d, &self.grad);
                 }
-                // Without pairs the direction is −∇J, unscaled: see
+                // Without pairs the direction is −M⁻¹∇J, unscaled: see
                 // `first_step`; afterwards the scaled direction's natural
                 // unit step.
-                let t0 = if self.s.is_empty() { self.first_step() } else { 1.0 };
+                let t0 = if self.s.is_empty() { self.first_step(&d) } else { 1.0 };
                 let found = wolfe_search(self, &d, slope, t0, settings, objective)?;
                 if let Some((t, _, _, grad)) = &found {
                     let s: Vec<f64> = d.iter().map(|v| t * v).collect();
@@ -306,9 +324,11 @@ impl State {
                 found
             }
             Method::GradientDescent { increase } => {
-                let d: Vec<f64> = self.grad.iter().map(|g| -g).collect();
+                let mut d = self.grad.clone();
+                objective.precondition(&mut d);
+                d.iter_mut().for_each(|v| *v = -*v);
                 let slope = dot(&d, &self.grad);
-                let t0 = if self.step > 0.0 { self.step * increase } else { self.first_step() };
+                let t0 = if self.step > 0.0 { self.step * increase } else { self.first_step(&d) };
                 armijo_search(self, &d, slope, t0, settings, objective)?
             }
         };

@@ -508,7 +508,13 @@ impl Session {
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
             self.stage_target(k)?;
-            let settings = Settings { max_iterations: self.plan.stages[k].max_iterations, ..self.plan.settings };
+            let spec = &self.plan.stages[k];
+            let settings = Settings {
+                max_iterations: spec.max_iterations,
+                decrease_tolerance: spec.decrease.0,
+                decrease_window: spec.decrease.1,
+                ..self.plan.settings
+            };
             let mut objective = MatchObjective::new(&self.problem, self.unknowns.clone());
             let mut current = match self.checkpoint.current.take() {
                 Some(c) => c,

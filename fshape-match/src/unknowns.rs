@@ -29,6 +29,7 @@ use fshape_fem::{Norm, SignalNorm};
 use fshape_shoot::{Energies, ModelKind, Problem, ShootError};
 
 use crate::optimize::{Settings, State, Stop};
+use crate::precondition::{KernelFactor, NormMatrix};
 
 /// The metric in which one block of unknowns is optimised (configuration
 /// spellings `l2`, `euclidean`).
@@ -39,12 +40,18 @@ pub enum Metric {
     L2,
     /// The Euclidean metric of the vertex values.
     Euclidean,
+    /// The metric of the geodesic's energy ([`crate::precondition`]), as
+    /// L-BFGS's initial Hessian: ⟨δp, K(x_0) δp⟩ on p_0 (the V-norm of the
+    /// velocity), ⟨δp^f, D_s(x_0)⁻¹ δp^f⟩ on p^f (the signal norm of the
+    /// signal velocity; metamorphosis only).
+    Energy,
 }
 
 /// The metrics of the two blocks of unknowns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Metrics {
-    /// Of p_0 (default Euclidean).
+    /// Of p_0 (default the energy's: fewer iterations to the same fit,
+    /// docs/experiments.md).
     pub momentum: Metric,
     /// Of p^f or ζ (default L², the paper's).
     pub signal: Metric,
@@ -52,7 +59,7 @@ pub struct Metrics {
 
 impl Default for Metrics {
     fn default() -> Self {
-        Metrics { momentum: Metric::Euclidean, signal: Metric::L2 }
+        Metrics { momentum: Metric::Energy, signal: Metric::L2 }
     }
 }
 
@@ -66,6 +73,11 @@ impl From<Metric> for Metrics {
 /// The packing of (p_0, p^f) into the optimiser's unknowns.
 #[derive(Clone, Debug)]
 pub struct Unknowns {
+    /// The energy metric of p_0: the kernel matrix's factor (a template of
+    /// at most [`crate::precondition::MAX_VERTICES`] vertices).
+    factor: Option<std::sync::Arc<KernelFactor>>,
+    /// The energy metric of p^f: the signal norm's matrix.
+    signal_matrix: Option<std::sync::Arc<NormMatrix>>,
     /// P·n and P.
     pn: usize,
     p: usize,
@@ -92,7 +104,24 @@ impl Unknowns {
         metrics: impl Into<Metrics>,
         scales: Option<crate::Scales>,
     ) -> Result<Unknowns, ShootError> {
-        Unknowns::for_template(problem.template(), problem.model().kind(), metrics, scales)
+        let metrics = metrics.into();
+        let mut unknowns = Unknowns::for_template(problem.template(), problem.model().kind(), metrics, scales)?;
+        if metrics.momentum == Metric::Energy {
+            let t = problem.template();
+            unknowns.factor = KernelFactor::new(t, problem.model().kernel())?.map(std::sync::Arc::new);
+        }
+        if metrics.signal == Metric::Energy && problem.model().kind() == ModelKind::Metamorphosis {
+            let t = problem.template();
+            let matrix = NormMatrix::new(t, problem.model().norm(), unknowns.pn)?;
+            unknowns.signal_matrix = Some(std::sync::Arc::new(matrix));
+        }
+        Ok(unknowns)
+    }
+
+    /// Whether p_0 is in the energy metric (`Metric::Energy` and a
+    /// template small enough to factor its kernel matrix).
+    pub fn kernel_metric(&self) -> bool {
+        self.factor.is_some()
     }
 
     /// [`Unknowns::scaled`] from the template and the model kind alone.
@@ -114,12 +143,12 @@ impl Unknowns {
         };
         let mut scale = match (kind, metrics.signal) {
             (ModelKind::Lddmm, _) => Vec::new(),
-            (_, Metric::Euclidean) => vec![1.0; p],
+            (_, Metric::Euclidean | Metric::Energy) => vec![1.0; p],
             (ModelKind::Metamorphosis, Metric::L2) => mass_scale(true)?,
             (ModelKind::Tangential, Metric::L2) => mass_scale(false)?,
         };
         let mut scale_p = match metrics.momentum {
-            Metric::Euclidean => vec![1.0; pn],
+            Metric::Euclidean | Metric::Energy => vec![1.0; pn],
             Metric::L2 => mass_scale(true)?.iter().flat_map(|s| std::iter::repeat_n(*s, dim)).collect(),
         };
         if let Some(sc) = scales {
@@ -135,7 +164,7 @@ impl Unknowns {
             scale_p.iter_mut().for_each(|v| *v *= c0);
             scale.iter_mut().for_each(|v| *v *= cf);
         }
-        Ok(Unknowns { pn, p, scale, scale_p })
+        Ok(Unknowns { factor: None, signal_matrix: None, pn, p, scale, scale_p })
     }
 
     /// Number of unknowns.
@@ -217,6 +246,15 @@ impl crate::optimize::Objective for MatchObjective<'_> {
     /// p_0, then the signal's control (when there is one).
     fn blocks(&self) -> Vec<usize> {
         if self.unknowns.scale.is_empty() { Vec::new() } else { vec![self.unknowns.pn] }
+    }
+
+    fn precondition(&self, v: &mut [f64]) {
+        if let Some(f) = &self.unknowns.factor {
+            f.apply(v);
+        }
+        if let Some(m) = &self.unknowns.signal_matrix {
+            m.apply(v);
+        }
     }
 
     fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {

@@ -6,6 +6,8 @@ mod config;
 mod objective;
 #[path = "matching/optimize.rs"]
 mod optimize;
+#[path = "matching/precondition.rs"]
+mod precondition;
 #[path = "matching/quality.rs"]
 mod quality;
 #[path = "matching/resolution.rs"]
@@ -20,6 +22,14 @@ use fshape_shoot::Model;
 
 /// A model from the lines of a `[model]` section plus defaults elsewhere.
 pub fn model(model_lines: &str, deformation_lines: &str, integrator: &str, steps: usize) -> Model {
+    // The weights these tests were written with (the defaults are
+    // scale-free weights for real data: γ_f = 0.1, γ_W = 1000).
+    let mut model_lines = model_lines.to_string();
+    for (key, value) in [("gamma_f", "1.0"), ("gamma_w", "1.0")] {
+        if !model_lines.contains(key) {
+            model_lines.push_str(&format!("\n{key} = {value}"));
+        }
+    }
     let text = format!(
         "[model]\n{model_lines}\n[deformation]\nwidths = [0.6, 0.3]\n{deformation_lines}\n\
          [integrator]\nscheme = \"{integrator}\"\nsteps = {steps}\n"

@@ -9,7 +9,8 @@ fn defaults_are_documented_values() {
     let m = c.model().unwrap();
     assert_eq!(m.kind(), ModelKind::Metamorphosis);
     assert_eq!(m.norm(), fshape_fem::Norm::L2Lumped);
-    assert_eq!((m.gamma_v(), m.gamma_f(), m.gamma_w()), (1.0, 1.0, 1.0));
+    // The scale-free defaults (module docs of fshape_match::config).
+    assert_eq!((m.gamma_v(), m.gamma_f(), m.gamma_w()), (1.0, 0.1, 1000.0));
     assert_eq!((m.integrator(), m.steps(), m.max_drift()), (Integrator::Rk4, 10, 0.5));
     assert!(m.kernel().taper().is_none());
     // Weights default to 1: k(0) = 2 for two widths.
@@ -78,6 +79,8 @@ fn a_config_written_with_serde_reads_back_to_the_same_value() {
         scheme: Some(vec![Integrator::Euler, Integrator::Rk4]),
         steps: Some(vec![3, 10]),
         max_iterations: Some(vec![50, 20]),
+        decrease_tolerance: Some(vec![1e-2, 1e-3]),
+        decrease_window: Some(vec![10, 3]),
     });
     for c in [shipped, full] {
         let text = c.to_toml();

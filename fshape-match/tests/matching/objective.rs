@@ -112,7 +112,7 @@ fn optimizer_and_schedule_errors_name_their_key() {
     let base = "[deformation]\nwidths = [0.5]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n";
     let c = Config::parse(base).unwrap();
     let (settings, metric) = c.optimizer().unwrap();
-    let defaults = Metrics { momentum: Metric::Euclidean, signal: Metric::L2 };
+    let defaults = Metrics { momentum: Metric::Energy, signal: Metric::L2 };
     assert_eq!((settings, metric), (Settings::default(), defaults), "documented defaults");
     assert_eq!(c.schedule().unwrap().len(), 1);
     let c = Config::parse(&format!("{base}[schedule]\nkernel_geom = [\"gaussian:0.4\", \"gaussian:0.1\"]\n")).unwrap();
@@ -274,4 +274,72 @@ fn the_first_momentum_step_moves_space_alike_on_a_graded_mesh_in_the_l2_metric()
     eprintln!("relative difference of the first step's velocity field: L2 {l2:.3}, Euclidean {euclid:.3}");
     assert!(l2 < 0.1, "the L2 step depends on the mesh: {l2}");
     assert!(euclid > 3.0 * l2, "the Euclidean step does not depend on it? {euclid}");
+}
+
+#[test]
+fn the_first_energy_metric_steps_are_the_same_fields_on_a_graded_mesh() {
+    use fshape_match::optimize::Objective;
+    use fshape_match::quality::ClosestPoints;
+    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    // A target that differs in geometry (stretched along x) and signal.
+    let target = fshape_mesh::generate::square(2500, 7);
+    let pts: Vec<f64> = target.points().chunks_exact(2).flat_map(|p| [1.15 * p[0], p[1]]).collect();
+    let f: Vec<f64> = target.points().chunks_exact(2).map(|p| 0.5 * (2.0 * p[0]).sin() + 0.3 * p[1]).collect();
+    let target = target.with_points(pts).unwrap().with_signal(Some(f)).unwrap();
+    let uniform = fshape_mesh::generate::square(1500, 1);
+    let graded = graded_square(1500, 2);
+    let kernel = VarifoldKernel::parse("gaussian:0.2", Some("gaussian:1.0"), "binet").unwrap();
+    let deformation = fshape_kernels::Kernel::gaussian(0.3).unwrap();
+    // The first L-BFGS direction −M⁻¹∂J/∂q in (p_0, p^f), as fields: the
+    // velocity K δp_0 at the uniform mesh's vertices, and the signal
+    // velocity ḟ = D_s⁻¹ δp^f (H¹, ℓ = 0.3) at the template's.
+    let steps = |template: &fshape_mesh::FShape, metric: Metric| -> (Vec<f64>, Vec<f64>) {
+        let n = template.n_vertices();
+        let template = template.clone().with_signal(Some(vec![0.0; n])).unwrap();
+        let model = model("gamma_w = 10.0\nnorm = \"h1\"\nlength = 0.3", "", "rk4", 4).with_kernel(deformation.clone());
+        let problem = Problem::new(&template, model).unwrap().with_target(&target, kernel.clone()).unwrap();
+        let unknowns = Unknowns::new(&problem, Metrics { momentum: metric, signal: metric }).unwrap();
+        assert_eq!(unknowns.kernel_metric(), metric == Metric::Energy);
+        let mut objective = MatchObjective::new(&problem, unknowns.clone());
+        let (_, mut dq) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+        objective.precondition(&mut dq);
+        dq.iter_mut().for_each(|v| *v = -*v);
+        let (dp0, dpf) = unknowns.unpack(&dq);
+        let sums = fshape_kernels::KernelSums::try_new(&deformation, template.points(), 2).unwrap();
+        let velocity = sums.conv(uniform.points(), &dp0, 2).unwrap();
+        let norm = fshape_fem::SignalNorm::try_new(&template, fshape_fem::Norm::H1 { length: 0.3 }).unwrap();
+        let mut solver = norm.solver().unwrap();
+        solver.factor(template.points()).unwrap();
+        (velocity, solver.solve(&dpf).unwrap())
+    };
+    let relative = |a: &[f64], b: &[f64]| -> f64 {
+        let num: f64 = a.iter().zip(b).map(|(u, v)| (u - v).powi(2)).sum();
+        (num / a.iter().map(|u| u * u).sum::<f64>()).sqrt()
+    };
+    // ḟ on the graded mesh, interpolated at the uniform mesh's vertices.
+    let on_graded = ClosestPoints::new(&graded).unwrap();
+    let at_uniform = |fb: &[f64]| -> Vec<f64> {
+        uniform
+            .points()
+            .chunks_exact(2)
+            .map(|p| {
+                let c = on_graded.closest([p[0], p[1], 0.0]);
+                let ids = &graded.cells()[3 * c.cell..3 * c.cell + 3];
+                ids.iter().zip(c.bary).map(|(&v, w)| w * fb[v]).sum()
+            })
+            .collect()
+    };
+    let mut differences = Vec::new();
+    for metric in [Metric::Energy, Metric::Euclidean] {
+        let (va, fa) = steps(&uniform, metric);
+        let (vb, fb) = steps(&graded, metric);
+        differences.push((relative(&va, &vb), relative(&fa, &at_uniform(&fb))));
+    }
+    eprintln!(
+        "relative differences (velocity, signal velocity): energy {:.3?}, Euclidean {:.3?}",
+        differences[0], differences[1]
+    );
+    let ((v, f), (ve, fe)) = (differences[0], differences[1]);
+    assert!(v < 0.1 && f < 0.1, "the energy metric's step depends on the mesh: {v}, {f}");
+    assert!(ve > 3.0 * v && fe > 3.0 * f, "the Euclidean step does not depend on it? {ve}, {fe}");
 }

@@ -16,7 +16,7 @@ fn inputs() -> (FShape, FShape, Config) {
     let signal: Vec<f64> = target.points().chunks_exact(3).map(|p| 0.5 * p[0]).collect();
     let target = target.with_signal(Some(signal)).unwrap();
     let mut config = Config::parse(
-        "[model]\ngamma_w = 10.0\n[deformation]\nwidths = [0.5]\n\
+        "[model]\ngamma_w = 10.0\ngamma_f = 1.0\n[deformation]\nwidths = [0.5]\n\
          [attachment]\nkernel_geom = \"gaussian:0.3\"\nkernel_signal = \"gaussian:1.0\"\n\
          [schedule]\nkernel_geom = [\"gaussian:0.6\", \"gaussian:0.3\"]\n",
     )
@@ -381,7 +381,7 @@ fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
 }
 
 #[test]
-fn each_stage_may_have_its_own_iteration_limit() {
+fn each_stage_may_have_its_own_iteration_limit_and_decrease_test() {
     let (source, target, mut config) = inputs();
     let mut schedule = config.schedule.clone().unwrap();
     schedule.max_iterations = Some(vec![2, 4]);
@@ -393,9 +393,25 @@ fn each_stage_may_have_its_own_iteration_limit() {
     // reach theirs.
     assert_eq!((r.stages[0].iterations.len(), r.stages[1].iterations.len()), (2, 4));
     schedule.max_iterations = Some(vec![2]);
-    config.schedule = Some(schedule);
+    config.schedule = Some(schedule.clone());
     let e = Session::new(&source, &target, &config).err().expect("refused").to_string();
     assert!(e.contains("schedule.max_iterations"), "{e}");
+    // A decrease test per stage: J can never fall by more than all of it,
+    // so a tolerance of 1 over a window of 1 ends the first stage after one
+    // iteration, on that test; the second keeps [optimizer]'s (and its cap).
+    schedule.max_iterations = None;
+    schedule.decrease_tolerance = Some(vec![1.0, config.optimizer.decrease_tolerance]);
+    schedule.decrease_window = Some(vec![1, config.optimizer.decrease_window]);
+    config.schedule = Some(schedule.clone());
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    session.run(&mut ()).unwrap();
+    let r = session.result().unwrap();
+    assert_eq!((r.stages[0].stop, r.stages[0].iterations.len()), (fshape_match::optimize::Stop::Decrease, 1));
+    assert_eq!((r.stages[1].stop, r.stages[1].iterations.len()), (fshape_match::optimize::Stop::Iterations, 6));
+    schedule.decrease_tolerance = Some(vec![f64::NAN, 1.0]);
+    config.schedule = Some(schedule);
+    let e = Session::new(&source, &target, &config).err().expect("refused").to_string();
+    assert!(e.contains("schedule.decrease_tolerance[0]"), "{e}");
 }
 
 /// Stops when stage `at` starts.

@@ -1,0 +1,203 @@
+//! The energy metric of the momenta: the metric the geodesic's energy
+//! puts on p_0 (the kernel matrix, [`KernelFactor`]) and on p^f (the
+//! signal norm's matrix, [`NormMatrix`]).
+//!
+//! The energy of a geodesic is ½γ_V p_0ᵀK(x_0)p_0 (+ the signal's part):
+//! its Hessian in p_0 is γ_V K(x_0), the Gram matrix of the deformation
+//! kernel on the template, constant during a stage. A Gaussian K is
+//! nearly singular, so in the Euclidean metric of p_0 the energy is badly
+//! conditioned, and the data term more so: its gradient reaches p_0
+//! through K, twice smoothed (∂J/∂p_0 ≈ K ∂A/∂x_1 for short times, its
+//! Hessian ≈ K A'' K). In the metric ⟨δp, K δp⟩ (the squared V-norm of the
+//! velocity δv = K δp that a change δp makes) the energy's Hessian becomes
+//! the identity and the data term's K^{1/2}A''K^{1/2}: the gradient is
+//! K⁻¹∂J/∂p_0, whose velocity K·K⁻¹∂J/∂p_0 is the classical V-gradient of
+//! LDDMM (Beg et al. 2005).
+//!
+//! It enters the optimiser as L-BFGS's initial inverse Hessian H_0 =
+//! γ (K + λD_0⁻¹)⁻¹ (any positive definite H_0 keeps the method's
+//! guarantees), applied by a dense Cholesky factor computed once per
+//! template. The ridge keeps the factor well defined where K is
+//! numerically singular (wide kernels on fine meshes), at the price of
+//! treating directions of K-eigenvalue below it as L²; a ten times smaller
+//! ridge made line searches fail on the bunny (docs/experiments.md). The
+//! factor costs n³/3 operations and n² values for n vertices, hence
+//! [`MAX_VERTICES`]: a larger template keeps the stage's other metric
+//! ([`crate::unknowns::Unknowns::kernel_metric`] tells).
+
+use fshape_fem::{Norm, SignalNorm};
+use fshape_kernels::Kernel;
+use fshape_mesh::FShape;
+use fshape_shoot::ShootError;
+
+/// The ridge's size, relative to k(0)·r_0^d ([`KernelFactor`]).
+pub const RIDGE: f64 = 1.5e-4;
+
+/// The largest template (vertices) whose kernel matrix is factored: 4096
+/// vertices is 128 MiB and about 2·10¹⁰ operations.
+pub const MAX_VERTICES: usize = 4096;
+
+/// The Cholesky factor of K(x_0) + λD_0⁻¹, applying H_0's shape
+/// (K + λD_0⁻¹)⁻¹ to the p_0 block of the optimiser's unknowns. In the
+/// energy metric p_0 = c·q with c a constant (1, or the normalisation's
+/// 1/L), and the shape leaves c out: K and λD_0⁻¹ are both the same for a
+/// copy of the data scaled in length (kernel widths scaled alike), so the
+/// first step, −(K + λD_0⁻¹)⁻¹∂J/∂q, is too, as the normalised weights
+/// promise (tested).
+///
+/// The ridge λD_0⁻¹ (D_0 the template's lumped mass) is the discrete form
+/// of λ∫ρ² for the density ρ that p_0 samples (p_i ≈ ρ(x_i)m_i), so it
+/// regularises the same continuous operator at every resolution, where a
+/// multiple of the identity would weigh less on finer meshes. Its size
+/// λ = [`RIDGE`]·k(0)·r_0^d has the units of K's action on densities
+/// (r_0: the radius where k falls to e^{−1/2}k(0), σ for a Gaussian; d:
+/// the cells' dimension), so it is scale-free too.
+#[derive(Debug)]
+pub struct KernelFactor {
+    n: usize,
+    dim: usize,
+    /// Lower triangle of L (row-major n × n; LLᵀ = K + λD_0⁻¹).
+    l: Vec<f64>,
+}
+
+/// The radius where k falls to e^{−1/2}·k(0) (σ for a Gaussian of width σ).
+fn half_width(kernel: &Kernel) -> f64 {
+    let target = (-0.5f64).exp() * kernel.value(0.0);
+    let mut hi = 1.0;
+    while kernel.value(hi * hi) > target {
+        hi *= 2.0;
+    }
+    while kernel.value(hi * hi / 4.0) <= target && hi > 1e-300 {
+        hi /= 2.0;
+    }
+    let mut lo = hi / 2.0;
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if kernel.value(mid * mid) > target { lo = mid } else { hi = mid }
+    }
+    hi
+}
+
+impl KernelFactor {
+    /// Factors K(x_0) + λD_0⁻¹ on `template`. `Ok(None)` when the template has more than [`MAX_VERTICES`]
+    /// vertices or the factorisation meets a pivot that is not positive (a
+    /// kernel that is not positive definite); an error where the lumped
+    /// mass is not defined (a degenerate cell).
+    pub fn new(template: &FShape, kernel: &Kernel) -> Result<Option<KernelFactor>, ShootError> {
+        let (n, dim) = (template.n_vertices(), template.dim());
+        if n > MAX_VERTICES {
+            return Ok(None);
+        }
+        let masses = SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(template.points())?;
+        let lambda = KernelFactor::ridge(kernel, template.kind().dim());
+        let points = template.points();
+        let mut l = vec![0.0; n * n];
+        for i in 0..n {
+            let xi = &points[i * dim..(i + 1) * dim];
+            for j in 0..=i {
+                let xj = &points[j * dim..(j + 1) * dim];
+                let u: f64 = xi.iter().zip(xj).map(|(a, b)| (a - b) * (a - b)).sum();
+                l[i * n + j] = kernel.value(u);
+            }
+            l[i * n + i] += lambda / masses[i];
+        }
+        // Row-oriented Cholesky–Crout: L_ij = (A_ij − Σ_{k<j} L_ik L_jk)/L_jj.
+        for i in 0..n {
+            for j in 0..=i {
+                let (upper, lower) = l.split_at_mut(i * n);
+                let row_i = &lower[..n];
+                let row_j = if j == i { row_i } else { &upper[j * n..j * n + n] };
+                let s: f64 = row_i[..j].iter().zip(&row_j[..j]).map(|(a, b)| a * b).sum();
+                let a = lower[j] - s;
+                if j == i {
+                    if !(a > 0.0 && a.is_finite()) {
+                        return Ok(None);
+                    }
+                    lower[j] = a.sqrt();
+                } else {
+                    let d = upper[j * n + j];
+                    lower[j] = a / d;
+                }
+            }
+        }
+        Ok(Some(KernelFactor { n, dim, l }))
+    }
+
+    /// The ridge λ of a kernel on cells of dimension `cell_dim`, without
+    /// the masses: λD_0⁻¹ is added to K.
+    pub fn ridge(kernel: &Kernel, cell_dim: usize) -> f64 {
+        RIDGE * kernel.value(0.0) * half_width(kernel).powi(cell_dim as i32)
+    }
+
+    /// v ← (K + λD_0⁻¹)⁻¹v on the first n·dim values of `v` (the p_0
+    /// block, each dimension alike); the rest is left as it is.
+    pub fn apply(&self, v: &mut [f64]) {
+        let (n, d) = (self.n, self.dim);
+        let block = &mut v[..n * d];
+        // L y = b, row by row, all dim columns at once.
+        for i in 0..n {
+            let row = &self.l[i * n..i * n + i];
+            for c in 0..d {
+                let s: f64 = row.iter().enumerate().map(|(k, lik)| lik * block[k * d + c]).sum();
+                block[i * d + c] = (block[i * d + c] - s) / self.l[i * n + i];
+            }
+        }
+        // Lᵀ x = y, from the last row up.
+        for i in (0..n).rev() {
+            for c in 0..d {
+                block[i * d + c] /= self.l[i * n + i];
+            }
+            let row = &self.l[i * n..i * n + i];
+            for (k, lik) in row.iter().enumerate() {
+                for c in 0..d {
+                    block[k * d + c] -= lik * block[i * d + c];
+                }
+            }
+        }
+    }
+
+    /// The number of template vertices.
+    pub fn n_vertices(&self) -> usize {
+        self.n
+    }
+}
+
+/// The signal norm's matrix D_s(x_0) on the template, applying H_0's
+/// shape D_s/m̄ (m̄ the mean lumped mass) to the p^f block: the signal
+/// energy is ½ p^fᵀD_s⁻¹p^f/γ_f (ḟ = D_s⁻¹p^f/γ_f), Hessian D_s⁻¹/γ_f, so
+/// the energy's metric turns the energy's Hessian into the identity, as
+/// the kernel's does for p_0. For H¹ (D_s = M + ℓ²S) it undoes the
+/// smoothing that D_s⁻¹ puts between p^f and the data term; for the lumped
+/// L² norm it is the L² metric (D_s = D_0). In the energy metric p^f = c·q
+/// with c a constant, left out like the kernel factor's; dividing by m̄
+/// makes the shape the same for a copy of the data scaled in length.
+#[derive(Debug)]
+pub struct NormMatrix {
+    norm: SignalNorm,
+    points: Vec<f64>,
+    /// 1/m̄.
+    inv_mean_mass: f64,
+    /// Where the p^f block starts in the unknowns.
+    offset: usize,
+}
+
+impl NormMatrix {
+    /// D_s(x_0) of `norm` on `template`; the p^f block starts at `offset`.
+    /// Fails where the norm does (a degenerate cell).
+    pub fn new(template: &FShape, norm: Norm, offset: usize) -> Result<NormMatrix, ShootError> {
+        let signal_norm = SignalNorm::try_new(template, norm)?;
+        let points = template.points().to_vec();
+        let masses = SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(&points)?;
+        let mean = masses.iter().sum::<f64>() / masses.len().max(1) as f64;
+        // Once here, so that `apply` cannot fail later.
+        signal_norm.matvec(&points, &masses)?;
+        Ok(NormMatrix { norm: signal_norm, points, inv_mean_mass: 1.0 / mean, offset })
+    }
+
+    /// v ← (D_s/m̄) v on the p^f block of `v`.
+    pub fn apply(&self, v: &mut [f64]) {
+        let block = &mut v[self.offset..];
+        let out = self.norm.matvec(&self.points, block).expect("checked when built");
+        block.iter_mut().zip(&out).for_each(|(x, o)| *x = o * self.inv_mean_mass);
+    }
+}
