@@ -147,34 +147,45 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
     Ok(())
 }
 
+/// The bunny stages' convergence test: J fell by less than this fraction
+/// over this many iterations.
+pub const BUNNY_DECREASE: (f64, usize) = (1e-2, 5);
+
 /// Settings of the bunny and cortex runs.
 pub struct RunArgs<'a> {
     pub out: &'a Path,
     pub data: &'a Path,
     pub max_iterations: usize,
     pub gamma_w: f64,
+    /// Bunny: the level-3 template, three stages on it.
+    pub quick: bool,
 }
 
 /// The bunny (paper section 5.1): the level-5 sphere with signal 0 onto the
 /// textured 2581-vertex Stanford bunny, H¹ against lumped L², the shipped
 /// `data/configs/bunny.toml` with scale-free weights (γ_W = `gamma_w`,
-/// γ_f = 0.1) and four stages: k_p 0.2 and 0.1 on the level-3 sphere (642
-/// vertices), 0.05 on the level-4 sphere (2562), then 0.05 on the template,
-/// with 2, 2, 0.6 and 0.25 times `max_iterations` iterations: the coarse
-/// stages do most of the work (docs/experiments.md: 418 s for H¹ with the
-/// default 100).
+/// γ_f = 0.1), p_0 in the energy metric, and four stages: k_p 0.2 and 0.1
+/// on the level-3 sphere (642 vertices), 0.05 on the level-4 sphere
+/// (2562), then 0.05 on the template, each ending on the decrease test
+/// [`BUNNY_DECREASE`], with limits of 4, 4, 1.5 and 0.4 times
+/// `max_iterations` iterations as a safety net (docs/experiments.md).
+/// `quick`: the level-3 sphere as the template, k_p 0.2, 0.1, 0.05 on it.
 pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
-    let dir = a.out.join("bunny");
+    let dir = a.out.join(if a.quick { "bunny-quick" } else { "bunny" });
     let bunny = io::read_mesh(&a.data.join("stanford_bunny/bunny_qslim_2581v.ply.gz"), &io::ReadOptions::default())?;
-    let (template, target) = fshape_match::demo::bunny_setting(&bunny)?;
+    let level = if a.quick { 3 } else { 5 };
+    let (template, target) = fshape_match::demo::bunny_setting_at_level(&bunny, level)?;
     let (sp, tp) = write_inputs(&dir, &template, &target)?;
-    let mut coarse = Vec::new();
-    for level in [3, 4] {
-        let path = dir.join(format!("sphere_level{level}.ply"));
-        write_mesh(&path, &fshape_match::demo::bunny_setting_at_level(&bunny, level)?.0, Encoding::Binary)?;
-        coarse.push(path);
+    let mut stage_templates = Vec::new();
+    if !a.quick {
+        let mut coarse = Vec::new();
+        for level in [3, 4] {
+            let path = dir.join(format!("sphere_level{level}.ply"));
+            write_mesh(&path, &fshape_match::demo::bunny_setting_at_level(&bunny, level)?.0, Encoding::Binary)?;
+            coarse.push(path);
+        }
+        stage_templates = vec![coarse[0].clone(), coarse[0].clone(), coarse[1].clone()];
     }
-    let stage_templates = [coarse[0].clone(), coarse[0].clone(), coarse[1].clone()];
     let shipped = Config::read(&a.data.join("configs/bunny.toml"))?;
     let n = a.max_iterations as f64;
     let budget = |f: f64| ((f * n).round() as usize).max(1);
@@ -186,14 +197,30 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
         config.model.normalize = true;
         config.model.gamma_f = 0.1;
         config.model.gamma_w = a.gamma_w;
-        let mut stages = schedule(&[0.2, 0.1, 0.05, 0.05])?;
-        stages.max_iterations = Some(vec![budget(2.0), budget(2.0), budget(0.6), budget(0.25)]);
+        config.optimizer.momentum_metric = fshape_match::Metric::Energy;
+        // Each stage ends when J fell by less than 1 % over its last 5
+        // iterations; the limits are a safety net.
+        let (widths, budgets) = if a.quick {
+            (vec![0.2, 0.1, 0.05], vec![budget(4.0), budget(4.0), budget(4.0)])
+        } else {
+            (vec![0.2, 0.1, 0.05, 0.05], vec![budget(4.0), budget(4.0), budget(1.5), budget(0.4)])
+        };
+        let mut stages = schedule(&widths)?;
+        stages.decrease_tolerance = Some(vec![BUNNY_DECREASE.0; widths.len()]);
+        stages.decrease_window = Some(vec![BUNNY_DECREASE.1; widths.len()]);
+        stages.max_iterations = Some(budgets);
         config.schedule = Some(stages);
+        let stages_text = if a.quick {
+            "three stages on the level-3 sphere: k_p 0.2, 0.1, 0.05"
+        } else {
+            "four stages: k_p 0.2, 0.1 on the level-3 sphere,\n\
+             0.05 on the level-4 sphere, 0.05 on the template (--stage-templates)"
+        };
         let header = format!(
             "fshape demo bunny: data/configs/bunny.toml with norm {name}, scale-free weights\n\
-             (gamma_w {}, gamma_f 0.1) and four stages: k_p 0.2, 0.1 on the level-3 sphere,\n\
-             0.05 on the level-4 sphere, 0.05 on the template (--stage-templates).",
-            a.gamma_w
+             (gamma_w {}, gamma_f 0.1), p_0 in the energy metric, and {stages_text},\n\
+             each ending when J fell by less than {} over {} iterations.",
+            a.gamma_w, BUNNY_DECREASE.0, BUNNY_DECREASE.1
         );
         eprintln!("bunny: {name} -> {}", run.display());
         run_match_staged(&sp, &tp, &header, &config, &run, (0.0, 90.0), &stage_templates)

@@ -269,7 +269,7 @@ fn shoot_inputs(tag: &str) -> (String, String, String, String) {
     std::fs::write(&pfp, pf).unwrap();
     std::fs::write(
         &cfg,
-        "[model]\nnorm = \"h1\"\nlength = 0.5\nnormalize = false\n[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 8\n",
+        "[model]\nnorm = \"h1\"\nlength = 0.5\nnormalize = false\ngamma_f = 1.0\n[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 8\n",
     )
     .unwrap();
     let s = |p: PathBuf| p.display().to_string();
@@ -677,4 +677,31 @@ fn demo_cortex_runs_both_models_on_the_hemispheres_it_is_given() {
     let o = fshape(&args);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("rh.thick.csv.gz") && err.contains("5 values"), "{err}");
+}
+
+#[test]
+fn demo_bunny_quick_runs_three_stages_on_the_coarse_sphere_with_their_convergence_test() {
+    let out = tmp("bunny_quick_out");
+    let o = fshape(&["demo", "bunny", "--quick", "--max-iterations", "1", "--out", &out.display().to_string()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for norm in ["h1", "l2-lumped"] {
+        let dir = out.join("bunny-quick").join(norm);
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+        let stages = summary["stages"].as_array().unwrap();
+        assert_eq!(stages.len(), 3, "{norm}");
+        // Four iterations at most per stage (4 × --max-iterations), each
+        // stage stopped by a rule the summary names.
+        for s in stages {
+            assert!(s["iterations"].as_array().unwrap().len() <= 4, "{norm}: {s}");
+            assert!(["Decrease", "Iterations", "Gradient"].contains(&s["stop"].as_str().unwrap()), "{norm}: {s}");
+        }
+        let config = std::fs::read_to_string(dir.join("config.toml")).unwrap();
+        assert!(config.contains("decrease_window = [5, 5, 5]") && config.contains("momentum_metric = \"energy\""));
+        let template = fshape_mesh::io::read_mesh(&out.join("bunny-quick/source.ply"), &Default::default()).unwrap();
+        assert_eq!(template.n_vertices(), 642);
+    }
+    let o = fshape(&["demo", "cortex", "--quick", "--out", &out.display().to_string()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--quick"), "{err}");
 }
