@@ -155,11 +155,6 @@ impl KernelFactor {
             }
         }
     }
-
-    /// The number of template vertices.
-    pub fn n_vertices(&self) -> usize {
-        self.n
-    }
 }
 
 /// The signal norm's matrix D_s(x_0) on the template, applying H_0's

@@ -541,7 +541,6 @@ impl Session {
                     Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
                 }
             };
-            let spec = &self.plan.stages[k];
             if observer.stage_started(k, stages, spec, current.iterations.len()) == Control::Stop {
                 self.checkpoint.current = Some(current);
                 save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;

@@ -305,14 +305,15 @@ fn coarse_stages_may_shoot_with_a_cheaper_integrator_and_the_last_is_the_model()
     }
 }
 
+/// The unit icosphere of `level` with signal 0 (a template).
+fn sphere(level: u32) -> FShape {
+    let s = fshape_mesh::generate::icosphere(level, 1.0);
+    let n = s.n_vertices();
+    s.with_signal(Some(vec![0.0; n])).unwrap()
+}
+
 #[test]
 fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
-    use fshape_mesh::generate::icosphere;
-    let sphere = |level: u32| {
-        let s = icosphere(level, 1.0);
-        let n = s.n_vertices();
-        s.with_signal(Some(vec![0.0; n])).unwrap()
-    };
     let (_, target, mut config) = inputs();
     let source = sphere(3);
     let mut schedule = config.schedule.clone().unwrap();
@@ -364,7 +365,7 @@ fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
     let mut first = session().with_checkpoint_file(&file);
     first.run(&mut Recorder { stop_after: Some(3), ..Recorder::default() }).unwrap();
     let x = first.checkpoint().current.as_ref().unwrap().state.x.len();
-    assert_eq!(x, 4 * icosphere(1, 1.0).n_vertices(), "stage 0 runs on the level-1 sphere");
+    assert_eq!(x, 4 * sphere(1).n_vertices(), "stage 0 runs on the level-1 sphere");
     let mut second = session().resume_from_file(&file).unwrap();
     second.run(&mut ()).unwrap();
     let again = second.result().unwrap();
@@ -425,12 +426,6 @@ impl Observer for StopAtStage {
 
 #[test]
 fn stages_on_equal_templates_share_them_without_a_transfer() {
-    use fshape_mesh::generate::icosphere;
-    let sphere = |level: u32| {
-        let s = icosphere(level, 1.0);
-        let n = s.n_vertices();
-        s.with_signal(Some(vec![0.0; n])).unwrap()
-    };
     let (_, target, mut config) = inputs();
     let mut schedule = config.schedule.clone().unwrap();
     schedule.kernel_geom.insert(0, fshape_match::PositionKernel::parse("gaussian:0.8").unwrap());
