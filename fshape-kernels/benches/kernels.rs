@@ -62,5 +62,43 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// The shooting's fused self-interaction sums (K p and ∂_x(pᵀKp)/2, and
+/// their directional derivatives) with the bunny's deformation kernel
+/// (Gaussians of widths 0.2 and 0.1, unit weights) on icospheres of radius
+/// 0.35: the general path (`conv_and_grad_into` with x = y) against the
+/// one that visits each pair once (`self_conv_and_grad_into`).
+fn shooting(c: &mut Criterion) {
+    use fshape_kernels::{Profile, SumWorkspace};
+    let mut group = c.benchmark_group("shooting");
+    group.sample_size(10).warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(2));
+    let k = Kernel::try_new(&Profile::Gaussians { sigmas: vec![0.2, 0.1], weights: vec![1.0, 1.0] }).unwrap();
+    for level in [4, 5] {
+        let sphere = fshape_mesh::generate::icosphere(level, 0.35);
+        let y = sphere.points().to_vec();
+        let n = y.len() / 3;
+        let mut rng = SplitMix64(2);
+        let mut r = |len: usize| -> Vec<f64> { (0..len).map(|_| rng.range(-1.0, 1.0)).collect() };
+        let (p, dy, dp) = (r(3 * n), r(3 * n), r(3 * n));
+        let sums = KernelSums::try_new(&k, &y, 3).unwrap();
+        let mut ws = SumWorkspace::default();
+        let (mut conv, mut grad) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
+        group.bench_function(BenchmarkId::new("conv_and_grad_general", n), |bch| {
+            bch.iter(|| sums.conv_and_grad_into(&mut ws, &y, &p, &p, 3, &mut conv, &mut grad).unwrap())
+        });
+        group.bench_function(BenchmarkId::new("conv_and_grad_self", n), |bch| {
+            bch.iter(|| sums.self_conv_and_grad_into(&mut ws, &p, 3, &mut conv, &mut grad).unwrap())
+        });
+        group.bench_function(BenchmarkId::new("jvp_general", n), |bch| {
+            bch.iter(|| {
+                sums.conv_and_grad_jvp_into(&mut ws, &y, &dy, &dy, &p, &dp, &p, &dp, 3, &mut conv, &mut grad).unwrap()
+            })
+        });
+        group.bench_function(BenchmarkId::new("jvp_self", n), |bch| {
+            bch.iter(|| sums.self_conv_and_grad_jvp_into(&mut ws, &dy, &p, &dp, 3, &mut conv, &mut grad).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, shooting);
 criterion_main!(benches);

@@ -210,6 +210,56 @@ fn power_lanes(e: [f64; L], m: u32, floor: f64) -> [f64; L] {
     out
 }
 
+/// k, k' (if `d1`) and k'' (if `d2`) of the sum of Gaussians `terms` at
+/// the lanes' squared distances `u` (zero where not asked), summed over the
+/// terms in order. With integer ratios a_t = m_t·a_min, one exponential e
+/// and its powers e^{m_t} (a few ulps from exp(−a_t u); lanes where the
+/// power would be subnormal are set to 0, as exp_lanes does below e^−708,
+/// to avoid slow subnormal arithmetic).
+#[inline(always)]
+pub(crate) fn gauss_lanes(terms: &GaussTerms, u: &[f64; L], d1: bool, d2: bool) -> ([f64; L], [f64; L], [f64; L]) {
+    let (mut k0, mut k1, mut k2) = ([0.0; L], [0.0; L], [0.0; L]);
+    let base = match terms.powers {
+        Some(_) => {
+            let a = terms.a[..terms.n].iter().copied().fold(f64::INFINITY, f64::min);
+            let mut arg = [0.0; L];
+            for l in 0..L {
+                arg[l] = -a * u[l];
+            }
+            Some(exp_lanes(arg))
+        }
+        None => None,
+    };
+    for term in 0..terms.n {
+        let (a, w) = (terms.a[term], terms.w[term]);
+        let e = match (base, terms.powers) {
+            (Some(e1), Some(m)) => power_lanes(e1, m[term], terms.floors[term]),
+            _ => {
+                let mut arg = [0.0; L];
+                for l in 0..L {
+                    arg[l] = -a * u[l];
+                }
+                exp_lanes(arg)
+            }
+        };
+        // Only the derivatives asked for (constants after inlining).
+        for l in 0..L {
+            k0[l] += w * e[l];
+        }
+        if d1 {
+            for l in 0..L {
+                k1[l] -= a * w * e[l];
+            }
+        }
+        if d2 {
+            for l in 0..L {
+                k2[l] += a * a * w * e[l];
+            }
+        }
+    }
+    (k0, k1, k2)
+}
+
 /// s(u), s'(u), s''(u) of the quintic taper (see `Kernel::derivatives`).
 #[inline(always)]
 fn taper_lanes(t: Taper, u: &[f64; L]) -> ([f64; L], [f64; L], [f64; L]) {
@@ -258,50 +308,7 @@ impl<const D: usize, const BD: usize, const MODE: u8> Block<'_, D, BD, MODE> {
         for j in 0..run.y.len() {
             let (yj, bj) = (&run.y[j], &run.b[j]);
             let u = sq_dist_lanes(&t.x, yj);
-            // k, k', k'' summed over the terms (each from one exponential).
-            let (mut k0, mut k1, mut k2) = ([0.0; L], [0.0; L], [0.0; L]);
-            // With integer ratios a_t = m_t·a_min, one exponential e and its
-            // powers e^{m_t} (a few ulps from exp(−a_t u); lanes where the
-            // power would be subnormal are set to 0, as exp_lanes does
-            // below e^−708, to avoid slow subnormal arithmetic).
-            let base = match self.terms.powers {
-                Some(_) => {
-                    let a = self.terms.a[..self.terms.n].iter().copied().fold(f64::INFINITY, f64::min);
-                    let mut arg = [0.0; L];
-                    for l in 0..L {
-                        arg[l] = -a * u[l];
-                    }
-                    Some(exp_lanes(arg))
-                }
-                None => None,
-            };
-            for term in 0..self.terms.n {
-                let (a, w) = (self.terms.a[term], self.terms.w[term]);
-                let e = match (base, self.terms.powers) {
-                    (Some(e1), Some(m)) => power_lanes(e1, m[term], self.terms.floors[term]),
-                    _ => {
-                        let mut arg = [0.0; L];
-                        for l in 0..L {
-                            arg[l] = -a * u[l];
-                        }
-                        exp_lanes(arg)
-                    }
-                };
-                // Only the derivatives the mode uses (MODE is a constant).
-                for l in 0..L {
-                    k0[l] += w * e[l];
-                }
-                if grad || jvp {
-                    for l in 0..L {
-                        k1[l] -= a * w * e[l];
-                    }
-                }
-                if grad && jvp {
-                    for l in 0..L {
-                        k2[l] += a * a * w * e[l];
-                    }
-                }
-            }
+            let (mut k0, mut k1, mut k2) = gauss_lanes(self.terms, &u, grad || jvp, grad && jvp);
             if let Some(tp) = taper {
                 if grad || jvp {
                     let (s, ds, dds) = taper_lanes(tp, &u);
@@ -391,10 +398,12 @@ pub(crate) struct FastWorkspace {
     dys: Vec<f64>,
     dbs: Vec<f64>,
     rows: Vec<f64>,
+    /// The symmetric sums' per-chunk accumulators (`symmetric.rs`).
+    pub(crate) chunks: Vec<f64>,
     /// Run the block kernel without SIMD dispatch (baseline x86-64), for
     /// the test that every instruction set gives the same bits.
     #[cfg(test)]
-    scalar: bool,
+    pub(crate) scalar: bool,
 }
 
 /// Computes the sum `MODE` for Gaussian sums in 2 or 3 dimensions with

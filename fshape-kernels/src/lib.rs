@@ -42,6 +42,7 @@ mod fast;
 mod mixed;
 mod profile;
 mod sums;
+mod symmetric;
 
 pub use blocks::{BlockPairs, SourceRun};
 pub use mixed::Precision;

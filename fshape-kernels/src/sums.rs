@@ -389,6 +389,82 @@ impl<'a> KernelSums<'a> {
         Ok(())
     }
 
+    /// [`KernelSums::conv_and_grad_into`] at the sources themselves
+    /// (x = y) with a = b: conv = K(y) b and grad = [`KernelSums::grad_cross`]
+    /// of (b, b) at y, half of ∂_y(bᵀK(y)b) (the shooting's K p and
+    /// ∂_x(pᵀK p)/2). For exact sums of Gaussians each pair is visited
+    /// once (the kernel is symmetric: pair (i, j) gives j the mirror of what
+    /// it gives i), about half the work; other kernels take
+    /// [`KernelSums::conv_and_grad_into`]. Serial and parallel results are
+    /// equal bit for bit, as for every sum here.
+    pub fn self_conv_and_grad_into(
+        &self,
+        ws: &mut SumWorkspace,
+        b: &[f64],
+        bdim: usize,
+        conv: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), KernelError> {
+        let n = self.n_sources();
+        self.check_len("b", b, n * bdim)?;
+        self.check_len("conv output", conv, n * bdim)?;
+        self.check_len("gradient output", grad, n * self.dim)?;
+        let inp = crate::symmetric::SelfInputs { y: self.y, dy: &[], b, db: &[] };
+        if !self.self_sums::<false>(ws, inp, bdim, conv, grad)? {
+            self.conv_and_grad_into(ws, self.y, b, b, bdim, conv, grad)?;
+        }
+        Ok(())
+    }
+
+    /// [`KernelSums::conv_and_grad_jvp_into`] at the sources themselves
+    /// with dx = dy, a = b and da = db: the directional derivatives of
+    /// [`KernelSums::self_conv_and_grad_into`] when y and b move by dy and
+    /// db, each pair visited once for exact sums of Gaussians.
+    #[allow(clippy::too_many_arguments)]
+    pub fn self_conv_and_grad_jvp_into(
+        &self,
+        ws: &mut SumWorkspace,
+        dy: &[f64],
+        b: &[f64],
+        db: &[f64],
+        bdim: usize,
+        conv: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), KernelError> {
+        let n = self.n_sources();
+        for (what, v, len) in [
+            ("dy", dy, self.y.len()),
+            ("b", b, n * bdim),
+            ("db", db, n * bdim),
+            ("conv output", conv, n * bdim),
+            ("gradient output", grad, n * self.dim),
+        ] {
+            self.check_len(what, v, len)?;
+        }
+        let inp = crate::symmetric::SelfInputs { y: self.y, dy, b, db };
+        if !self.self_sums::<true>(ws, inp, bdim, conv, grad)? {
+            self.conv_and_grad_jvp_into(ws, self.y, dy, dy, b, db, b, db, bdim, conv, grad)?;
+        }
+        Ok(())
+    }
+
+    /// The symmetric path for exact sums of Gaussians; `false` (nothing
+    /// written) for other kernels and dimensions.
+    fn self_sums<const JVP: bool>(
+        &self,
+        ws: &mut SumWorkspace,
+        inp: crate::symmetric::SelfInputs<'_>,
+        bdim: usize,
+        conv: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<bool, KernelError> {
+        let Some(terms) = self.kernel.gaussian_terms() else { return Ok(false) };
+        if self.kernel.taper().is_some() {
+            return Ok(false);
+        }
+        Ok(crate::symmetric::self_sums_into::<JVP>(&terms, inp, self.dim, bdim, self.parallel, &mut ws.0, conv, grad))
+    }
+
     fn check_targets(&self, x: &[f64]) -> Result<(), KernelError> {
         if !x.len().is_multiple_of(self.dim) {
             return Err(KernelError::Dimension {

@@ -157,7 +157,8 @@ impl Dynamics<'_> {
         let (x, p) = (&z[l.x()], &z[l.mom()]);
         timed(&mut t.kernels, || -> Result<_, ShootError> {
             let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
-            Ok(sums.conv_and_grad_into(&mut s.sums, x, p, p, l.dim, &mut s.kp, &mut s.gk)?)
+            // Each pair once where the kernel allows it (sums of Gaussians).
+            Ok(sums.self_conv_and_grad_into(&mut s.sums, p, l.dim, &mut s.kp, &mut s.gk)?)
         })?;
         for (o, v) in out[l.x()].iter_mut().zip(&s.kp) {
             *o = v / self.gamma_v;
@@ -203,7 +204,7 @@ impl Dynamics<'_> {
         let (dx, dp) = (&w[l.x()], &w[l.mom()]);
         timed(&mut t.kernels, || -> Result<_, ShootError> {
             let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
-            Ok(sums.conv_and_grad_jvp_into(&mut s.sums, x, dx, dx, p, dp, p, dp, l.dim, &mut s.kp, &mut s.gk)?)
+            Ok(sums.self_conv_and_grad_jvp_into(&mut s.sums, dx, p, dp, l.dim, &mut s.kp, &mut s.gk)?)
         })?;
         for (o, v) in out[l.x()].iter_mut().zip(&s.kp) {
             *o = v / self.gamma_v;
