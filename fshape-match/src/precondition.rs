@@ -33,9 +33,11 @@ use fshape_shoot::ShootError;
 /// The ridge's size, relative to k(0)·r_0^d ([`KernelFactor`]).
 pub const RIDGE: f64 = 1.5e-4;
 
-/// The largest template (vertices) whose kernel matrix is factored: 4096
-/// vertices is 128 MiB and about 2·10¹⁰ operations.
-pub const MAX_VERTICES: usize = 4096;
+/// The largest template (vertices) whose kernel matrix is factored: 16384
+/// vertices is 2 GiB and about 1.5·10¹² operations (the bunny's
+/// 10242-vertex template: 800 MiB and 10 s serial on the 2-core machine of
+/// docs/experiments.md, less than one evaluation of J there).
+pub const MAX_VERTICES: usize = 16384;
 
 /// The Cholesky factor of K(x_0) + λD_0⁻¹, applying H_0's shape
 /// (K + λD_0⁻¹)⁻¹ to the p_0 block of the optimiser's unknowns. In the
@@ -52,12 +54,20 @@ pub const MAX_VERTICES: usize = 4096;
 /// λ = [`RIDGE`]·k(0)·r_0^d has the units of K's action on densities
 /// (r_0: the radius where k falls to e^{−1/2}k(0), σ for a Gaussian; d:
 /// the cells' dimension), so it is scale-free too.
-#[derive(Debug)]
+///
+/// The factorisation and the solves are faer's blocked dense Cholesky,
+/// run serially (`Par::Seq`): faer's parallel reductions would make the
+/// bits depend on the number of threads.
 pub struct KernelFactor {
-    n: usize,
     dim: usize,
-    /// Lower triangle of L (row-major n × n; LLᵀ = K + λD_0⁻¹).
-    l: Vec<f64>,
+    /// L (lower triangle; LLᵀ = K + λD_0⁻¹).
+    l: faer::Mat<f64>,
+}
+
+impl std::fmt::Debug for KernelFactor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("KernelFactor").field("n", &self.l.nrows()).field("dim", &self.dim).finish_non_exhaustive()
+    }
 }
 
 /// The radius where k falls to e^{−1/2}·k(0) (σ for a Gaussian of width σ).
@@ -84,6 +94,8 @@ impl KernelFactor {
     /// kernel that is not positive definite); an error where the lumped
     /// mass is not defined (a degenerate cell).
     pub fn new(template: &FShape, kernel: &Kernel) -> Result<Option<KernelFactor>, ShootError> {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::linalg::cholesky::llt::factor;
         let (n, dim) = (template.n_vertices(), template.dim());
         if n > MAX_VERTICES {
             return Ok(None);
@@ -91,36 +103,26 @@ impl KernelFactor {
         let masses = SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(template.points())?;
         let lambda = KernelFactor::ridge(kernel, template.kind().dim());
         let points = template.points();
-        let mut l = vec![0.0; n * n];
-        for i in 0..n {
-            let xi = &points[i * dim..(i + 1) * dim];
-            for j in 0..=i {
-                let xj = &points[j * dim..(j + 1) * dim];
+        // The lower triangle, column by column (faer is column-major).
+        let mut l = faer::Mat::<f64>::zeros(n, n);
+        for j in 0..n {
+            let xj = &points[j * dim..(j + 1) * dim];
+            let col = l.col_mut(j).try_as_col_major_mut().expect("a fresh matrix is contiguous").as_slice_mut();
+            for (i, v) in col.iter_mut().enumerate().skip(j) {
+                let xi = &points[i * dim..(i + 1) * dim];
                 let u: f64 = xi.iter().zip(xj).map(|(a, b)| (a - b) * (a - b)).sum();
-                l[i * n + j] = kernel.value(u);
+                *v = kernel.value(u);
             }
-            l[i * n + i] += lambda / masses[i];
+            col[j] += lambda / masses[j];
         }
-        // Row-oriented Cholesky–Crout: L_ij = (A_ij − Σ_{k<j} L_ik L_jk)/L_jj.
-        for i in 0..n {
-            for j in 0..=i {
-                let (upper, lower) = l.split_at_mut(i * n);
-                let row_i = &lower[..n];
-                let row_j = if j == i { row_i } else { &upper[j * n..j * n + n] };
-                let s: f64 = row_i[..j].iter().zip(&row_j[..j]).map(|(a, b)| a * b).sum();
-                let a = lower[j] - s;
-                if j == i {
-                    if !(a > 0.0 && a.is_finite()) {
-                        return Ok(None);
-                    }
-                    lower[j] = a.sqrt();
-                } else {
-                    let d = upper[j * n + j];
-                    lower[j] = a / d;
-                }
-            }
+        let par = faer::Par::Seq;
+        let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f64>(n, par, Default::default()));
+        let done =
+            factor::cholesky_in_place(l.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default());
+        if done.is_err() {
+            return Ok(None);
         }
-        Ok(Some(KernelFactor { n, dim, l }))
+        Ok(Some(KernelFactor { dim, l }))
     }
 
     /// The ridge λ of a kernel on cells of dimension `cell_dim`, without
@@ -132,26 +134,20 @@ impl KernelFactor {
     /// v ← (K + λD_0⁻¹)⁻¹v on the first n·dim values of `v` (the p_0
     /// block, each dimension alike); the rest is left as it is.
     pub fn apply(&self, v: &mut [f64]) {
-        let (n, d) = (self.n, self.dim);
-        let block = &mut v[..n * d];
-        // L y = b, row by row, all dim columns at once.
+        use faer::dyn_stack::MemStack;
+        let (n, d) = (self.l.nrows(), self.dim);
+        // The block is n × d row-major: as a matrix, d × n column-major; its
+        // transpose is the n × d right-hand side.
+        let mut rhs = faer::Mat::<f64>::from_fn(n, d, |i, c| v[i * d + c]);
+        faer::linalg::cholesky::llt::solve::solve_in_place(
+            self.l.as_ref(),
+            rhs.as_mut(),
+            faer::Par::Seq,
+            MemStack::new(&mut []),
+        );
         for i in 0..n {
-            let row = &self.l[i * n..i * n + i];
             for c in 0..d {
-                let s: f64 = row.iter().enumerate().map(|(k, lik)| lik * block[k * d + c]).sum();
-                block[i * d + c] = (block[i * d + c] - s) / self.l[i * n + i];
-            }
-        }
-        // Lᵀ x = y, from the last row up.
-        for i in (0..n).rev() {
-            for c in 0..d {
-                block[i * d + c] /= self.l[i * n + i];
-            }
-            let row = &self.l[i * n..i * n + i];
-            for (k, lik) in row.iter().enumerate() {
-                for c in 0..d {
-                    block[k * d + c] -= lik * block[i * d + c];
-                }
+                v[i * d + c] = rhs[(i, c)];
             }
         }
     }

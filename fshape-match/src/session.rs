@@ -226,6 +226,10 @@ pub struct Session {
     /// The template the problem holds: the stage whose template it is, or
     /// `None` for the source.
     on_template: Option<usize>,
+    /// Whether `unknowns` carries the metric's matrices for the template
+    /// the problem holds (built by the first stage on it: a stage template
+    /// may replace the source before any stage runs on it).
+    metric_built: bool,
     parallel: bool,
 }
 
@@ -257,7 +261,9 @@ impl Session {
         }
         let plan = config.plan(source, target)?;
         let problem = Problem::new(source, plan.model.clone())?;
-        let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales)?;
+        // The metric's matrices (a dense kernel factor) wait for the first
+        // stage on the source: it may run on a stage template first.
+        let unknowns = Unknowns::for_template(source, plan.model.kind(), plan.metrics, plan.scales)?;
         let checkpoint = Checkpoint {
             format: CHECKPOINT_FORMAT,
             fingerprint: fingerprint(source, target, config),
@@ -278,6 +284,7 @@ impl Session {
             stage_templates: Vec::new(),
             template_keys: Vec::new(),
             on_template: None,
+            metric_built: false,
             parallel: true,
         })
     }
@@ -465,7 +472,8 @@ impl Session {
         &self.problem
     }
 
-    /// The packing of the unknowns.
+    /// The packing of the unknowns (of the stage that ran or runs last; it
+    /// carries the energy metric's matrices once a stage has started).
     pub fn unknowns(&self) -> &Unknowns {
         &self.unknowns
     }
@@ -483,11 +491,14 @@ impl Session {
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
         let (key, template) = self.template_of(k);
         if key != self.on_template {
-            let problem = Problem::new(template, self.plan.model.clone())?.with_parallel(self.parallel);
-            self.unknowns = Unknowns::scaled(&problem, self.plan.metrics, self.plan.scales)?;
-            self.problem = problem;
+            self.problem = Problem::new(template, self.plan.model.clone())?.with_parallel(self.parallel);
             self.on_template = key;
             self.staged = None;
+            self.metric_built = false;
+        }
+        if !self.metric_built {
+            self.unknowns = Unknowns::scaled(&self.problem, self.plan.metrics, self.plan.scales)?;
+            self.metric_built = true;
         }
         if self.staged != Some(k) {
             let stage = &self.plan.stages[k];

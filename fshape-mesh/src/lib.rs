@@ -34,6 +34,7 @@
 //! assert!(sphere.validate().is_clean());
 //! ```
 
+mod coarsen;
 mod geometry;
 mod shape;
 mod topology;
@@ -44,6 +45,7 @@ pub mod io;
 #[cfg(feature = "test-support")]
 pub mod test_support;
 
+pub use coarsen::CoarsenError;
 pub use geometry::BoundingBox;
 pub use shape::{CellKind, FShape, ShapeError};
 pub use topology::{Facet, Topology};
