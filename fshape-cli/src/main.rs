@@ -180,11 +180,10 @@ enum Command {
         /// Digits: the ratios γ_V/γ_f to run.
         #[arg(long, value_delimiter = ',', default_value = "1,20,100")]
         ratios: Vec<f64>,
-        /// Weight γ_W of the data attachment [default: 100 for the digits
-        /// and 1e-2 for the cortex, in the data's units; 1e3 for the bunny,
-        /// scale-free].
-        #[arg(long)]
-        gamma_w: Option<f64>,
+        /// Weight γ_W of the data attachment (scale-free: the demos
+        /// normalise lengths and signals).
+        #[arg(long, default_value_t = 1e3)]
+        gamma_w: f64,
         /// Bunny: the 642-vertex sphere as template and three stages on it
         /// (about a minute per norm) instead of the paper's 10242 vertices.
         #[arg(long)]
@@ -285,16 +284,9 @@ fn main() -> ExitCode {
                 _ if quick && name != "bunny" => {
                     Err(anyhow::anyhow!("--quick: only the bunny demo has a quick variant"))
                 }
-                "bunny" => {
-                    let gamma_w = gamma_w.unwrap_or(1e3);
-                    demo::bunny(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick })
-                }
-                "cortex" => {
-                    let gamma_w = gamma_w.unwrap_or(1e-2);
-                    demo::cortex(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick })
-                }
+                "bunny" => demo::bunny(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick }),
+                "cortex" => demo::cortex(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick }),
                 _ => {
-                    let gamma_w = gamma_w.unwrap_or(100.0);
                     demo::digits(&demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w })
                 }
             }

@@ -644,7 +644,8 @@ fn match_takes_the_view_as_azimuth_comma_elevation_negative_included() {
 fn demo_cortex_runs_both_models_on_the_hemispheres_it_is_given() {
     // Stand-ins for fsaverage5 (coarse spheres in mm, the right one at
     // x > 0), so the demo's wiring runs in a second: mirroring, the
-    // thickness CSV, one config per model, three stages each.
+    // thickness CSV, the coarse templates undone from the icosahedral
+    // subdivision, one config per model, four stages each.
     use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
     let data = tmp("cortex_data");
     let fs5 = data.join("fsaverage5");
@@ -664,11 +665,18 @@ fn demo_cortex_runs_both_models_on_the_hemispheres_it_is_given() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let target = read_mesh(&out.join("cortex/target.ply"), &ReadOptions::default()).unwrap();
     assert!(target.points().chunks_exact(3).all(|p| p[0] < 0.0), "mirrored to x < 0");
+    // The first 42 and 12 vertices of the 162-vertex sphere, with their thickness.
+    for (file, n) in [("source_coarse1.ply", 42), ("source_coarse2.ply", 12)] {
+        let coarse = read_mesh(&out.join("cortex").join(file), &ReadOptions::default()).unwrap();
+        assert_eq!((coarse.n_vertices(), coarse.n_cells()), (n, 2 * n - 4), "{file}");
+        assert_eq!(coarse.points(), &left[..3 * n]);
+        assert_eq!(coarse.signal().unwrap(), &thick(&left, 0.5)[..n]);
+    }
     for model in ["tangential", "metamorphosis"] {
         let dir = out.join("cortex").join(model);
         let summary: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
-        assert_eq!(summary["stages"].as_array().unwrap().len(), 3, "{model}");
+        assert_eq!(summary["stages"].as_array().unwrap().len(), 4, "{model}");
         assert!(summary["final_value"].as_f64().unwrap() < summary["stages"][0]["initial"]["value"].as_f64().unwrap());
         assert!(std::fs::read_to_string(dir.join("config.toml")).unwrap().contains(&format!("kind = \"{model}\"")));
     }
