@@ -51,9 +51,15 @@ fn attachment(geom: f64, signal: f64, tolerance: Option<f64>) -> Result<Attachme
     })
 }
 
-/// `[schedule]` of Gaussian position kernels, coarse to fine.
-fn schedule(widths: &[f64]) -> Result<ScheduleSection> {
-    Ok(ScheduleSection::new(widths.iter().map(|&w| gaussian(w)).collect::<Result<_>>()?))
+/// `[schedule]` of Gaussian position kernels, coarse to fine, each stage
+/// ending when J fell by less than its tolerance over
+/// [`BUNNY_DECREASE`]'s window, or at its iteration limit.
+fn schedule(widths: &[f64], tolerances: Vec<f64>, limits: Vec<usize>) -> Result<ScheduleSection> {
+    let mut stages = ScheduleSection::new(widths.iter().map(|&w| gaussian(w)).collect::<Result<_>>()?);
+    stages.decrease_tolerance = Some(tolerances);
+    stages.decrease_window = Some(vec![BUNNY_DECREASE.1; widths.len()]);
+    stages.max_iterations = Some(limits);
+    Ok(stages)
 }
 
 /// Writes `config` (after the comment lines of `header`) to
@@ -141,11 +147,7 @@ pub fn digits(a: &DigitsArgs<'_>) -> Result<()> {
         config.deformation.tolerance = Some(1e-6);
         config.attachment = Some(attachment(p3, f, Some(1e-6))?);
         config.optimizer.momentum_metric = fshape_match::Metric::Energy;
-        let mut stages = schedule(&[p1, p2, p3, p3])?;
-        stages.decrease_tolerance = Some(vec![BUNNY_DECREASE.0; 4]);
-        stages.decrease_window = Some(vec![BUNNY_DECREASE.1; 4]);
-        stages.max_iterations = Some(vec![4 * n, 4 * n, 4 * n, n]);
-        config.schedule = Some(stages);
+        config.schedule = Some(schedule(&[p1, p2, p3, p3], vec![BUNNY_DECREASE.0; 4], vec![4 * n, 4 * n, 4 * n, n])?);
         let header = format!(
             "fshape demo digits: gamma_V / gamma_f = {ratio}, scale-free weights (gamma_w {}),\n\
              p_0 in the energy metric; k_p 0.141, 0.071, 0.035 on source_coarse.ply, then 0.035\n\
@@ -222,24 +224,19 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
         config.model.gamma_f = 0.1;
         config.model.gamma_w = a.gamma_w;
         config.optimizer.momentum_metric = fshape_match::Metric::Energy;
-        // Each stage ends when J fell by less than 1 % over its last 5
-        // iterations; the limits are a safety net.
+        // Each stage ends on its decrease test; the limits are a safety net.
         let (widths, budgets) = if a.quick {
             (vec![0.2, 0.1, 0.05], vec![budget(4.0), budget(4.0), budget(4.0)])
         } else {
             (vec![0.2, 0.1, 0.05, 0.05], vec![budget(4.0), budget(4.0), budget(1.5), budget(0.4)])
         };
-        let mut stages = schedule(&widths)?;
         // At the paper's resolution the coarse stages go to half the
         // tolerance: they are cheap, and the last stage starts closer.
         let mut tolerances = vec![BUNNY_DECREASE.0; widths.len()];
         if !a.quick {
             tolerances[..3].fill(BUNNY_COARSE_DECREASE);
         }
-        stages.decrease_tolerance = Some(tolerances);
-        stages.decrease_window = Some(vec![BUNNY_DECREASE.1; widths.len()]);
-        stages.max_iterations = Some(budgets);
-        config.schedule = Some(stages);
+        config.schedule = Some(schedule(&widths, tolerances, budgets)?);
         let stages_text = if a.quick {
             "three stages on the level-3 sphere: k_p 0.2, 0.1, 0.05"
         } else {
@@ -338,11 +335,8 @@ pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
         config.deformation.tolerance = Some(1e-6);
         config.attachment = Some(attachment(5.0, 1.0, Some(1e-6))?);
         config.optimizer.momentum_metric = fshape_match::Metric::Energy;
-        let mut stages = schedule(&[20.0, 10.0, 5.0, 5.0])?;
-        stages.decrease_tolerance = Some(vec![BUNNY_DECREASE.0; 4]);
-        stages.decrease_window = Some(vec![BUNNY_DECREASE.1; 4]);
-        stages.max_iterations = Some(vec![4 * n, 4 * n, 2 * n, (n / 2).max(1)]);
-        config.schedule = Some(stages);
+        let limits = vec![4 * n, 4 * n, 2 * n, (n / 2).max(1)];
+        config.schedule = Some(schedule(&[20.0, 10.0, 5.0, 5.0], vec![BUNNY_DECREASE.0; 4], limits)?);
         let header = format!(
             "fshape demo cortex: {}, H1 with length {CORTEX_LENGTH_MM} mm, scale-free weights\n\
              (gamma_w {}, gamma_f 0.1), p_0 in the energy metric. Everything is in mm\n\
