@@ -62,6 +62,31 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// How close a shape X is to a target Y, as `fshape match` reports a
+    /// registration: the mean symmetric closest-point distance, its 95th
+    /// percentile and maximum, and the share of Y within 1 % of X, as
+    /// fractions of Y's bounding-box diagonal; the signal error at closest
+    /// points (rms and 99th percentile, of Y's signal range) and the
+    /// roughness of X's signal against Y's (the ratio of their Dirichlet
+    /// seminorms: above 1 when X's signal oscillates).
+    Quality {
+        /// The shape X (e.g. a registration's state at t = 1).
+        source: PathBuf,
+        /// The target Y.
+        target: PathBuf,
+        /// Vertex property to read as the signal of both files (default `signal`).
+        #[arg(long)]
+        signal_name: Option<String>,
+        /// Per-vertex signal CSV for the source.
+        #[arg(long)]
+        source_signal: Option<PathBuf>,
+        /// Per-vertex signal CSV for the target.
+        #[arg(long)]
+        target_signal: Option<PathBuf>,
+        /// Print JSON for scripts.
+        #[arg(long)]
+        json: bool,
+    },
     /// The data attachment A(X, Y) = ⟨X,X⟩ − 2⟨X,Y⟩ + ⟨Y,Y⟩ between two
     /// fshapes (functional varifold; varifold or current without a signal
     /// kernel). Prints A itself, a squared distance, then the three inner
@@ -236,6 +261,9 @@ fn main() -> ExitCode {
             signals: (source_signal.as_deref(), target_signal.as_deref()),
             json,
         }),
+        Command::Quality { source, target, signal_name, source_signal, target_signal, json } => {
+            quality(&source, &target, signal_name, (source_signal.as_deref(), target_signal.as_deref()), json)
+        }
         Command::Shoot { source, momentum, signal_momentum, config, out, times, signal_name } => shoot(&ShootArgs {
             source: &source,
             momentum: &momentum,
@@ -586,6 +614,26 @@ fn distance(a: &DistanceArgs<'_>) -> Result<()> {
         println!("A = {:.12e}", d.value);
         println!("<X,X> = {:.12e}\n<X,Y> = {:.12e}\n<Y,Y> = {:.12e}", d.xx, d.xy, d.yy);
         println!("({} and {} cells, {:.3} s)", x.n_cells(), y.n_cells(), summary.seconds);
+    }
+    Ok(())
+}
+
+/// `fshape quality`: the match quality of one file against another.
+fn quality(
+    source: &Path,
+    target: &Path,
+    signal_name: Option<String>,
+    signals: (Option<&Path>, Option<&Path>),
+    json: bool,
+) -> Result<()> {
+    let x = load(source, signal_name.clone(), signals.0)?;
+    let y = load(target, signal_name, signals.1)?;
+    let q = fshape_match::quality(&x, &y)
+        .with_context(|| format!("the quality of {} against {}", source.display(), target.display()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&q)?);
+    } else {
+        println!("{} against {}: {}", source.display(), target.display(), q.describe());
     }
     Ok(())
 }

@@ -474,6 +474,13 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     assert!(num(q, "signal_rms") < num(q0, "signal_rms"), "{q} against {q0}");
     let own = fshape_match::quality(&end, &target).unwrap();
     assert!((own.mean_distance - num(q, "mean_distance")).abs() < 1e-9, "{own:?}");
+    // `fshape quality` on the written end state says the same, field by field.
+    let o = fshape(&["quality", &out.join("state_004.ply").display().to_string(), &t, "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cli = json(&o);
+    for k in ["mean_distance", "p95_distance", "target_within_1pct", "signal_rms", "signal_p99", "signal_roughness"] {
+        assert!((num(&cli, k) - num(q, k)).abs() < 1e-9 * (1.0 + num(q, k).abs()), "{k}: {cli} against {q}");
+    }
     let p0 = fshape_mesh::io::csv::read_vectors(&out.join("p0.csv"), 3).unwrap();
     assert_eq!(p0.len(), 3 * target.n_vertices());
     // The match's momenta shot again with the shoot.toml it wrote (the

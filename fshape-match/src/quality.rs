@@ -18,7 +18,17 @@
 //! And the signal error: at each target sample, the matched signal
 //! interpolated at its closest point on X minus the target's signal there;
 //! its area-weighted root mean square as a fraction of the target signal's
-//! range (max − min over the vertices).
+//! range (max − min over the vertices), and its 99th percentile (isolated
+//! spots of wrong value, which the rms dilutes).
+//!
+//! And the signal's roughness: the Dirichlet seminorm of the matched
+//! signal on the matched shape, (∫_X |∇f|²)^½ of the P1 interpolant, over
+//! the target signal's on the target. A faithful match gives about 1; a
+//! signal that oscillates between vertices (the paper's lumped-L²
+//! artefacts) gives more, one smoothed too much gives less. For surfaces
+//! both integrals have the same units whatever the size of the shape, so
+//! the ratio compares shapes of different sizes; for curves it scales as
+//! the inverse length ratio, near 1 once the shapes are close.
 
 use fshape_mesh::{CellKind, FShape};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -45,6 +55,15 @@ pub struct Quality {
     /// RMS of the signal error at closest points / the target signal's
     /// range; `None` when the target has no signal or a constant one.
     pub signal_rms: Option<f64>,
+    /// 99th percentile of the absolute signal error at closest points /
+    /// the target signal's range (area-weighted); `None` as `signal_rms`.
+    #[serde(default)]
+    pub signal_p99: Option<f64>,
+    /// Dirichlet seminorm of the shape's signal over the target's
+    /// (module docs); `None` when either has no signal or the target's
+    /// signal is constant.
+    #[serde(default)]
+    pub signal_roughness: Option<f64>,
     /// The target signal's range (max − min), in its units (0 without one).
     pub signal_range: f64,
 }
@@ -61,6 +80,12 @@ impl Quality {
         );
         if let Some(e) = self.signal_rms {
             s.push_str(&format!(", signal error {:.2}% of its range (rms)", 100.0 * e));
+            if let Some(p) = self.signal_p99 {
+                s.push_str(&format!(", {:.2}% (99th percentile)", 100.0 * p));
+            }
+        }
+        if let Some(r) = self.signal_roughness {
+            s.push_str(&format!(", signal roughness {r:.2} of the target's"));
         }
         s
     }
@@ -268,6 +293,36 @@ fn signal_at(shape: &FShape, cell: usize, bary: [f64; 3]) -> Option<f64> {
     Some(ids.iter().zip(bary).map(|(&v, w)| w * f[v]).sum())
 }
 
+/// (∫ |∇f|²)^½ over the shape for the P1 interpolant f of its signal:
+/// per triangle, area × dfᵀ G⁻¹ df with G the Gram matrix of two edges and
+/// df the value differences along them; per segment (f_b − f_a)²/length.
+/// Cells of zero volume carry no gradient and are skipped. `None` without
+/// a signal.
+pub fn dirichlet_seminorm(shape: &FShape) -> Option<f64> {
+    let f = shape.signal()?;
+    let k = shape.kind().n_corners();
+    let mut sum = 0.0;
+    for (c, ids) in shape.cells().chunks_exact(k).enumerate() {
+        let p = corners(shape, c);
+        let (e1, d1) = (sub(p[1], p[0]), f[ids[1]] - f[ids[0]]);
+        if k == 2 {
+            let len = dot(e1, e1).sqrt();
+            if len > 0.0 {
+                sum += d1 * d1 / len;
+            }
+            continue;
+        }
+        let (e2, d2) = (sub(p[2], p[0]), f[ids[2]] - f[ids[0]]);
+        let (g11, g12, g22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
+        let det = g11 * g22 - g12 * g12;
+        if det > 0.0 {
+            // dfᵀ G⁻¹ df × area, area = ½√det.
+            sum += (g22 * d1 * d1 - 2.0 * g12 * d1 * d2 + g11 * d2 * d2) / det * 0.5 * det.sqrt();
+        }
+    }
+    Some(sum.sqrt())
+}
+
 /// The weighted `q`-quantile of values with weights.
 fn quantile(mut pairs: Vec<(f64, f64)>, q: f64) -> f64 {
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -315,16 +370,24 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         let (lo, hi) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
         if hi >= lo { hi - lo } else { 0.0 }
     });
-    let signal_rms = if range > 0.0 && shape.signal().is_some() {
-        let mut sum = 0.0;
-        for (i, c) in dy.iter().enumerate() {
-            let ft = signal_at(target, ys.cells[i], ys.bary[i]).unwrap_or(0.0);
-            let fs = signal_at(shape, c.cell, c.bary).unwrap_or(0.0);
-            sum += ys.weights[i] * (fs - ft) * (fs - ft);
-        }
-        Some((sum / wy).sqrt() / range)
+    let (signal_rms, signal_p99) = if range > 0.0 && shape.signal().is_some() {
+        let errors: Vec<(f64, f64)> = dy
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let ft = signal_at(target, ys.cells[i], ys.bary[i]).unwrap_or(0.0);
+                let fs = signal_at(shape, c.cell, c.bary).unwrap_or(0.0);
+                ((fs - ft).abs(), ys.weights[i])
+            })
+            .collect();
+        let sum: f64 = errors.iter().map(|(e, w)| w * e * e).sum();
+        (Some((sum / wy).sqrt() / range), Some(quantile(errors, 0.99) / range))
     } else {
-        None
+        (None, None)
+    };
+    let signal_roughness = match (dirichlet_seminorm(shape), dirichlet_seminorm(target)) {
+        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+        _ => None,
     };
     Ok(Quality {
         diagonal,
@@ -333,6 +396,8 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         max_distance,
         target_within_1pct: within / wy,
         signal_rms,
+        signal_p99,
+        signal_roughness,
         signal_range: range,
     })
 }

@@ -28,6 +28,60 @@ fn parallel_squares_are_at_their_offset_and_a_shifted_signal_at_its_shift() {
         // The signal x + c against x on a square whose x spans [-1, 1].
         assert!((q.signal_range - 2.0).abs() < 1e-12);
         assert!((q.signal_rms.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{:?}", q.signal_rms);
+        // The error is |c| everywhere: so is its 99th percentile.
+        assert!((q.signal_p99.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{:?}", q.signal_p99);
+        // The same gradient on the same square.
+        assert!((q.signal_roughness.unwrap() - 1.0).abs() < 1e-12, "{:?}", q.signal_roughness);
+    }
+}
+
+#[test]
+fn roughness_is_the_ratio_of_gradients_and_grows_with_oscillation() {
+    let target = square_at(0.0, 0.0);
+    // f = x on the square [-1, 1]²: ∫|∇f|² = its area, 4.
+    let d = fshape_match::quality::dirichlet_seminorm(&target).unwrap();
+    assert!((d - 2.0).abs() < 1e-12, "{d}");
+    let steeper = {
+        let f: Vec<f64> = target.points().chunks_exact(3).map(|p| 3.0 * p[0] - 1.0).collect();
+        target.clone().with_signal(Some(f)).unwrap()
+    };
+    let q = quality(&steeper, &target).unwrap();
+    assert!((q.signal_roughness.unwrap() - 3.0).abs() < 1e-12, "{q:?}");
+    // ±e alternating with the vertex index: an rms error of under 2 % of
+    // the range, smaller than the offsets of the test above (which keep the
+    // roughness at 1), but edges of about 0.1 turn ±0.05 into gradients
+    // of the order of the target's own.
+    let e = 0.05;
+    let wiggle = |v: usize| if v.is_multiple_of(2) { e } else { -e };
+    let f: Vec<f64> = target.points().chunks_exact(3).enumerate().map(|(v, p)| p[0] + wiggle(v)).collect();
+    let rough = quality(&target.clone().with_signal(Some(f)).unwrap(), &target).unwrap();
+    assert!(rough.signal_rms.unwrap() < 0.02, "{rough:?}");
+    assert!(rough.signal_roughness.unwrap() > 1.2, "{rough:?}");
+    assert!(rough.signal_p99.unwrap() <= e / 2.0 + 1e-12, "{rough:?}");
+    // Without a signal on either side there is no roughness.
+    assert_eq!(quality(&target.clone().with_signal(None).unwrap(), &target).unwrap().signal_roughness, None);
+}
+
+/// ∫|∇f|² by another construction: the H¹ form (mass + ℓ² stiffness, ℓ =
+/// 1) minus the L² form, both from fshape-fem.
+fn fem_dirichlet(s: &FShape) -> f64 {
+    use fshape_fem::{Norm, SignalNorm};
+    let f = s.signal().unwrap();
+    let h1 = SignalNorm::try_new(s, Norm::H1 { length: 1.0 }).unwrap().quadratic(s.points(), f).unwrap();
+    let l2 = SignalNorm::try_new(s, Norm::L2).unwrap().quadratic(s.points(), f).unwrap();
+    h1 - l2
+}
+
+#[test]
+fn the_dirichlet_seminorm_agrees_with_the_finite_element_forms() {
+    let mut rng = fshape_mesh::generate::SplitMix64(29);
+    let shapes = [perturbed_icosphere(2, 0.2, 3), random_curve(2, 40, 5), random_curve(3, 25, 6)];
+    for s in shapes {
+        let f: Vec<f64> = (0..s.n_vertices()).map(|_| rng.range(-1.0, 1.0)).collect();
+        let s = s.with_signal(Some(f)).unwrap();
+        let ours = fshape_match::quality::dirichlet_seminorm(&s).unwrap();
+        let theirs = fem_dirichlet(&s).sqrt();
+        assert!((ours - theirs).abs() < 1e-10 * theirs, "{ours} against {theirs}");
     }
 }
 
