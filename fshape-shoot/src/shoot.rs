@@ -219,6 +219,19 @@ impl Problem {
         Ok(())
     }
 
+    /// Replaces the template's vertex positions and signal, keeping its
+    /// cells (an atlas moves its template between iterations). The signal
+    /// norm's symbolic analysis depends only on the cells, so it is kept.
+    /// `signal` may be `None` for a zero signal.
+    pub fn set_template(&mut self, points: &[f64], signal: Option<&[f64]>) -> Result<(), ShootError> {
+        let n = self.template.n_vertices();
+        let signal = signal.map_or_else(|| vec![0.0; n], <[f64]>::to_vec);
+        // (A cell the move degenerated is refused by the first shot, which
+        // names it.)
+        self.template = self.template.clone().with_points(points.to_vec())?.with_signal(Some(signal))?;
+        Ok(())
+    }
+
     /// Replaces the integrator and its number of steps (a coarse-to-fine
     /// schedule may shoot its coarse stages more cheaply); the rest of the
     /// model is kept.
@@ -516,7 +529,27 @@ impl Problem {
             ModelKind::Tangential => lam[l.f()].iter().zip(&ges).map(|(a, b)| a + b).collect(),
             ModelKind::Lddmm => vec![0.0; l.p],
         };
-        Ok(Gradient { objective: obj, p0: grad_p, pf: grad_pf, forward, backward, timings: t, trajectory: traj })
+        // The template's gradient: ∂J/∂x_0 = λ_x + ∂H_0/∂x, and ∂H/∂x = −ṗ,
+        // the momentum's slope at t = 0 with the sign changed; the
+        // tangential model's (γ_f/2)ζᵀD(x_0)ζ adds (γ_f/2)∂_x(ζᵀDζ).
+        // ∂J/∂f_0 = λ_f: H does not depend on f (f_0 + ζ for tangential).
+        let mut grad_x: Vec<f64> = lam[l.x()].iter().zip(&k0[l.mom()]).map(|(a, b)| a - b).collect();
+        if let (ModelKind::Tangential, Some(fem)) = (self.model.kind(), &self.fem) {
+            let g = timed(&mut t.fem, || fem.grad(self.template.points(), pf, pf))?;
+            axpy(&mut grad_x, 0.5 * self.model.gamma_f(), &g);
+        }
+        let grad_f = lam[l.f()].to_vec();
+        Ok(Gradient {
+            objective: obj,
+            p0: grad_p,
+            pf: grad_pf,
+            x0: grad_x,
+            f0: grad_f,
+            forward,
+            backward,
+            timings: t,
+            trajectory: traj,
+        })
     }
 
     /// Flows extra points (M × n) along a trajectory: ẏ = K_{y,x} p / γ_V,
@@ -581,6 +614,12 @@ pub struct Gradient {
     pub p0: Vec<f64>,
     /// ∂J/∂p^f (P): ∂J/∂ζ for the tangential model, zeros for LDDMM.
     pub pf: Vec<f64>,
+    /// ∂J/∂x_0 (P × n): the gradient in the template's vertex positions,
+    /// momenta held fixed (an atlas's template gradient).
+    pub x0: Vec<f64>,
+    /// ∂J/∂f_0 (P): the gradient in the template's signal, momenta held
+    /// fixed.
+    pub f0: Vec<f64>,
     /// Seconds in the forward pass (shooting + A).
     pub forward: f64,
     /// Seconds in the backward pass (adjoint).

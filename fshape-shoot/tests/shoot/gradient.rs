@@ -2,6 +2,7 @@
 //! directions, for every norm, model and integrator, with exact and
 //! truncated deformation kernels.
 
+use fshape_mesh::FShape;
 use fshape_mesh::generate::SplitMix64;
 use fshape_mesh::test_support::{check_gradient, random_direction};
 use fshape_shoot::Problem;
@@ -67,4 +68,70 @@ fn the_gradient_is_exact_for_each_integrator_and_for_curves() {
             check(&problem, &p0, &pf, &format!("{scheme}, {what}"), &mut rng);
         }
     }
+}
+
+/// `shape` with the signal `scale`·(x + y²) plus a little noise.
+fn with_signal(shape: FShape, scale: f64, rng: &mut SplitMix64) -> FShape {
+    let d = shape.dim();
+    let f: Vec<f64> =
+        shape.points().chunks_exact(d).map(|p| scale * (p[0] + p[1] * p[1]) + 0.1 * rng.range(-1.0, 1.0)).collect();
+    shape.with_signal(Some(f)).unwrap()
+}
+
+/// ∂J/∂x_0 and ∂J/∂f_0 (the template's gradient, momenta fixed) against
+/// central differences of J with the template moved by `set_template`.
+fn check_template(problem: &mut Problem, p0: &[f64], pf: &[f64], label: &str, rng: &mut SplitMix64) {
+    let g = problem.objective_grad(p0, pf).unwrap();
+    let (x0, f0) = (problem.template().points().to_vec(), problem.template().signal().unwrap().to_vec());
+    let n = x0.len();
+    let z: Vec<f64> = x0.iter().chain(&f0).copied().collect();
+    let grad: Vec<f64> = g.x0.iter().chain(&g.f0).copied().collect();
+    let cell = std::cell::RefCell::new(problem);
+    let j = |z: &[f64]| {
+        let mut p = cell.borrow_mut();
+        p.set_template(&z[..n], Some(&z[n..])).unwrap();
+        p.objective(p0, pf).unwrap().0.value
+    };
+    for _ in 0..2 {
+        let v = random_direction(z.len(), rng);
+        let c = check_gradient(j, &z, &grad, &v, 1e-5);
+        assert!(c.rel_error < 1e-6, "{label}: {c:?}");
+    }
+    // Positions alone and the signal alone, so neither hides behind the other.
+    for part in [0..n, n..z.len()] {
+        let mut v = vec![0.0; z.len()];
+        v[part.clone()].copy_from_slice(&random_direction(part.len(), rng));
+        let c = check_gradient(j, &z, &grad, &v, 1e-5);
+        assert!(c.rel_error < 1e-6, "{label}, {part:?}: {c:?}");
+    }
+}
+
+#[test]
+fn the_template_gradient_matches_central_differences_for_every_norm_and_model() {
+    let mut rng = SplitMix64(8);
+    let (template, target) = surfaces();
+    let (template, target) = (with_signal(template, 1.0, &mut rng), with_signal(target, 0.5, &mut rng));
+    let (p0, pf) = momenta(&template, 0.3, 3);
+    for kind in ["metamorphosis", "tangential", "lddmm"] {
+        for norm in ["l2-lumped", "l2", "h1"] {
+            if kind == "lddmm" && norm != "l2-lumped" {
+                continue;
+            }
+            let m = model(
+                &format!("kind = \"{kind}\"\nnorm = \"{norm}\"\nlength = 0.5\ngamma_f = 0.5\ngamma_w = 2.0"),
+                "",
+                "rk4",
+                5,
+            );
+            let mut problem = Problem::new(&template, m).unwrap().with_target(&target, attachment()).unwrap();
+            check_template(&mut problem, &p0, &pf, &format!("{kind}, {norm}"), &mut rng);
+        }
+    }
+    // Curves, with the midpoint rule.
+    let (template, target) = curves();
+    let (template, target) = (with_signal(template, 1.0, &mut rng), with_signal(target, 0.5, &mut rng));
+    let (p0, pf) = momenta(&template, 0.3, 4);
+    let m = model("norm = \"h1\"\nlength = 0.3", "", "midpoint", 4);
+    let mut problem = Problem::new(&template, m).unwrap().with_target(&target, attachment()).unwrap();
+    check_template(&mut problem, &p0, &pf, "curve, h1, midpoint", &mut rng);
 }
