@@ -33,6 +33,7 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod atlas;
 mod config;
 pub mod demo;
 pub mod optimize;
@@ -42,6 +43,7 @@ pub mod resolution;
 mod session;
 pub mod unknowns;
 
+pub use atlas::{Atlas, AtlasResult, SubjectResult};
 pub use config::{
     AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind, ModelSection,
     NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec, StageSpec,

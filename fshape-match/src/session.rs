@@ -39,7 +39,7 @@ pub struct Iteration {
 }
 
 impl Iteration {
-    fn of(state: &State, parts: &Energies) -> Iteration {
+    pub(crate) fn of(state: &State, parts: &Energies) -> Iteration {
         Iteration {
             iteration: state.iteration,
             value: parts.value,
@@ -94,6 +94,20 @@ pub struct Checkpoint {
     pub warm: Option<Vec<f64>>,
     /// Wall seconds spent on this registration so far, over every run.
     pub seconds: f64,
+}
+
+impl Checkpoint {
+    /// A placeholder while a run holds the real one.
+    pub(crate) fn empty() -> Checkpoint {
+        Checkpoint {
+            format: CHECKPOINT_FORMAT,
+            fingerprint: String::new(),
+            done: Vec::new(),
+            current: None,
+            warm: None,
+            seconds: 0.0,
+        }
+    }
 }
 
 /// What an observer wants after an event.
@@ -164,15 +178,15 @@ pub struct MatchResult {
 
 /// FNV-1a, 64 bits: only to recognise a checkpoint of the same inputs
 /// (no cryptographic need).
-struct Fnv(u64);
+pub(crate) struct Fnv(u64);
 
 impl Fnv {
-    fn new() -> Fnv {
+    pub(crate) fn new() -> Fnv {
         Fnv(0xcbf2_9ce4_8422_2325)
     }
 
     /// Feeds `bytes`, then a separator.
-    fn eat(&mut self, bytes: &[u8]) {
+    pub(crate) fn eat(&mut self, bytes: &[u8]) {
         for &b in bytes.iter().chain(&[0xff]) {
             self.0 ^= u64::from(b);
             self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
@@ -181,7 +195,7 @@ impl Fnv {
 
     /// Feeds a shape as data: dimension, cell type, coordinates, cells and
     /// signal bit for bit.
-    fn shape(&mut self, s: &FShape) {
+    pub(crate) fn shape(&mut self, s: &FShape) {
         self.eat(&(s.dim() as u64).to_le_bytes());
         self.eat(s.kind().name().as_bytes());
         self.eat(&s.points().iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
@@ -189,7 +203,7 @@ impl Fnv {
         self.eat(&s.signal().unwrap_or(&[]).iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
     }
 
-    fn hex(&self) -> String {
+    pub(crate) fn hex(&self) -> String {
         format!("{:016x}", self.0)
     }
 }
@@ -234,7 +248,7 @@ pub struct Session {
 }
 
 /// Records the time and writes the checkpoint to `file`, if any.
-fn save(checkpoint: &mut Checkpoint, file: Option<&Path>, seconds: f64) -> Result<(), MatchError> {
+pub(crate) fn save(checkpoint: &mut Checkpoint, file: Option<&Path>, seconds: f64) -> Result<(), MatchError> {
     checkpoint.seconds = seconds;
     let Some(path) = file else { return Ok(()) };
     let bytes = serde_json::to_vec_pretty(checkpoint).map_err(|e| checkpoint_error(e.to_string()))?;
@@ -242,7 +256,7 @@ fn save(checkpoint: &mut Checkpoint, file: Option<&Path>, seconds: f64) -> Resul
         .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })
 }
 
-fn checkpoint_error(problem: impl Into<String>) -> MatchError {
+pub(crate) fn checkpoint_error(problem: impl Into<String>) -> MatchError {
     MatchError::Checkpoint { problem: problem.into() }
 }
 
@@ -399,67 +413,7 @@ impl Session {
                 "the checkpoint was written for other inputs (source, target or configuration changed); remove it or start without resuming",
             ));
         }
-        let stages = self.plan.stages.len();
-        if c.done.len() > stages {
-            return Err(checkpoint_error(format!(
-                "the checkpoint has {} finished stages, but the schedule has {stages}",
-                c.done.len()
-            )));
-        }
-        // The warm start is the last finished stage's unknowns, the state
-        // those of the stage under way.
-        let done = c.done.len();
-        let (n_warm, n) = (self.unknowns_len(done.saturating_sub(1)), self.unknowns_len(done));
-        let vector = |what: &str, v: &[f64], n: usize| -> Result<(), MatchError> {
-            if v.len() != n {
-                return Err(checkpoint_error(format!(
-                    "the checkpoint's {what} has {} values, the problem has {n} unknowns",
-                    v.len()
-                )));
-            }
-            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                return Err(checkpoint_error(format!("the checkpoint's {what}[{i}] is not finite")));
-            }
-            Ok(())
-        };
-        if let Some(w) = &c.warm {
-            vector("warm", w, n_warm)?;
-        }
-        if !c.done.is_empty() && c.warm.is_none() {
-            return Err(checkpoint_error("the checkpoint has finished stages but no warm start (warm is missing)"));
-        }
-        if let Some(cur) = &c.current {
-            if c.done.len() == stages {
-                return Err(checkpoint_error("the checkpoint has a stage under way after the last stage"));
-            }
-            let s = &cur.state;
-            vector("current.state.x", &s.x, n)?;
-            vector("current.state.grad", &s.grad, n)?;
-            if s.s.len() != s.y.len() {
-                return Err(checkpoint_error(format!(
-                    "the checkpoint's current.state has {} steps s but {} gradient differences y",
-                    s.s.len(),
-                    s.y.len()
-                )));
-            }
-            for (k, (a, b)) in s.s.iter().zip(&s.y).enumerate() {
-                vector(&format!("current.state.s[{k}]"), a, n)?;
-                vector(&format!("current.state.y[{k}]"), b, n)?;
-            }
-            let scalars = [("value", s.value), ("grad_norm0", s.grad_norm0), ("step", s.step)];
-            if let Some((what, v)) = scalars.iter().find(|(_, v)| !v.is_finite()) {
-                return Err(checkpoint_error(format!("the checkpoint's current.state.{what} is {v}")));
-            }
-            if s.values.is_empty() || s.values.iter().any(|v| !v.is_finite()) {
-                return Err(checkpoint_error(
-                    "the checkpoint's current.state.values must be finite values, J at the start first",
-                ));
-            }
-        }
-        if !(c.seconds >= 0.0 && c.seconds.is_finite()) {
-            return Err(checkpoint_error(format!("the checkpoint's seconds is {}", c.seconds)));
-        }
-        Ok(())
+        validate_arrays(c, self.plan.stages.len(), |k| self.unknowns_len(k))
     }
 
     /// The checked plan.
@@ -621,4 +575,70 @@ impl Session {
             initial_quality,
         })
     }
+}
+
+/// Checks a checkpoint's arrays against a schedule of `stages` stages whose
+/// stage k has `len(k)` unknowns: sizes, finite values, a warm start after
+/// finished stages, the optimiser's state consistent.
+pub(crate) fn validate_arrays(c: &Checkpoint, stages: usize, len: impl Fn(usize) -> usize) -> Result<(), MatchError> {
+    if c.done.len() > stages {
+        return Err(checkpoint_error(format!(
+            "the checkpoint has {} finished stages, but the schedule has {stages}",
+            c.done.len()
+        )));
+    }
+    // The warm start is the last finished stage's unknowns, the state
+    // those of the stage under way.
+    let done = c.done.len();
+    let (n_warm, n) = (len(done.saturating_sub(1)), len(done));
+    let vector = |what: &str, v: &[f64], n: usize| -> Result<(), MatchError> {
+        if v.len() != n {
+            return Err(checkpoint_error(format!(
+                "the checkpoint's {what} has {} values, the problem has {n} unknowns",
+                v.len()
+            )));
+        }
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(checkpoint_error(format!("the checkpoint's {what}[{i}] is not finite")));
+        }
+        Ok(())
+    };
+    if let Some(w) = &c.warm {
+        vector("warm", w, n_warm)?;
+    }
+    if !c.done.is_empty() && c.warm.is_none() {
+        return Err(checkpoint_error("the checkpoint has finished stages but no warm start (warm is missing)"));
+    }
+    if let Some(cur) = &c.current {
+        if c.done.len() == stages {
+            return Err(checkpoint_error("the checkpoint has a stage under way after the last stage"));
+        }
+        let s = &cur.state;
+        vector("current.state.x", &s.x, n)?;
+        vector("current.state.grad", &s.grad, n)?;
+        if s.s.len() != s.y.len() {
+            return Err(checkpoint_error(format!(
+                "the checkpoint's current.state has {} steps s but {} gradient differences y",
+                s.s.len(),
+                s.y.len()
+            )));
+        }
+        for (k, (a, b)) in s.s.iter().zip(&s.y).enumerate() {
+            vector(&format!("current.state.s[{k}]"), a, n)?;
+            vector(&format!("current.state.y[{k}]"), b, n)?;
+        }
+        let scalars = [("value", s.value), ("grad_norm0", s.grad_norm0), ("step", s.step)];
+        if let Some((what, v)) = scalars.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(checkpoint_error(format!("the checkpoint's current.state.{what} is {v}")));
+        }
+        if s.values.is_empty() || s.values.iter().any(|v| !v.is_finite()) {
+            return Err(checkpoint_error(
+                "the checkpoint's current.state.values must be finite values, J at the start first",
+            ));
+        }
+    }
+    if !(c.seconds >= 0.0 && c.seconds.is_finite()) {
+        return Err(checkpoint_error(format!("the checkpoint's seconds is {}", c.seconds)));
+    }
+    Ok(())
 }

@@ -203,6 +203,26 @@ impl Unknowns {
     }
 }
 
+impl Unknowns {
+    /// The gradient in the unknowns of a gradient in (p_0, p^f).
+    pub fn pack_grad(&self, g_p0: &[f64], g_pf: &[f64]) -> Vec<f64> {
+        let mut grad: Vec<f64> = g_p0.iter().zip(&self.scale_p).map(|(v, s)| v * s).collect();
+        grad.extend(g_pf.iter().zip(&self.scale).map(|(v, s)| v * s));
+        grad
+    }
+
+    /// Applies the initial Hessian's shape of the energy metrics (if any)
+    /// to `v`, one problem's unknowns.
+    pub(crate) fn precondition(&self, v: &mut [f64]) {
+        if let Some(f) = &self.factor {
+            f.apply(v);
+        }
+        if let Some(m) = &self.signal_matrix {
+            m.apply(v);
+        }
+    }
+}
+
 /// J and its gradient in the unknowns; the last evaluation's parts are
 /// kept for reports.
 pub struct MatchObjective<'p> {
@@ -249,12 +269,7 @@ impl crate::optimize::Objective for MatchObjective<'_> {
     }
 
     fn precondition(&self, v: &mut [f64]) {
-        if let Some(f) = &self.unknowns.factor {
-            f.apply(v);
-        }
-        if let Some(m) = &self.unknowns.signal_matrix {
-            m.apply(v);
-        }
+        self.unknowns.precondition(v);
     }
 
     fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
@@ -280,9 +295,7 @@ impl crate::optimize::Objective for MatchObjective<'_> {
         };
         self.last = Some(g.objective);
         self.recent.push(g.objective);
-        let mut grad: Vec<f64> = g.p0.iter().zip(&self.unknowns.scale_p).map(|(v, s)| v * s).collect();
-        grad.extend(g.pf.iter().zip(&self.unknowns.scale).map(|(v, s)| v * s));
-        Ok((g.objective.value, grad))
+        Ok((g.objective.value, self.unknowns.pack_grad(&g.p0, &g.pf)))
     }
 }
 

@@ -1,5 +1,7 @@
 //! Integration tests of fshape-match (one binary, modules in `tests/matching/`).
 
+#[path = "matching/atlas.rs"]
+mod atlas;
 #[path = "matching/config.rs"]
 mod config;
 #[path = "matching/objective.rs"]

@@ -1,0 +1,590 @@
+//! Atlas estimation: a template fshape (x̄, f̄) and, per subject Y_i, the
+//! momenta (p_0ⁱ, p^{f,i}) of a geodesic from the template to it,
+//! minimising the mean of the subjects' matching objectives
+//!
+//! ```text
+//! J(x̄, f̄, (p_0ⁱ, p^{f,i})_i) = (1/N) Σ_i [ H(x̄, f̄, p_0ⁱ, p^{f,i}) + γ_W A(x_1ⁱ, f_1ⁱ; Y_i) ]
+//! ```
+//!
+//! jointly in every unknown by L-BFGS: the *free template* of the fshape
+//! literature (fshapesTk's), whose positions and signal are unknowns. The
+//! mean rather than the sum keeps γ_W's meaning per subject whatever the
+//! population's size. Each subject's term and its gradients, in its own
+//! momenta and in the template ([`fshape_shoot::Gradient::x0`], `f0`), come
+//! from one shooting and its adjoint; the subjects are evaluated in
+//! parallel and their template gradients summed in subject order, so a
+//! run gives the same bits for any number of threads.
+//!
+//! The unknowns, in order: the template's positions (divided by the length
+//! scale L when the weights are normalised), its signal (divided by the
+//! signal scale S), then each subject's momenta packed as in matching
+//! ([`Unknowns`]). L-BFGS's initial Hessian is block-diagonal
+//! ([`crate::optimize::Objective::precondition`]): on the positions the
+//! deformation kernel K(x̄) (the Sobolev gradient: a step moves the template
+//! by a velocity field of V, as fshapesTk smooths its template gradient),
+//! on the signal the lumped mass's inverse D̄⁻¹ (the L² gradient of a
+//! function; ∂J/∂f̄ is a density), on each subject's momenta the matching
+//! metric. These matrices are built once, on the initial template, so that
+//! the change of variables is fixed for the whole run and a checkpoint's
+//! unknowns mean the same in every stage.
+//!
+//! Not here yet: the hypertemplate model (the template shot from a fixed
+//! hypertemplate by its own momenta) and stages on coarser templates.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use fshape_fem::{Norm, SignalNorm};
+use fshape_kernels::{Kernel, KernelSums};
+use fshape_mesh::FShape;
+use fshape_shoot::{Energies, ModelKind, Problem, ShootError, Trajectory};
+use rayon::prelude::*;
+
+use crate::optimize::{Settings, State};
+use crate::session::{Fnv, checkpoint_error, save};
+use crate::unknowns::Unknowns;
+use crate::{
+    CHECKPOINT_FORMAT, Checkpoint, Config, Control, Current, Iteration, MatchError, Observer, Outcome, Plan,
+    StageRecord,
+};
+
+/// The template blocks' change of variables and initial Hessian.
+struct TemplateMetric {
+    /// x̄ = length · u_x.
+    length: f64,
+    /// f̄ = signal · u_f.
+    signal: f64,
+    /// The deformation kernel and the initial template's positions: M⁻¹
+    /// on the positions is K(x̄_0).
+    kernel: Kernel,
+    points: Vec<f64>,
+    dim: usize,
+    /// m̄/m_i, the lumped masses' inverse scaled to mean 1.
+    inv_mass: Vec<f64>,
+}
+
+impl TemplateMetric {
+    fn new(template: &FShape, kernel: &Kernel, scales: Option<crate::Scales>) -> Result<Self, ShootError> {
+        let masses = SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(template.points())?;
+        if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
+            return Err(fshape_fem::FemError::Singular { vertex: v }.into());
+        }
+        let mean = masses.iter().sum::<f64>() / masses.len() as f64;
+        // Built once here, so that applying it later cannot fail.
+        KernelSums::try_new(kernel, template.points(), template.dim())?;
+        Ok(TemplateMetric {
+            length: scales.map_or(1.0, |s| s.length),
+            signal: scales.map_or(1.0, |s| s.signal),
+            kernel: kernel.clone(),
+            points: template.points().to_vec(),
+            dim: template.dim(),
+            inv_mass: masses.iter().map(|m| mean / m).collect(),
+        })
+    }
+}
+
+/// One subject's evaluation, without its trajectory (one trajectory per
+/// thread at a time).
+struct SubjectEval {
+    energies: Energies,
+    /// ∂J_i/∂(its unknowns).
+    grad: Vec<f64>,
+    /// ∂J_i/∂x̄ and ∂J_i/∂f̄.
+    x0: Vec<f64>,
+    f0: Vec<f64>,
+}
+
+/// The atlas objective in the unknowns (module docs): the subjects'
+/// problems hold the template of the last evaluation.
+pub struct AtlasObjective<'p> {
+    problems: &'p mut [Problem],
+    unknowns: Unknowns,
+    metric: &'p TemplateMetric,
+    /// P·n and P of the template.
+    pn: usize,
+    p: usize,
+    /// The mean parts of every evaluation since `parts_of` last found one.
+    recent: Vec<Energies>,
+    evaluations: usize,
+}
+
+impl AtlasObjective<'_> {
+    fn subject_len(&self) -> usize {
+        self.unknowns.len()
+    }
+
+    /// The template (positions, signal) of the unknowns.
+    fn template_of(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let m = self.metric;
+        (
+            x[..self.pn].iter().map(|u| u * m.length).collect(),
+            x[self.pn..self.pn + self.p].iter().map(|u| u * m.signal).collect(),
+        )
+    }
+
+    /// J's mean parts at the evaluated point whose J is `value` (as
+    /// [`crate::unknowns::MatchObjective::parts_of`]).
+    fn parts_of(&mut self, value: f64) -> Option<Energies> {
+        let found = self.recent.iter().rev().find(|e| e.value.to_bits() == value.to_bits()).copied();
+        self.recent.clear();
+        found
+    }
+}
+
+impl crate::optimize::Objective for AtlasObjective<'_> {
+    type Error = ShootError;
+
+    /// Template positions, template signal, then each subject's p_0 and
+    /// (with a signal control) p^f.
+    fn blocks(&self) -> Vec<usize> {
+        let mut starts = vec![self.pn];
+        let m = self.subject_len();
+        let signal_block = m > self.pn;
+        for i in 0..self.problems.len() {
+            let start = self.pn + self.p + i * m;
+            starts.push(start);
+            if signal_block {
+                starts.push(start + self.pn);
+            }
+        }
+        starts
+    }
+
+    fn precondition(&self, v: &mut [f64]) {
+        let m = self.metric;
+        let sums = KernelSums::try_new(&m.kernel, &m.points, m.dim).expect("checked when built");
+        let kv = sums.conv(&m.points, &v[..self.pn], m.dim).expect("checked when built");
+        v[..self.pn].copy_from_slice(&kv);
+        for (x, w) in v[self.pn..self.pn + self.p].iter_mut().zip(&m.inv_mass) {
+            *x *= w;
+        }
+        let len = self.subject_len();
+        for chunk in v[self.pn + self.p..].chunks_exact_mut(len) {
+            self.unknowns.precondition(chunk);
+        }
+    }
+
+    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
+        self.evaluations += 1;
+        let (points, signal) = self.template_of(x);
+        let len = self.subject_len();
+        let unknowns = &self.unknowns;
+        let evals: Vec<Result<SubjectEval, ShootError>> = self
+            .problems
+            .par_iter_mut()
+            .zip(x[self.pn + self.p..].par_chunks(len))
+            .map(|(problem, xi)| {
+                problem.set_template(&points, Some(&signal))?;
+                let (p0, pf) = unknowns.unpack(xi);
+                let g = problem.objective_grad(&p0, &pf)?;
+                Ok(SubjectEval { energies: g.objective, grad: unknowns.pack_grad(&g.p0, &g.pf), x0: g.x0, f0: g.f0 })
+            })
+            .collect();
+        let n = evals.len() as f64;
+        let mut grad = vec![0.0; x.len()];
+        let mut mean = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
+        // Summed in subject order: the same bits for any number of threads.
+        for (i, e) in evals.into_iter().enumerate() {
+            let e = match e {
+                Ok(e) => e,
+                // As in matching: past the first point, a shooting that
+                // diverged is a step too far, which the line search undoes.
+                Err(err)
+                    if self.evaluations > 1
+                        && !matches!(
+                            err,
+                            ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget
+                        ) =>
+                {
+                    return Ok((f64::NAN, vec![f64::NAN; x.len()]));
+                }
+                Err(err) => return Err(err),
+            };
+            mean.value += e.energies.value / n;
+            mean.energy += e.energies.energy / n;
+            mean.signal_energy += e.energies.signal_energy / n;
+            mean.attachment += e.energies.attachment / n;
+            for (g, v) in grad[..self.pn].iter_mut().zip(&e.x0) {
+                *g += v * self.metric.length / n;
+            }
+            for (g, v) in grad[self.pn..self.pn + self.p].iter_mut().zip(&e.f0) {
+                *g += v * self.metric.signal / n;
+            }
+            let start = self.pn + self.p + i * len;
+            for (g, v) in grad[start..start + len].iter_mut().zip(&e.grad) {
+                *g = v / n;
+            }
+        }
+        self.recent.push(mean);
+        Ok((mean.value, grad))
+    }
+}
+
+/// One subject's part of an atlas result.
+#[derive(Clone, Debug)]
+pub struct SubjectResult {
+    /// Its initial momenta p_0 (P × n, on the template's vertices).
+    pub p0: Vec<f64>,
+    /// Its signal momentum p^f (ζ for the tangential model, 0 for LDDMM).
+    pub pf: Vec<f64>,
+    /// Its J_i and parts, with the last stage's kernel.
+    pub energies: Energies,
+    /// The geodesic from the template to it.
+    pub trajectory: Trajectory,
+    /// How close the template shot by its momenta came to it.
+    pub quality: crate::Quality,
+    /// How close the estimated template itself is to it.
+    pub template_quality: crate::Quality,
+}
+
+/// The atlas: the template and every subject's geodesic.
+#[derive(Clone, Debug)]
+pub struct AtlasResult {
+    /// The estimated template (the initial template's cells).
+    pub template: FShape,
+    /// Per subject, in the order given.
+    pub subjects: Vec<SubjectResult>,
+    /// The mean J and parts at the result.
+    pub energies: Energies,
+    /// Every stage's records (J and parts are means over the subjects).
+    pub stages: Vec<StageRecord>,
+    /// Accepted iterations, all stages.
+    pub iterations: usize,
+    /// Objective evaluations, all stages.
+    pub evaluations: usize,
+    /// Wall seconds, all runs.
+    pub seconds: f64,
+}
+
+/// An atlas estimation run: stages of the schedule one after the other,
+/// with a checkpoint after every accepted iteration and resume to the same
+/// bits, as [`crate::Session`] for one registration.
+pub struct Atlas {
+    plan: Plan,
+    problems: Vec<Problem>,
+    template: FShape,
+    subjects: Vec<FShape>,
+    unknowns: Unknowns,
+    metric: TemplateMetric,
+    checkpoint: Checkpoint,
+    checkpoint_file: Option<PathBuf>,
+    staged: Option<usize>,
+}
+
+/// FNV-1a, as hex, of the initial template, the subjects and the
+/// configuration.
+pub fn atlas_fingerprint(template: &FShape, subjects: &[FShape], config: &Config) -> String {
+    let mut h = Fnv::new();
+    h.eat(b"atlas");
+    h.shape(template);
+    for s in subjects {
+        h.shape(s);
+    }
+    h.eat(config.to_toml().as_bytes());
+    h.hex()
+}
+
+impl Atlas {
+    /// Checks the configuration and the shapes and builds one problem per
+    /// subject on the initial `template`. With `model.normalize`, the
+    /// scales (length L, signal S) are the initial template's against the
+    /// first subject's, as [`Config::plan`] takes them for one match.
+    pub fn new(template: &FShape, subjects: &[FShape], config: &Config) -> Result<Atlas, MatchError> {
+        let first = subjects.first().ok_or_else(|| MatchError::Shapes("an atlas needs at least one subject".into()))?;
+        for (i, s) in subjects.iter().enumerate() {
+            if s.dim() != template.dim() || s.kind() != template.kind() {
+                return Err(MatchError::Shapes(format!(
+                    "subject {i} is a {} mesh in R^{}, the template a {} mesh in R^{}",
+                    s.kind().name(),
+                    s.dim(),
+                    template.kind().name(),
+                    template.dim()
+                )));
+            }
+        }
+        let plan = config.plan(template, first)?;
+        let template = match template.signal() {
+            Some(_) => template.clone(),
+            None => template.clone().with_signal(Some(vec![0.0; template.n_vertices()]))?,
+        };
+        let problems =
+            subjects.iter().map(|_| Problem::new(&template, plan.model.clone())).collect::<Result<Vec<_>, _>>()?;
+        let unknowns = Unknowns::scaled(&problems[0], plan.metrics, plan.scales)?;
+        let metric = TemplateMetric::new(&template, plan.model.kernel(), plan.scales)?;
+        let checkpoint = Checkpoint {
+            format: CHECKPOINT_FORMAT,
+            fingerprint: atlas_fingerprint(&template, subjects, config),
+            done: Vec::new(),
+            current: None,
+            warm: None,
+            seconds: 0.0,
+        };
+        Ok(Atlas {
+            plan,
+            problems,
+            template,
+            subjects: subjects.to_vec(),
+            unknowns,
+            metric,
+            checkpoint,
+            checkpoint_file: None,
+            staged: None,
+        })
+    }
+
+    /// Writes the checkpoint to `path` after every accepted iteration, at
+    /// the end of every stage and when stopped.
+    pub fn with_checkpoint_file(mut self, path: &Path) -> Atlas {
+        self.checkpoint_file = Some(path.to_path_buf());
+        self
+    }
+
+    /// The checked plan.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// The checkpoint as of now.
+    pub fn checkpoint(&self) -> &Checkpoint {
+        &self.checkpoint
+    }
+
+    /// Whether every stage has run.
+    pub fn is_finished(&self) -> bool {
+        self.checkpoint.done.len() == self.plan.stages.len()
+    }
+
+    /// The number of unknowns: the template's positions and signal, then
+    /// every subject's momenta.
+    pub fn len(&self) -> usize {
+        let t = &self.template;
+        t.n_vertices() * (t.dim() + 1) + self.subjects.len() * self.unknowns.len()
+    }
+
+    /// Whether there are no unknowns (never: a template has vertices).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The starting unknowns: the initial template and zero momenta.
+    fn start(&self) -> Vec<f64> {
+        let mut x: Vec<f64> = self.template.points().iter().map(|v| v / self.metric.length).collect();
+        x.extend(self.template.signal().expect("set in new").iter().map(|v| v / self.metric.signal));
+        x.resize(self.len(), 0.0);
+        x
+    }
+
+    /// Continues from `checkpoint` after checking it belongs to these
+    /// inputs and holds finite arrays of this problem's size.
+    pub fn resume(mut self, checkpoint: Checkpoint) -> Result<Atlas, MatchError> {
+        if checkpoint.format != CHECKPOINT_FORMAT {
+            return Err(checkpoint_error(format!(
+                "the checkpoint is of format {} (this version reads format {CHECKPOINT_FORMAT}); start again without resuming",
+                checkpoint.format
+            )));
+        }
+        if checkpoint.fingerprint != self.checkpoint.fingerprint {
+            return Err(checkpoint_error(
+                "the checkpoint was written for other inputs (template, subjects or configuration changed); remove it or start without resuming",
+            ));
+        }
+        crate::session::validate_arrays(&checkpoint, self.plan.stages.len(), |_| self.len())?;
+        self.checkpoint = checkpoint;
+        Ok(self)
+    }
+
+    /// [`Atlas::resume`] from a checkpoint file; errors name the file.
+    pub fn resume_from_file(self, path: &Path) -> Result<Atlas, MatchError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })?;
+        let checkpoint: Checkpoint = serde_json::from_str(&text)
+            .map_err(|e| checkpoint_error(format!("not a readable checkpoint ({e})")).in_file(path))?;
+        self.resume(checkpoint).map_err(|e| e.in_file(path))
+    }
+
+    fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
+        if self.staged != Some(k) {
+            let stage = &self.plan.stages[k];
+            for (problem, subject) in self.problems.iter_mut().zip(&self.subjects) {
+                problem.set_target(subject, stage.kernel.clone())?;
+                problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
+            }
+            self.staged = Some(k);
+        }
+        Ok(())
+    }
+
+    fn objective(&mut self) -> AtlasObjective<'_> {
+        let t = &self.template;
+        AtlasObjective {
+            pn: t.n_vertices() * t.dim(),
+            p: t.n_vertices(),
+            problems: &mut self.problems,
+            unknowns: self.unknowns.clone(),
+            metric: &self.metric,
+            recent: Vec::new(),
+            evaluations: 0,
+        }
+    }
+
+    /// Runs the remaining stages until each stops by its rule, or until
+    /// `observer` says [`Control::Stop`]. J and its parts in the records
+    /// are means over the subjects.
+    pub fn run(&mut self, observer: &mut impl Observer) -> Result<Outcome, MatchError> {
+        let start = Instant::now();
+        let earlier = self.checkpoint.seconds;
+        let clock = move || earlier + start.elapsed().as_secs_f64();
+        let stages = self.plan.stages.len();
+        while self.checkpoint.done.len() < stages {
+            let k = self.checkpoint.done.len();
+            self.stage_target(k)?;
+            let spec = self.plan.stages[k].clone();
+            let settings = Settings {
+                max_iterations: spec.max_iterations,
+                decrease_tolerance: spec.decrease.0,
+                decrease_window: spec.decrease.1,
+                ..self.plan.settings
+            };
+            let current = self.checkpoint.current.take();
+            let warm = self.checkpoint.warm.clone();
+            let x0 = warm.unwrap_or_else(|| self.start());
+            let file = self.checkpoint_file.clone();
+            let mut checkpoint = std::mem::replace(&mut self.checkpoint, Checkpoint::empty());
+            let mut objective = self.objective();
+            let mut current = match current {
+                Some(c) => c,
+                None => {
+                    let state = State::start(x0, &mut objective)?;
+                    let parts = objective.parts_of(state.value).expect("the starting point was evaluated");
+                    Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
+                }
+            };
+            if observer.stage_started(k, stages, &spec, current.iterations.len()) == Control::Stop {
+                checkpoint.current = Some(current);
+                save(&mut checkpoint, file.as_deref(), clock())?;
+                self.checkpoint = checkpoint;
+                return Ok(Outcome::Interrupted);
+            }
+            let stop = loop {
+                if let Some(stop) = current.state.iterate(&settings, &mut objective)? {
+                    break stop;
+                }
+                let parts = objective.parts_of(current.state.value).expect("an accepted step was evaluated");
+                let record = Iteration::of(&current.state, &parts);
+                current.iterations.push(record.clone());
+                let control = observer.iteration(k, &record);
+                checkpoint.current = Some(current);
+                save(&mut checkpoint, file.as_deref(), clock())?;
+                if control == Control::Stop {
+                    self.checkpoint = checkpoint;
+                    return Ok(Outcome::Interrupted);
+                }
+                current = checkpoint.current.take().expect("just set");
+            };
+            let record = StageRecord {
+                kernel_geom: spec.label.clone(),
+                stop,
+                reason: stop.describe().into(),
+                initial: current.initial,
+                iterations: current.iterations,
+            };
+            checkpoint.warm = Some(current.state.x);
+            observer.stage_finished(k, &record);
+            checkpoint.done.push(record);
+            save(&mut checkpoint, file.as_deref(), clock())?;
+            self.checkpoint = checkpoint;
+        }
+        Ok(Outcome::Finished)
+    }
+
+    /// The estimated template at the unknowns `x`.
+    fn template_at(&self, x: &[f64]) -> Result<FShape, MatchError> {
+        let pn = self.template.n_vertices() * self.template.dim();
+        let p = self.template.n_vertices();
+        let points = x[..pn].iter().map(|u| u * self.metric.length).collect();
+        let signal = x[pn..pn + p].iter().map(|u| u * self.metric.signal).collect();
+        Ok(self.template.clone().with_points(points)?.with_signal(Some(signal))?)
+    }
+
+    /// The result of a finished run: the template, and every subject's
+    /// momenta shot once more with the last stage's data term.
+    pub fn result(&mut self) -> Result<AtlasResult, MatchError> {
+        if !self.is_finished() {
+            return Err(MatchError::NotFinished);
+        }
+        self.stage_target(self.plan.stages.len() - 1)?;
+        let x = self.checkpoint.warm.clone().ok_or(MatchError::NotFinished)?;
+        let template = self.template_at(&x)?;
+        let len = self.unknowns.len();
+        let offset = template.n_vertices() * (template.dim() + 1);
+        let n = self.subjects.len() as f64;
+        let mut energies = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
+        let mut subjects = Vec::with_capacity(self.subjects.len());
+        for (i, (problem, subject)) in self.problems.iter_mut().zip(&self.subjects).enumerate() {
+            problem.set_template(template.points(), template.signal())?;
+            let (p0, pf) = self.unknowns.unpack(&x[offset + i * len..offset + (i + 1) * len]);
+            let (e, trajectory) = problem.objective(&p0, &pf)?;
+            energies.value += e.value / n;
+            energies.energy += e.energy / n;
+            energies.signal_energy += e.signal_energy / n;
+            energies.attachment += e.attachment / n;
+            let last = trajectory.steps();
+            let matched = template
+                .clone()
+                .with_points(trajectory.points(last).to_vec())?
+                .with_signal(Some(trajectory.signal(last).to_vec()))?;
+            subjects.push(SubjectResult {
+                quality: crate::quality(&matched, subject)?,
+                template_quality: crate::quality(&template, subject)?,
+                p0,
+                pf,
+                energies: e,
+                trajectory,
+            });
+        }
+        let done = &self.checkpoint.done;
+        Ok(AtlasResult {
+            template,
+            subjects,
+            energies,
+            stages: done.clone(),
+            iterations: done.iter().map(|s| s.iterations.len()).sum(),
+            evaluations: done.iter().map(|s| s.iterations.last().unwrap_or(&s.initial).evaluations).sum(),
+            seconds: self.checkpoint.seconds,
+        })
+    }
+}
+
+impl Atlas {
+    /// J (the mean over subjects) and its gradient in the [`Atlas::len`]
+    /// unknowns `x`, with stage `stage`'s data term: for tests, and for
+    /// callers that drive an optimiser themselves.
+    pub fn value_grad(&mut self, stage: usize, x: &[f64]) -> Result<(f64, Vec<f64>), MatchError> {
+        use crate::optimize::Objective;
+        if stage >= self.plan.stages.len() {
+            return Err(MatchError::Shapes(format!("stage {stage} of a schedule of {}", self.plan.stages.len())));
+        }
+        if x.len() != self.len() {
+            return Err(MatchError::Shapes(format!("{} unknowns for an atlas of {}", x.len(), self.len())));
+        }
+        self.stage_target(stage)?;
+        Ok(self.objective().value_grad(x)?)
+    }
+
+    /// Applies the initial Hessian's shape M⁻¹ (module docs) to `v`.
+    pub fn precondition(&mut self, v: &mut [f64]) {
+        use crate::optimize::Objective;
+        self.objective().precondition(v);
+    }
+
+    /// The starting unknowns ([`Atlas::len`] values): the initial template,
+    /// zero momenta.
+    pub fn initial_unknowns(&self) -> Vec<f64> {
+        self.start()
+    }
+
+    /// Whether the model has a signal control (p^f or ζ) per subject.
+    pub fn has_signal_control(&self) -> bool {
+        self.plan.model.kind() != ModelKind::Lddmm
+    }
+}
