@@ -13,6 +13,7 @@ use fshape_mesh::{FShape, Finding, Repairs, Severity};
 use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
+mod atlas_cmd;
 mod demo;
 mod match_cmd;
 mod render;
@@ -187,6 +188,43 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         stage_templates: Vec<PathBuf>,
     },
+    /// Estimate a template from a population (metamorphosis atlas, free
+    /// template): the template's positions and signal and every subject's
+    /// momenta minimise the mean of the subjects' matching objectives
+    /// (the `fshape match` configuration). Writes the template, each
+    /// subject's momenta and matched template, momenta.csv (one row per
+    /// subject), pictures and summary.json; checkpoints every iteration.
+    Atlas {
+        /// The subjects' meshes (with a `signal` vertex property).
+        subjects: Vec<PathBuf>,
+        /// A list of subjects, one per line: `mesh[,signal.csv]`, paths
+        /// relative to the list (read before the positional ones).
+        #[arg(long = "subjects")]
+        list: Option<PathBuf>,
+        /// The initial template (default: the first subject). Without a
+        /// signal it takes the subjects' mean (vertex by vertex when they
+        /// share its vertices).
+        #[arg(long)]
+        template: Option<PathBuf>,
+        /// The configuration (TOML, as for `fshape match`).
+        #[arg(long)]
+        config: PathBuf,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Continue from OUT/checkpoint.json.
+        #[arg(long)]
+        resume: bool,
+        /// Stop after this many iterations in this run, leaving the checkpoint.
+        #[arg(long)]
+        stop_after: Option<usize>,
+        /// Vertex property of every mesh to read as the signal.
+        #[arg(long)]
+        signal_name: Option<String>,
+        /// Camera of the renders: azimuth,elevation in degrees.
+        #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
+        view: Vec<f64>,
+    },
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo {
@@ -304,6 +342,27 @@ fn main() -> ExitCode {
                 times: &times,
                 view: (azimuth, elevation),
                 stage_templates: &stage_templates,
+            })
+        }
+        Command::Atlas { subjects, list, template, config, out, resume, stop_after, signal_name, view } => {
+            let (azimuth, elevation) = match view[..] {
+                [a, e] if a.is_finite() && e.is_finite() => (a, e),
+                _ => {
+                    let got: Vec<String> = view.iter().map(f64::to_string).collect();
+                    eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
+                    return ExitCode::from(2);
+                }
+            };
+            atlas_cmd::run(&atlas_cmd::AtlasArgs {
+                subjects: &subjects,
+                list: list.as_deref(),
+                template: template.as_deref(),
+                config: &config,
+                out: &out,
+                resume,
+                stop_after,
+                signal_name,
+                view: (azimuth, elevation),
             })
         }
         Command::Demo { name, out, data, max_iterations, ratios, gamma_w, quick } => {

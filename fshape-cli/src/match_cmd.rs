@@ -69,11 +69,25 @@ struct Summary<'a> {
 }
 
 /// The progress bar (drawn only on a terminal) and `--stop-after`.
-struct Progress {
+pub(crate) struct Progress {
     gamma_w: f64,
     /// Iterations this invocation may still make.
     budget: Option<usize>,
     bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    /// For a model with weight γ_W, stopping after `budget` iterations.
+    pub(crate) fn new(gamma_w: f64, budget: Option<usize>) -> Progress {
+        Progress { gamma_w, budget, bar: None }
+    }
+
+    /// Leaves the bar where it stopped, with `why`.
+    pub(crate) fn abandon(&mut self, why: &'static str) {
+        if let Some(bar) = self.bar.take() {
+            bar.abandon_with_message(why);
+        }
+    }
 }
 
 impl Observer for Progress {
@@ -142,11 +156,9 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let mut session = session.with_checkpoint_file(&checkpoint_path);
     let model = session.plan().model.clone();
     let metrics = session.plan().metrics;
-    let mut progress = Progress { gamma_w: model.gamma_w(), budget: a.stop_after, bar: None };
+    let mut progress = Progress::new(model.gamma_w(), a.stop_after);
     if session.run(&mut progress)? == Outcome::Interrupted {
-        if let Some(bar) = progress.bar.take() {
-            bar.abandon_with_message("stopped by --stop-after; continue with --resume");
-        }
+        progress.abandon("stopped by --stop-after; continue with --resume");
         eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());
         return Ok(());
     }
@@ -252,7 +264,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
 
 /// J, the energy and γ_W·A against the iteration number (log scale), all
 /// stages one after the other, as (SVG text, PNG bytes).
-fn energy_plot(stages: &[StageRecord], gamma_w: f64) -> Result<(String, Vec<u8>)> {
+pub(crate) fn energy_plot(stages: &[StageRecord], gamma_w: f64) -> Result<(String, Vec<u8>)> {
     use plotters::prelude::*;
     let mut series: [Vec<(f64, f64)>; 3] = Default::default();
     let mut n = 0usize;

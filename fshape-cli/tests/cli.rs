@@ -720,3 +720,103 @@ fn demo_bunny_quick_runs_three_stages_on_the_coarse_sphere_with_their_convergenc
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--quick"), "{err}");
 }
+
+/// Three subjects (stretched spheres with signals, written as PLY), a list
+/// file naming the last two, and an atlas configuration.
+fn atlas_inputs(tag: &str) -> (Vec<String>, String, String) {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    let mut files = Vec::new();
+    for i in 0..3 {
+        let s = fshape_mesh::generate::icosphere(2, 1.0);
+        let a = 1.0 + 0.2 * i as f64;
+        let pts: Vec<f64> =
+            s.points().chunks_exact(3).flat_map(|p| [0.5 * a * p[0], 0.5 * p[1], 0.5 * p[2] / a]).collect();
+        let f: Vec<f64> = pts.chunks_exact(3).map(|p| p[2] + 0.3 * i as f64 * p[0]).collect();
+        let path = tmp(&format!("{tag}_subject{i}.ply"));
+        write_mesh(&path, &s.with_points(pts).unwrap().with_signal(Some(f)).unwrap(), Encoding::Binary).unwrap();
+        files.push(path.display().to_string());
+    }
+    let list = tmp(&format!("{tag}_list.csv"));
+    let name = |f: &str| PathBuf::from(f).file_name().unwrap().to_string_lossy().to_string();
+    std::fs::write(&list, format!("# subjects\n{}\n{}\n", name(&files[1]), name(&files[2]))).unwrap();
+    let config = tmp(&format!("{tag}.toml"));
+    std::fs::write(
+        &config,
+        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.4, 0.2]\n[integrator]\nsteps = 5\n\
+         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+         [optimizer]\nmax_iterations = 6\n",
+    )
+    .unwrap();
+    (files, list.display().to_string(), config.display().to_string())
+}
+
+#[test]
+fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
+    let (files, list, config) = atlas_inputs("atlas");
+    let (whole, parts) = (tmp("atlas_whole"), tmp("atlas_parts"));
+    let run = |out: &PathBuf, extra: &[&str]| {
+        let out = out.display().to_string();
+        let args =
+            [&["atlas", files[0].as_str(), "--subjects", &list, "--config", &config, "--out", &out], extra].concat();
+        let o = fshape(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    let o = run(&whole, &[]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("atlas of 3 subjects"));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(whole.join("summary.json")).unwrap()).unwrap();
+    let subjects = summary["subjects"].as_array().unwrap();
+    // The list's subjects first, then the positional one.
+    assert_eq!(subjects.len(), 3);
+    assert!(subjects[0]["file"].as_str().unwrap().ends_with("atlas_subject1.ply"));
+    assert!(subjects[2]["file"].as_str().unwrap().ends_with("atlas_subject0.ply"));
+    // Each subject is closer to the template shot onto it than to the
+    // template itself, and J fell.
+    for s in subjects {
+        let q = |k: &str| s[k]["mean_distance"].as_f64().unwrap();
+        assert!(q("quality") < q("template_quality"), "{s}");
+    }
+    let stage = &summary["stages"][0];
+    let last = stage["iterations"].as_array().unwrap().last().unwrap()["value"].as_f64().unwrap();
+    assert!(last < stage["initial"]["value"].as_f64().unwrap());
+    // momenta.csv: a header and one row per subject, the subject's index,
+    // then 3 values per vertex of p_0 and one of p^f.
+    let table = std::fs::read_to_string(whole.join("momenta.csv")).unwrap();
+    let rows: Vec<&str> = table.lines().collect();
+    assert_eq!(rows.len(), 4);
+    assert!(rows.iter().all(|r| r.split(',').count() == 1 + 4 * 162), "{}", &rows[0][..80]);
+    for f in ["template.ply", "template.vtk", "template.png", "subjects.png", "energy.png", "subject_002/matched.ply"] {
+        assert!(whole.join(f).exists(), "{f}");
+    }
+    // Stopped after 2 iterations and resumed: the same template, bit for bit.
+    run(&parts, &["--stop-after", "2"]);
+    assert!(!parts.join("template.ply").exists());
+    run(&parts, &["--resume"]);
+    for f in ["template.ply", "momenta.csv", "subject_001/p0.csv"] {
+        assert_eq!(std::fs::read(whole.join(f)).unwrap(), std::fs::read(parts.join(f)).unwrap(), "{f}");
+    }
+}
+
+#[test]
+fn atlas_refuses_a_bad_list_line_naming_the_file_and_line() {
+    let (files, list, config) = atlas_inputs("atlas_bad");
+    std::fs::write(&list, "a.ply\nb.ply,b.csv,extra\n").unwrap();
+    let o = fshape(&[
+        "atlas",
+        &files[0],
+        "--subjects",
+        &list,
+        "--config",
+        &config,
+        "--out",
+        &tmp("atlas_bad_out").display().to_string(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("atlas_bad_list.csv:2"), "{err}");
+    // No subjects at all.
+    let o = fshape(&["atlas", "--config", &config, "--out", &tmp("atlas_none").display().to_string()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no subjects"));
+}

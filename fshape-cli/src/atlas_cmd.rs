@@ -1,0 +1,309 @@
+//! `fshape atlas`: a template estimated from a population with
+//! fshape-match's [`Atlas`], with the program's parts around it: the
+//! subjects' files, a progress bar, the outputs and the summary. The atlas
+//! checkpoints after every accepted iteration; `--resume` continues to the
+//! bits an uninterrupted run gives.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use fshape_match::{Atlas, Config, MatchError, Outcome};
+use fshape_mesh::FShape;
+use fshape_mesh::io::{self, Encoding};
+use fshape_shoot::ModelKind;
+use serde::Serialize;
+
+use crate::render::{self, SIZE, View};
+
+/// The command's arguments.
+pub struct AtlasArgs<'a> {
+    /// The subjects' mesh files (after those of `--subjects`).
+    pub subjects: &'a [PathBuf],
+    /// A list file: one subject per line, `mesh[,signal.csv]`.
+    pub list: Option<&'a Path>,
+    /// The initial template (default: the first subject).
+    pub template: Option<&'a Path>,
+    pub config: &'a Path,
+    pub out: &'a Path,
+    pub resume: bool,
+    pub stop_after: Option<usize>,
+    pub signal_name: Option<String>,
+    /// Azimuth and elevation of the renders, degrees.
+    pub view: (f64, f64),
+}
+
+#[derive(Serialize)]
+struct SubjectSummary {
+    file: String,
+    /// J_i and its parts at the result.
+    value: f64,
+    energy: f64,
+    attachment: f64,
+    /// How close the template shot by the subject's momenta came to it,
+    /// and how close the estimated template itself is.
+    quality: fshape_match::Quality,
+    template_quality: fshape_match::Quality,
+    directory: String,
+}
+
+#[derive(Serialize)]
+struct Summary<'a> {
+    template_start: String,
+    config: String,
+    model: &'static str,
+    norm: &'static str,
+    gamma_v: f64,
+    gamma_f: f64,
+    gamma_w: f64,
+    scales: Option<fshape_match::Scales>,
+    effective_weights: [f64; 3],
+    /// Per stage, J and its parts per iteration: means over the subjects.
+    stages: &'a [fshape_match::StageRecord],
+    final_value: f64,
+    final_energy: f64,
+    final_attachment: f64,
+    subjects: Vec<SubjectSummary>,
+    /// Over the subjects: the mean of each one's mean distance and signal
+    /// error after matching.
+    mean_distance: f64,
+    mean_signal_rms: Option<f64>,
+    iterations: usize,
+    evaluations: usize,
+    seconds: f64,
+    files: Vec<String>,
+}
+
+/// The subjects' (mesh, signal CSV) paths: the list file's, then the
+/// positional ones.
+fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<(PathBuf, Option<PathBuf>)>> {
+    let mut paths = Vec::new();
+    if let Some(list) = a.list {
+        let text = std::fs::read_to_string(list).with_context(|| format!("reading {}", list.display()))?;
+        let base = list.parent().unwrap_or(Path::new("."));
+        for (k, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let mut parts = line.split(',').map(str::trim);
+            let mesh = parts.next().unwrap_or_default();
+            let signal = parts.next().filter(|s| !s.is_empty());
+            if parts.next().is_some() {
+                bail!("{}:{}: expected `mesh[,signal.csv]`, found `{line}`", list.display(), k + 1);
+            }
+            paths.push((base.join(mesh), signal.map(|s| base.join(s))));
+        }
+    }
+    paths.extend(a.subjects.iter().map(|p| (p.clone(), None)));
+    if paths.is_empty() {
+        bail!("no subjects: give their files, or --subjects LIST");
+    }
+    Ok(paths)
+}
+
+/// The initial template: `template` or the first subject; without a
+/// signal it takes the subjects' mean, vertex by vertex when every subject
+/// has its vertices (one mesh, several signals, as the digits), else their
+/// mean value.
+fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape> {
+    if template.signal().is_some() {
+        return Ok(template);
+    }
+    let n = template.n_vertices();
+    let signals: Vec<&[f64]> = subjects.iter().filter_map(|s| s.signal()).collect();
+    if signals.is_empty() {
+        return Ok(template);
+    }
+    let mean = if signals.iter().all(|f| f.len() == n) {
+        (0..n).map(|v| signals.iter().map(|f| f[v]).sum::<f64>() / signals.len() as f64).collect()
+    } else {
+        let (sum, count) = signals.iter().fold((0.0, 0usize), |(s, c), f| (s + f.iter().sum::<f64>(), c + f.len()));
+        vec![sum / count.max(1) as f64; n]
+    };
+    Ok(template.with_signal(Some(mean))?)
+}
+
+pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
+    let config = Config::read(a.config)?;
+    let paths = subject_paths(a)?;
+    let subjects: Vec<FShape> = paths
+        .iter()
+        .map(|(mesh, signal)| crate::load(mesh, a.signal_name.clone(), signal.as_deref()))
+        .collect::<Result<_>>()?;
+    let (template_path, template) = match a.template {
+        Some(p) => (p.to_path_buf(), crate::load(p, a.signal_name.clone(), None)?),
+        None => (paths[0].0.clone(), subjects[0].clone()),
+    };
+    let template = initial_template(template, &subjects)?;
+    let atlas = match Atlas::new(&template, &subjects, &config) {
+        Err(MatchError::Shapes(why)) => bail!("{}: {why}", template_path.display()),
+        other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
+    };
+    let checkpoint_path = a.out.join("checkpoint.json");
+    let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };
+    std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut atlas = atlas.with_checkpoint_file(&checkpoint_path);
+    let model = atlas.plan().model.clone();
+    let mut progress = crate::match_cmd::Progress::new(model.gamma_w(), a.stop_after);
+    if atlas.run(&mut progress)? == Outcome::Interrupted {
+        progress.abandon("stopped by --stop-after; continue with --resume");
+        eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());
+        return Ok(());
+    }
+    let after = Instant::now();
+    let result = atlas.result()?;
+    let mut outputs: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let mut files: Vec<String> = Vec::new();
+    let mut push = |name: String, bytes: Vec<u8>| {
+        outputs.push((a.out.join(&name), bytes));
+        files.push(name);
+    };
+    for (name, format) in [("template.ply", io::Format::Ply), ("template.vtk", io::Format::Vtk)] {
+        let mut bytes = Vec::new();
+        io::write_to(&mut bytes, &result.template, format, Encoding::Binary)?;
+        push(name.into(), bytes);
+    }
+    let dim = result.template.dim();
+    let kind = model.kind();
+    let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
+    // One row per subject: p_0 (vertex by vertex), then p^f (or ζ).
+    let mut header: Vec<String> = vec!["subject".into()];
+    for v in 0..result.template.n_vertices() {
+        header.extend(names.iter().map(|n| format!("{n}_{v}")));
+    }
+    if kind != ModelKind::Lddmm {
+        header.extend((0..result.template.n_vertices()).map(|v| format!("pf_{v}")));
+    }
+    let mut table = header.join(",") + "\n";
+    let mut matched = Vec::new();
+    let mut subject_summaries = Vec::new();
+    for (i, (s, (path, _))) in result.subjects.iter().zip(&paths).enumerate() {
+        let dir = format!("subject_{i:03}");
+        push(format!("{dir}/p0.csv"), io::csv::vectors_text(names, &s.p0).into_bytes());
+        if kind != ModelKind::Lddmm {
+            let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
+            push(format!("{dir}/pf.csv"), io::csv::vectors_text(&[name], &s.pf).into_bytes());
+        }
+        let last = s.trajectory.steps();
+        let end = result
+            .template
+            .clone()
+            .with_points(s.trajectory.points(last).to_vec())?
+            .with_signal(Some(s.trajectory.signal(last).to_vec()))?;
+        let mut bytes = Vec::new();
+        io::write_to(&mut bytes, &end, io::Format::Ply, Encoding::Binary)?;
+        push(format!("{dir}/matched.ply"), bytes);
+        matched.push(end);
+        let row: Vec<String> = std::iter::once(i.to_string())
+            .chain(
+                s.p0.iter().chain(if kind == ModelKind::Lddmm { &[][..] } else { &s.pf[..] }).map(|v| format!("{v:e}")),
+            )
+            .collect();
+        table.push_str(&(row.join(",") + "\n"));
+        subject_summaries.push(SubjectSummary {
+            file: path.display().to_string(),
+            value: s.energies.value,
+            energy: s.energies.energy,
+            attachment: s.energies.attachment,
+            quality: s.quality,
+            template_quality: s.template_quality,
+            directory: dir,
+        });
+    }
+    push("momenta.csv".into(), table.into_bytes());
+    // Pictures: the template, and a grid of each subject (left) next to the
+    // template shot onto it (right), all with one camera and colour range.
+    let mut all: Vec<&FShape> = subjects.iter().collect();
+    all.push(&result.template);
+    let view = View::fit(&all, a.view.0, a.view.1);
+    push("template.png".into(), render::png(&render::rasterise(&result.template, &view))?);
+    let pairs: Vec<(&FShape, &FShape)> = subjects.iter().zip(&matched).take(GRID_ROWS * GRID_PAIRS).collect();
+    let (grid, width, height) = grid(&pairs, &view);
+    push("subjects.png".into(), render::png_sized(&grid, width, height)?);
+    let (svg, png) = crate::match_cmd::energy_plot(&result.stages, model.gamma_w())?;
+    push("energy.svg".into(), svg.into_bytes());
+    push("energy.png".into(), png);
+    let n = result.subjects.len() as f64;
+    let mean_distance = result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n;
+    let rms: Vec<f64> = result.subjects.iter().filter_map(|s| s.quality.signal_rms).collect();
+    let mean_signal_rms = (rms.len() == result.subjects.len()).then(|| rms.iter().sum::<f64>() / n);
+    let e = result.energies;
+    let summary = Summary {
+        template_start: template_path.display().to_string(),
+        config: a.config.display().to_string(),
+        model: kind.name(),
+        norm: model.norm().name(),
+        gamma_v: config.model.gamma_v,
+        gamma_f: config.model.gamma_f,
+        gamma_w: config.model.gamma_w,
+        scales: atlas.plan().scales,
+        effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
+        stages: &result.stages,
+        final_value: e.value,
+        final_energy: e.energy,
+        final_attachment: e.attachment,
+        subjects: subject_summaries,
+        mean_distance,
+        mean_signal_rms,
+        iterations: result.iterations,
+        evaluations: result.evaluations,
+        seconds: result.seconds + after.elapsed().as_secs_f64(),
+        files: files.clone(),
+    };
+    outputs.push((a.out.join("summary.json"), serde_json::to_vec_pretty(&summary)?));
+    for (path, bytes) in &outputs {
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+        }
+        io::write_atomic(path, bytes, false)?;
+    }
+    println!(
+        "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files to {}",
+        result.subjects.len(),
+        e.value,
+        e.energy,
+        e.attachment,
+        result.iterations,
+        result.stages.len(),
+        outputs.len(),
+        a.out.display()
+    );
+    let signal = mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
+    println!(
+        "  subjects matched from the template: mean distance {:.3}% of the diagonal (mean over subjects){signal}",
+        100.0 * mean_distance
+    );
+    Ok(())
+}
+
+/// Rows and subject pairs per row of the subjects' picture.
+const GRID_ROWS: usize = 8;
+const GRID_PAIRS: usize = 4;
+
+/// Each subject next to its matched template, at a quarter of the render
+/// size, `GRID_PAIRS` pairs per row: (RGB, width, height).
+fn grid(pairs: &[(&FShape, &FShape)], view: &View) -> (Vec<u8>, u32, u32) {
+    let tile = SIZE / 4;
+    let rows = pairs.len().div_ceil(GRID_PAIRS).max(1);
+    let (width, height) = (2 * GRID_PAIRS * tile, rows * tile);
+    let mut rgb = vec![255u8; width * height * 3];
+    for (k, (subject, matched)) in pairs.iter().enumerate() {
+        for (j, shape) in [subject, matched].iter().enumerate() {
+            let full = render::rasterise(shape, view);
+            let (col, row) = (2 * (k % GRID_PAIRS) + j, k / GRID_PAIRS);
+            for y in 0..tile {
+                for x in 0..tile {
+                    // The mean of each 4 × 4 block.
+                    let dst = ((row * tile + y) * width + col * tile + x) * 3;
+                    for c in 0..3 {
+                        let sum: usize =
+                            (0..16).map(|b| usize::from(full[((4 * y + b / 4) * SIZE + 4 * x + b % 4) * 3 + c])).sum();
+                        rgb[dst + c] = (sum / 16) as u8;
+                    }
+                }
+            }
+        }
+    }
+    (rgb, width as u32, height as u32)
+}
