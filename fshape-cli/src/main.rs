@@ -228,8 +228,9 @@ enum Command {
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo {
-        /// Which experiment: digits, bunny or cortex.
-        #[arg(value_parser = ["digits", "bunny", "cortex"])]
+        /// Which experiment: digits, bunny, cortex, or atlas-digits (an
+        /// atlas of 64 writers' 3s; `fshape atlas` outputs).
+        #[arg(value_parser = ["digits", "bunny", "cortex", "atlas-digits"])]
         name: String,
         /// Output directory.
         #[arg(long, default_value = "demo-output")]
@@ -251,6 +252,9 @@ enum Command {
         /// (about a minute per norm) instead of the paper's 10242 vertices.
         #[arg(long)]
         quick: bool,
+        /// atlas-digits: only the first N subjects (0: all 64).
+        #[arg(long, default_value_t = 0)]
+        subjects: usize,
     },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
     /// optionally .gz), optionally attaching a signal from a CSV file.
@@ -365,7 +369,7 @@ fn main() -> ExitCode {
                 view: (azimuth, elevation),
             })
         }
-        Command::Demo { name, out, data, max_iterations, ratios, gamma_w, quick } => {
+        Command::Demo { name, out, data, max_iterations, ratios, gamma_w, quick, subjects } => {
             let data = data.unwrap_or_else(demo::default_data);
             match name.as_str() {
                 _ if quick && name != "bunny" => {
@@ -373,6 +377,10 @@ fn main() -> ExitCode {
                 }
                 "bunny" => demo::bunny(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick }),
                 "cortex" => demo::cortex(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick }),
+                "atlas-digits" => demo::atlas_digits(
+                    &demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w },
+                    subjects,
+                ),
                 _ => {
                     demo::digits(&demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w })
                 }

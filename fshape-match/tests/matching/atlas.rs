@@ -180,3 +180,96 @@ fn an_atlas_refuses_an_empty_population_and_mixed_shapes() {
     let err = Atlas::new(&template(), &[subjects()[0].clone(), curve], &config).err().unwrap().to_string();
     assert!(err.contains("subject 1"), "{err}");
 }
+
+/// The vertex-wise mean of the subjects' positions and signals minus the
+/// template's: the first-order bias of any template estimate, since a
+/// template moved by it is what the mean of the subjects' geodesics points
+/// to (the subjects share the template's vertices here).
+fn mean_displacement(truth: &FShape, subjects: &[FShape]) -> (Vec<f64>, Vec<f64>) {
+    let n = subjects.len() as f64;
+    let mut dx = vec![0.0; truth.points().len()];
+    let mut df = vec![0.0; truth.n_vertices()];
+    for s in subjects {
+        for (d, (a, b)) in dx.iter_mut().zip(s.points().iter().zip(truth.points())) {
+            *d += (a - b) / n;
+        }
+        for (d, (a, b)) in df.iter_mut().zip(s.signal().unwrap().iter().zip(truth.signal().unwrap())) {
+            *d += (a - b) / n;
+        }
+    }
+    (dx, df)
+}
+
+#[test]
+fn a_population_shot_from_a_known_template_gives_it_back_within_the_derived_bound() {
+    use fshape_shoot::Problem;
+    // The truth: an ellipsoid carrying 2z.
+    let sphere = fshape_mesh::generate::icosphere(2, 0.5);
+    let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.3 * p[0], p[1], 0.75 * p[2]]).collect();
+    let f: Vec<f64> = pts.chunks_exact(3).map(|p| 2.0 * p[2]).collect();
+    let truth = sphere.clone().with_points(pts).unwrap().with_signal(Some(f)).unwrap();
+    let mut config = Config::parse(
+        "[model]\nnorm = \"h1\"\nlength = 0.3\ngamma_f = 0.1\n[deformation]\nwidths = [0.4]\n\
+         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+         [optimizer]\ndecrease_tolerance = 1e-3\ndecrease_window = 5\nmax_iterations = 300\n",
+    )
+    .unwrap();
+    config.integrator.steps = 5;
+    // Eight subjects: the truth shot by seeded random momenta.
+    let plan = config.plan(&truth, &truth).unwrap();
+    let shooter = Problem::new(&truth, plan.model.clone()).unwrap();
+    let n = truth.n_vertices();
+    let subjects: Vec<FShape> = (0..8)
+        .map(|i| {
+            let p0 = random_vector_field(n, 3, 0.002, 100 + i);
+            let pf = random_vector_field(n, 1, 0.002, 200 + i);
+            let traj = shooter.shoot(&p0, &pf).unwrap();
+            let k = traj.steps();
+            truth
+                .clone()
+                .with_points(traj.points(k).to_vec())
+                .unwrap()
+                .with_signal(Some(traj.signal(k).to_vec()))
+                .unwrap()
+        })
+        .collect();
+    // Start from the sphere with the subjects' mean signal.
+    let (_, df) = mean_displacement(&truth, &subjects);
+    let mean_signal: Vec<f64> = truth.signal().unwrap().iter().zip(&df).map(|(a, b)| a + b).collect();
+    let start = sphere.with_signal(Some(mean_signal)).unwrap();
+    let mut atlas = Atlas::new(&start, &subjects, &config).unwrap();
+    atlas.run(&mut ()).unwrap();
+    let r = atlas.result().unwrap();
+    assert_ne!(r.stages[0].stop, fshape_match::optimize::Stop::Iterations, "{:?}", r.stages[0].reason);
+    // The bound: the first-order bias (the mean displacement, as a mean
+    // vertex distance and an rms signal change) plus what the atlas leaves
+    // unmatched (the subjects' mean distance and signal error after
+    // matching); for the signal, also what the template's own position
+    // error carries (below). Nothing in it is chosen: all are measured.
+    let (dx, df) = mean_displacement(&truth, &subjects);
+    let diag = truth.bounding_box().diagonal();
+    let bias_x =
+        dx.chunks_exact(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).sum::<f64>() / n as f64 / diag;
+    let range = 2.0 * 0.75 * 0.5 * 2.0;
+    let bias_f = (df.iter().map(|d| d * d).sum::<f64>() / n as f64).sqrt() / range;
+    let k = r.subjects.len() as f64;
+    let residual_x = r.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / k;
+    let residual_f = r.subjects.iter().map(|s| s.quality.signal_rms.unwrap()).sum::<f64>() / k;
+    let got = fshape_match::quality(&r.template, &truth).unwrap();
+    let before = fshape_match::quality(&start, &truth).unwrap();
+    // A position error δ moves the closest point of a signal 2z by up to
+    // 2δ: the signal error the geometric error alone explains.
+    let carried_f = 2.0 * got.mean_distance * diag / range;
+    let (tol_x, tol_f) = (bias_x + residual_x, bias_f + residual_f + carried_f);
+    eprintln!(
+        "template vs truth: distance {:.4} (start {:.4}, bound {tol_x:.4} = bias {bias_x:.4} + residual {residual_x:.4}); \
+         signal {:.4} (bound {tol_f:.4} = {bias_f:.4} + {residual_f:.4} + {carried_f:.4})",
+        got.mean_distance,
+        before.mean_distance,
+        got.signal_rms.unwrap()
+    );
+    // The test has teeth: the start is well outside the bound.
+    assert!(before.mean_distance > 3.0 * tol_x, "{before:?} against {tol_x}");
+    assert!(got.mean_distance <= tol_x, "{got:?} against {tol_x}");
+    assert!(got.signal_rms.unwrap() <= tol_f, "{got:?} against {tol_f}");
+}
