@@ -472,7 +472,6 @@ impl Problem {
         let forward = start.elapsed().as_secs_f64();
         let mut t = traj.timings;
         let l = self.layout;
-        let last = self.model.steps();
         let back = std::time::Instant::now();
         // λ_N = ∂J/∂z_N.
         let gw = self.model.gamma_w();
@@ -483,42 +482,7 @@ impl Problem {
         for (o, v) in lam[l.f()].iter_mut().zip(&ga.signal) {
             *o = gw * v;
         }
-        let dynamics = self.dynamics();
-        let mut scratch = Scratch::new(l, dynamics.fem)?;
-        let (a, b) = self.model.integrator().tableau();
-        let dt = 1.0 / last as f64;
-        let (len, s) = (l.len(), b.len());
-        // ∂J/∂Z_i for the stages of one step, ∂J/∂k_i, and h at a stage.
-        let mut gz = vec![0.0; s * len];
-        let mut gk = vec![0.0; len];
-        let mut h = vec![0.0; l.p];
-        for step in (0..last).rev() {
-            for i in (0..s).rev() {
-                // ∂J/∂k_i = dt b_i λ + Σ_{j>i} dt a_ji ∂J/∂Z_j.
-                for (g, v) in gk.iter_mut().zip(&lam) {
-                    *g = dt * b[i] * v;
-                }
-                let (mine, later) = gz.split_at_mut((i + 1) * len);
-                for j in i + 1..s {
-                    let aji = a[j].get(i).copied().unwrap_or(0.0);
-                    if aji != 0.0 {
-                        axpy(&mut gk, dt * aji, &later[(j - i - 1) * len..(j - i) * len]);
-                    }
-                }
-                let gzi = &mut mine[i * len..];
-                if gk.iter().all(|v| *v == 0.0) {
-                    gzi.fill(0.0);
-                    continue;
-                }
-                // Refactor at Z_i and recover h there.
-                let zi = traj.stage(step, i);
-                timed(&mut t.fem, || scratch.solve_at(&zi[l.x()], &zi[l.pf()], &mut h))?;
-                dynamics.vjp(zi, &h, &gk, gzi, &mut scratch, &mut t)?;
-            }
-            for g in gz.chunks_exact(len) {
-                axpy(&mut lam, 1.0, g);
-            }
-        }
+        let lam = self.backward(&traj, lam, &mut t)?;
         let backward = back.elapsed().as_secs_f64();
         // ∂J/∂p_0 = ∂H_0/∂p + λ_p; ∂J/∂p^f = ∂H_0/∂p^f + λ_pf (metamorphosis),
         // or the signal energy's gradient + λ_f (tangential: f_0 = f + ζ).
@@ -550,6 +514,82 @@ impl Problem {
             timings: t,
             trajectory: traj,
         })
+    }
+
+    /// The adjoint pass: from λ = ∂Φ/∂z_N at the end of `traj`, ∂Φ/∂z_0
+    /// through the integrator's steps (the discrete adjoint).
+    fn backward(&self, traj: &Trajectory, mut lam: Vec<f64>, t: &mut Timings) -> Result<Vec<f64>, ShootError> {
+        let l = self.layout;
+        let last = self.model.steps();
+        let dynamics = self.dynamics();
+        let mut scratch = Scratch::new(l, dynamics.fem)?;
+        let (a, b) = self.model.integrator().tableau();
+        let dt = 1.0 / last as f64;
+        let (len, s) = (l.len(), b.len());
+        // ∂J/∂Z_i for the stages of one step, ∂J/∂k_i, and h at a stage.
+        let mut gz = vec![0.0; s * len];
+        let mut gk = vec![0.0; len];
+        let mut h = vec![0.0; l.p];
+        for step in (0..last).rev() {
+            for i in (0..s).rev() {
+                // ∂J/∂k_i = dt b_i λ + Σ_{j>i} dt a_ji ∂J/∂Z_j.
+                for (g, v) in gk.iter_mut().zip(&lam) {
+                    *g = dt * b[i] * v;
+                }
+                let (mine, later) = gz.split_at_mut((i + 1) * len);
+                for j in i + 1..s {
+                    let aji = a[j].get(i).copied().unwrap_or(0.0);
+                    if aji != 0.0 {
+                        axpy(&mut gk, dt * aji, &later[(j - i - 1) * len..(j - i) * len]);
+                    }
+                }
+                let gzi = &mut mine[i * len..];
+                if gk.iter().all(|v| *v == 0.0) {
+                    gzi.fill(0.0);
+                    continue;
+                }
+                // Refactor at Z_i and recover h there.
+                let zi = traj.stage(step, i);
+                timed(&mut t.fem, || scratch.solve_at(&zi[l.x()], &zi[l.pf()], &mut h))?;
+                dynamics.vjp(zi, &h, &gk, gzi, &mut scratch, t)?;
+            }
+            for g in gz.chunks_exact(len) {
+                axpy(&mut lam, 1.0, g);
+            }
+        }
+        Ok(lam)
+    }
+
+    /// The gradient of Φ = H(z_0) + ⟨end_x, x_1⟩ + ⟨end_f, f_1⟩ in (p_0,
+    /// p^f) along `traj` (shot from p_0, p^f by [`Problem::shoot`]): the
+    /// adjoint with a given end co-state, for a template that is itself
+    /// shot (an atlas's hypertemplate), where ∂J/∂x_1 comes from
+    /// elsewhere. For LDDMM the ∂/∂p^f part is zeros.
+    pub fn pullback(
+        &self,
+        traj: &Trajectory,
+        end_x: &[f64],
+        end_f: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>), ShootError> {
+        let l = self.layout;
+        for (what, v, n) in [("end co-state of x", end_x, l.pn), ("end co-state of f", end_f, l.p)] {
+            if v.len() != n {
+                return Err(ShootError::Dimension { what, expected: n, found: v.len() });
+            }
+        }
+        let mut lam = vec![0.0; l.len()];
+        lam[l.x()].copy_from_slice(end_x);
+        lam[l.f()].copy_from_slice(end_f);
+        let mut t = Timings::default();
+        let lam = self.backward(traj, lam, &mut t)?;
+        let k0 = traj.slope(0);
+        let grad_p = lam[l.mom()].iter().zip(&k0[l.x()]).map(|(a, b)| a + b).collect();
+        let grad_pf = match self.model.kind() {
+            ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
+            ModelKind::Tangential => lam[l.f()].to_vec(),
+            ModelKind::Lddmm => vec![0.0; l.p],
+        };
+        Ok((grad_p, grad_pf))
     }
 
     /// Flows extra points (M × n) along a trajectory: ẏ = K_{y,x} p / γ_V,

@@ -135,3 +135,39 @@ fn the_template_gradient_matches_central_differences_for_every_norm_and_model() 
     let mut problem = Problem::new(&template, m).unwrap().with_target(&target, attachment()).unwrap();
     check_template(&mut problem, &p0, &pf, "curve, h1, midpoint", &mut rng);
 }
+
+#[test]
+fn the_pullback_of_an_end_costate_matches_central_differences() {
+    // Φ(p_0, p^f) = H(z_0) + ⟨a, x_1⟩ + ⟨b, f_1⟩ for fixed a, b.
+    let mut rng = SplitMix64(12);
+    let (template, _) = surfaces();
+    let template = with_signal(template, 1.0, &mut rng);
+    let (p0, pf) = momenta(&template, 0.3, 5);
+    let n = template.n_vertices();
+    let (a, b) = (random_direction(3 * n, &mut rng), random_direction(n, &mut rng));
+    for kind in ["metamorphosis", "tangential", "lddmm"] {
+        let m = model(&format!("kind = \"{kind}\"\nnorm = \"h1\"\nlength = 0.5\ngamma_f = 0.5"), "", "rk4", 5);
+        let problem = Problem::new(&template, m).unwrap();
+        let traj = problem.shoot(&p0, &pf).unwrap();
+        let (gp, gf) = problem.pullback(&traj, &a, &b).unwrap();
+        let phi = |z: &[f64]| {
+            let t = problem.shoot(&z[..3 * n], &z[3 * n..]).unwrap();
+            let k = t.steps();
+            let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x * y).sum::<f64>();
+            t.hamiltonian[0] + dot(&a, t.points(k)) + dot(&b, t.signal(k))
+        };
+        let z: Vec<f64> = p0.iter().chain(&pf).copied().collect();
+        let grad: Vec<f64> = gp.iter().chain(&gf).copied().collect();
+        for _ in 0..2 {
+            let v = random_direction(z.len(), &mut rng);
+            let c = check_gradient(phi, &z, &grad, &v, 1e-5);
+            assert!(c.rel_error < 1e-6, "{kind}: {c:?}");
+        }
+    }
+    // End co-states of the wrong length are refused by name.
+    let m = model("norm = \"h1\"", "", "rk4", 3);
+    let problem = Problem::new(&template, m).unwrap();
+    let traj = problem.shoot(&p0, &pf).unwrap();
+    let err = problem.pullback(&traj, &a[1..], &b).unwrap_err().to_string();
+    assert!(err.contains("end co-state of x"), "{err}");
+}
