@@ -776,7 +776,18 @@ fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
     for s in subjects {
         let q = |k: &str| s[k]["mean_distance"].as_f64().unwrap();
         assert!(q("quality") < q("template_quality"), "{s}");
+        // The first subject is the initial template: it starts at A = 0,
+        // where the share removed is undefined (null).
+        let (a, a0) = (s["attachment"].as_f64().unwrap(), s["attachment_start"].as_f64().unwrap());
+        if a0 == 0.0 {
+            assert!(s["attachment_fall"].is_null(), "{s}");
+            continue;
+        }
+        let fall = s["attachment_fall"].as_f64().unwrap();
+        assert!(fall > 0.0 && (fall - (1.0 - a / a0)).abs() < 1e-12, "{s}");
     }
+    let min = subjects.iter().filter_map(|s| s["attachment_fall"].as_f64()).fold(f64::INFINITY, f64::min);
+    assert_eq!(summary["min_attachment_fall"].as_f64().unwrap(), min);
     let stage = &summary["stages"][0];
     let last = stage["iterations"].as_array().unwrap().last().unwrap()["value"].as_f64().unwrap();
     assert!(last < stage["initial"]["value"].as_f64().unwrap());
@@ -786,7 +797,15 @@ fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
     let rows: Vec<&str> = table.lines().collect();
     assert_eq!(rows.len(), 4);
     assert!(rows.iter().all(|r| r.split(',').count() == 1 + 4 * 162), "{}", &rows[0][..80]);
-    for f in ["template.ply", "template.vtk", "template.png", "subjects.png", "energy.png", "subject_002/matched.ply"] {
+    for f in [
+        "template.ply",
+        "template.vtk",
+        "template.png",
+        "template_start.png",
+        "subjects.png",
+        "energy.png",
+        "subject_002/matched.ply",
+    ] {
         assert!(whole.join(f).exists(), "{f}");
     }
     // Stopped after 2 iterations and resumed: the same template, bit for bit.

@@ -28,8 +28,19 @@
 //! the change of variables is fixed for the whole run and a checkpoint's
 //! unknowns mean the same in every stage.
 //!
-//! Not here yet: the hypertemplate model (the template shot from a fixed
-//! hypertemplate by its own momenta) and stages on coarser templates.
+//! The *hypertemplate* model (`[atlas] template = "hypertemplate"`)
+//! replaces the template's positions by momenta P_0 that shoot the initial
+//! template (the hypertemplate, fixed) to the template by LDDMM with the
+//! deformation kernel, and adds their energy (γ_V0/2)‖v‖²_V to J: the
+//! template stays a diffeomorphic image of the hypertemplate (no folds, its
+//! mesh quality kept), at the price of one more shooting per evaluation.
+//! The gradient in P_0 is the adjoint of that shooting with the subjects'
+//! mean ∂J/∂x̄ as its end co-state ([`Problem::pullback`]); P_0 takes the
+//! matching metric of momenta. The signal stays a free unknown. The free
+//! template is the default: it is fshapesTk's, costs nothing more than the
+//! subjects, and on the known-answer test comes back as close.
+//!
+//! Not here yet: stages on coarser templates.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -83,6 +94,31 @@ impl TemplateMetric {
     }
 }
 
+/// The hypertemplate's shooting: an LDDMM problem on the initial template
+/// and the packing of its momenta P_0.
+struct Hyper {
+    problem: Problem,
+    unknowns: Unknowns,
+}
+
+/// The template's positions of the first block of unknowns: scaled
+/// positions (free template), or the end of the hypertemplate's shooting
+/// by the P_0 they pack (with its trajectory, for the adjoint).
+fn positions(
+    hyper: Option<&Hyper>,
+    metric: &TemplateMetric,
+    block: &[f64],
+) -> Result<(Vec<f64>, Option<Trajectory>), ShootError> {
+    match hyper {
+        None => Ok((block.iter().map(|u| u * metric.length).collect(), None)),
+        Some(h) => {
+            let (p0, pf) = h.unknowns.unpack(block);
+            let traj = h.problem.shoot(&p0, &pf)?;
+            Ok((traj.points(traj.steps()).to_vec(), Some(traj)))
+        }
+    }
+}
+
 /// One subject's evaluation, without its trajectory (one trajectory per
 /// thread at a time).
 struct SubjectEval {
@@ -100,6 +136,7 @@ pub struct AtlasObjective<'p> {
     problems: &'p mut [Problem],
     unknowns: Unknowns,
     metric: &'p TemplateMetric,
+    hyper: Option<&'p Hyper>,
     /// P·n and P of the template.
     pn: usize,
     p: usize,
@@ -113,13 +150,17 @@ impl AtlasObjective<'_> {
         self.unknowns.len()
     }
 
-    /// The template (positions, signal) of the unknowns.
-    fn template_of(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let m = self.metric;
-        (
-            x[..self.pn].iter().map(|u| u * m.length).collect(),
-            x[self.pn..self.pn + self.p].iter().map(|u| u * m.signal).collect(),
-        )
+    /// Past the first point, a shooting that diverged is a step too far,
+    /// which the line search undoes (as in matching): `None`, else the
+    /// error.
+    fn step_too_far(&self, err: ShootError) -> Result<(), ShootError> {
+        if self.evaluations > 1
+            && !matches!(err, ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget)
+        {
+            Ok(())
+        } else {
+            Err(err)
+        }
     }
 
     /// J's mean parts at the evaluated point whose J is `value` (as
@@ -152,9 +193,14 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
 
     fn precondition(&self, v: &mut [f64]) {
         let m = self.metric;
-        let sums = KernelSums::try_new(&m.kernel, &m.points, m.dim).expect("checked when built");
-        let kv = sums.conv(&m.points, &v[..self.pn], m.dim).expect("checked when built");
-        v[..self.pn].copy_from_slice(&kv);
+        match self.hyper {
+            Some(h) => h.unknowns.precondition(&mut v[..self.pn]),
+            None => {
+                let sums = KernelSums::try_new(&m.kernel, &m.points, m.dim).expect("checked when built");
+                let kv = sums.conv(&m.points, &v[..self.pn], m.dim).expect("checked when built");
+                v[..self.pn].copy_from_slice(&kv);
+            }
+        }
         for (x, w) in v[self.pn..self.pn + self.p].iter_mut().zip(&m.inv_mass) {
             *x *= w;
         }
@@ -166,7 +212,12 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
 
     fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
         self.evaluations += 1;
-        let (points, signal) = self.template_of(x);
+        let nan = || Ok((f64::NAN, vec![f64::NAN; x.len()]));
+        let (points, traj) = match positions(self.hyper, self.metric, &x[..self.pn]) {
+            Ok(p) => p,
+            Err(e) => return self.step_too_far(e).and_then(|()| nan()),
+        };
+        let signal: Vec<f64> = x[self.pn..self.pn + self.p].iter().map(|u| u * self.metric.signal).collect();
         let len = self.subject_len();
         let unknowns = &self.unknowns;
         let evals: Vec<Result<SubjectEval, ShootError>> = self
@@ -183,29 +234,20 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         let n = evals.len() as f64;
         let mut grad = vec![0.0; x.len()];
         let mut mean = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
+        // ∂J/∂x̄, the mean of the subjects'.
+        let mut gx = vec![0.0; self.pn];
         // Summed in subject order: the same bits for any number of threads.
         for (i, e) in evals.into_iter().enumerate() {
             let e = match e {
                 Ok(e) => e,
-                // As in matching: past the first point, a shooting that
-                // diverged is a step too far, which the line search undoes.
-                Err(err)
-                    if self.evaluations > 1
-                        && !matches!(
-                            err,
-                            ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget
-                        ) =>
-                {
-                    return Ok((f64::NAN, vec![f64::NAN; x.len()]));
-                }
-                Err(err) => return Err(err),
+                Err(err) => return self.step_too_far(err).and_then(|()| nan()),
             };
             mean.value += e.energies.value / n;
             mean.energy += e.energies.energy / n;
             mean.signal_energy += e.energies.signal_energy / n;
             mean.attachment += e.energies.attachment / n;
-            for (g, v) in grad[..self.pn].iter_mut().zip(&e.x0) {
-                *g += v * self.metric.length / n;
+            for (g, v) in gx.iter_mut().zip(&e.x0) {
+                *g += v / n;
             }
             for (g, v) in grad[self.pn..self.pn + self.p].iter_mut().zip(&e.f0) {
                 *g += v * self.metric.signal / n;
@@ -213,6 +255,25 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
             let start = self.pn + self.p + i * len;
             for (g, v) in grad[start..start + len].iter_mut().zip(&e.grad) {
                 *g = v / n;
+            }
+        }
+        match (self.hyper, traj) {
+            (Some(h), Some(traj)) => {
+                // J also has the hypertemplate's energy H(P_0); its
+                // gradient and the subjects' through x̄(P_0) by the adjoint.
+                let (gp, _) = match h.problem.pullback(&traj, &gx, &vec![0.0; self.p]) {
+                    Ok(g) => g,
+                    Err(e) => return self.step_too_far(e).and_then(|()| nan()),
+                };
+                let e0 = traj.hamiltonian[0];
+                mean.value += e0;
+                mean.energy += e0;
+                grad[..self.pn].copy_from_slice(&h.unknowns.pack_grad(&gp, &[]));
+            }
+            _ => {
+                for (g, v) in grad[..self.pn].iter_mut().zip(&gx) {
+                    *g = v * self.metric.length;
+                }
             }
         }
         self.recent.push(mean);
@@ -235,6 +296,9 @@ pub struct SubjectResult {
     pub quality: crate::Quality,
     /// How close the estimated template itself is to it.
     pub template_quality: crate::Quality,
+    /// The data term A at the start: the initial template against it,
+    /// with the last stage's kernel.
+    pub initial_attachment: f64,
 }
 
 /// The atlas: the template and every subject's geodesic.
@@ -242,6 +306,9 @@ pub struct SubjectResult {
 pub struct AtlasResult {
     /// The estimated template (the initial template's cells).
     pub template: FShape,
+    /// Hypertemplate model: the momenta P_0 shooting the initial template
+    /// (the hypertemplate) to the template.
+    pub template_momenta: Option<Vec<f64>>,
     /// Per subject, in the order given.
     pub subjects: Vec<SubjectResult>,
     /// The mean J and parts at the result.
@@ -266,6 +333,7 @@ pub struct Atlas {
     subjects: Vec<FShape>,
     unknowns: Unknowns,
     metric: TemplateMetric,
+    hyper: Option<Hyper>,
     checkpoint: Checkpoint,
     checkpoint_file: Option<PathBuf>,
     staged: Option<usize>,
@@ -311,6 +379,28 @@ impl Atlas {
             subjects.iter().map(|_| Problem::new(&template, plan.model.clone())).collect::<Result<Vec<_>, _>>()?;
         let unknowns = Unknowns::scaled(&problems[0], plan.metrics, plan.scales)?;
         let metric = TemplateMetric::new(&template, plan.model.kernel(), plan.scales)?;
+        let section = config.atlas.clone().unwrap_or_default();
+        let hyper = match section.template {
+            crate::TemplateKind::Free => None,
+            crate::TemplateKind::Hypertemplate => {
+                let g = section.gamma_v0;
+                if !(g > 0.0 && g.is_finite()) {
+                    return Err(MatchError::Config {
+                        key: "atlas.gamma_v0".into(),
+                        message: format!("must be positive and finite, got {g}"),
+                    });
+                }
+                let gamma_v0 = match plan.scales {
+                    Some(s) if config.model.normalize => s.effective(g, 1.0, 1.0).0,
+                    _ => g,
+                };
+                let m = &plan.model;
+                let model = m.clone().with_kind(ModelKind::Lddmm).with_weights(gamma_v0, m.gamma_f(), m.gamma_w())?;
+                let problem = Problem::new(&template, model)?;
+                let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales)?;
+                Some(Hyper { problem, unknowns })
+            }
+        };
         let checkpoint = Checkpoint {
             format: CHECKPOINT_FORMAT,
             fingerprint: atlas_fingerprint(&template, subjects, config),
@@ -326,6 +416,7 @@ impl Atlas {
             subjects: subjects.to_vec(),
             unknowns,
             metric,
+            hyper,
             checkpoint,
             checkpoint_file: None,
             staged: None,
@@ -342,6 +433,11 @@ impl Atlas {
     /// The checked plan.
     pub fn plan(&self) -> &Plan {
         &self.plan
+    }
+
+    /// The initial template (with a zero signal if it had none).
+    pub fn initial_template(&self) -> &FShape {
+        &self.template
     }
 
     /// The checkpoint as of now.
@@ -368,7 +464,11 @@ impl Atlas {
 
     /// The starting unknowns: the initial template and zero momenta.
     fn start(&self) -> Vec<f64> {
-        let mut x: Vec<f64> = self.template.points().iter().map(|v| v / self.metric.length).collect();
+        let mut x: Vec<f64> = match self.hyper {
+            // P_0 = 0: the template starts as the hypertemplate.
+            Some(_) => vec![0.0; self.template.points().len()],
+            None => self.template.points().iter().map(|v| v / self.metric.length).collect(),
+        };
         x.extend(self.template.signal().expect("set in new").iter().map(|v| v / self.metric.signal));
         x.resize(self.len(), 0.0);
         x
@@ -422,6 +522,7 @@ impl Atlas {
             problems: &mut self.problems,
             unknowns: self.unknowns.clone(),
             metric: &self.metric,
+            hyper: self.hyper.as_ref(),
             recent: Vec::new(),
             evaluations: 0,
         }
@@ -497,13 +598,15 @@ impl Atlas {
         Ok(Outcome::Finished)
     }
 
-    /// The estimated template at the unknowns `x`.
-    fn template_at(&self, x: &[f64]) -> Result<FShape, MatchError> {
+    /// The estimated template at the unknowns `x`, and its hypertemplate
+    /// momenta (hypertemplate model).
+    fn template_at(&self, x: &[f64]) -> Result<(FShape, Option<Vec<f64>>), MatchError> {
         let pn = self.template.n_vertices() * self.template.dim();
         let p = self.template.n_vertices();
-        let points = x[..pn].iter().map(|u| u * self.metric.length).collect();
+        let (points, _) = positions(self.hyper.as_ref(), &self.metric, &x[..pn])?;
         let signal = x[pn..pn + p].iter().map(|u| u * self.metric.signal).collect();
-        Ok(self.template.clone().with_points(points)?.with_signal(Some(signal))?)
+        let momenta = self.hyper.as_ref().map(|h| h.unknowns.unpack(&x[..pn]).0);
+        Ok((self.template.clone().with_points(points)?.with_signal(Some(signal))?, momenta))
     }
 
     /// The result of a finished run: the template, and every subject's
@@ -514,13 +617,17 @@ impl Atlas {
         }
         self.stage_target(self.plan.stages.len() - 1)?;
         let x = self.checkpoint.warm.clone().ok_or(MatchError::NotFinished)?;
-        let template = self.template_at(&x)?;
+        let (template, template_momenta) = self.template_at(&x)?;
         let len = self.unknowns.len();
         let offset = template.n_vertices() * (template.dim() + 1);
         let n = self.subjects.len() as f64;
         let mut energies = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
         let mut subjects = Vec::with_capacity(self.subjects.len());
+        let start = self.template.clone();
+        let zeros = (vec![0.0; start.n_vertices() * start.dim()], vec![0.0; start.n_vertices()]);
         for (i, (problem, subject)) in self.problems.iter_mut().zip(&self.subjects).enumerate() {
+            problem.set_template(start.points(), start.signal())?;
+            let initial_attachment = problem.objective(&zeros.0, &zeros.1)?.0.attachment;
             problem.set_template(template.points(), template.signal())?;
             let (p0, pf) = self.unknowns.unpack(&x[offset + i * len..offset + (i + 1) * len]);
             let (e, trajectory) = problem.objective(&p0, &pf)?;
@@ -536,6 +643,7 @@ impl Atlas {
             subjects.push(SubjectResult {
                 quality: crate::quality(&matched, subject)?,
                 template_quality: crate::quality(&template, subject)?,
+                initial_attachment,
                 p0,
                 pf,
                 energies: e,
@@ -543,8 +651,15 @@ impl Atlas {
             });
         }
         let done = &self.checkpoint.done;
+        let hyper_energy = match (&self.hyper, &template_momenta) {
+            (Some(h), Some(p0)) => h.problem.shoot(p0, &vec![0.0; template.n_vertices()])?.hamiltonian[0],
+            _ => 0.0,
+        };
+        energies.value += hyper_energy;
+        energies.energy += hyper_energy;
         Ok(AtlasResult {
             template,
+            template_momenta,
             subjects,
             energies,
             stages: done.clone(),

@@ -48,6 +48,10 @@
 //! max_iterations = [200, 100, 30]           # per stage (default [optimizer]'s)
 //! decrease_tolerance = [1e-2, 1e-2, 1e-3]    # per stage (default [optimizer]'s)
 //! decrease_window = [10, 10, 3]              # per stage (default [optimizer]'s)
+//!
+//! [atlas]                           # fshape atlas only
+//! template = "free"                 # free | hypertemplate              (default free)
+//! gamma_v0 = 1.0                    # hypertemplate: weight γ_V0 of its energy (default 1)
 //! ```
 //!
 //! **Scale-free weights** (`normalize = true`, the default). The three
@@ -112,6 +116,40 @@ pub struct Config {
     /// `[schedule]` (matching).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub schedule: Option<ScheduleSection>,
+    /// `[atlas]` (atlas estimation only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub atlas: Option<AtlasSection>,
+}
+
+/// Which template model an atlas estimates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TemplateKind {
+    /// The template's positions and signal are unknowns (fshapesTk's
+    /// free template; its position gradient smoothed by the kernel).
+    #[default]
+    Free,
+    /// The template is the initial one (the hypertemplate) shot by its own
+    /// momenta P_0 (LDDMM, the deformation kernel), with (γ_V0/2)‖v‖²_V
+    /// added to J; its signal is an unknown as in the free template.
+    Hypertemplate,
+}
+
+/// `[atlas]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AtlasSection {
+    /// free | hypertemplate (default free).
+    pub template: TemplateKind,
+    /// γ_V0, the weight of the hypertemplate's deformation energy
+    /// (normalised like γ_V; default 1).
+    pub gamma_v0: f64,
+}
+
+impl Default for AtlasSection {
+    fn default() -> Self {
+        AtlasSection { template: TemplateKind::Free, gamma_v0: 1.0 }
+    }
 }
 
 /// The signal norm's name (`l2-lumped`, `l2`, `h1`); H¹'s length is
@@ -489,6 +527,7 @@ impl Config {
             attachment: None,
             optimizer: OptimizerSection::default(),
             schedule: None,
+            atlas: None,
         }
     }
 

@@ -45,8 +45,9 @@ pub mod unknowns;
 
 pub use atlas::{Atlas, AtlasResult, SubjectResult};
 pub use config::{
-    AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind, ModelSection,
-    NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec, StageSpec,
+    AtlasSection, AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind,
+    ModelSection, NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec,
+    StageSpec, TemplateKind,
 };
 pub use quality::{Quality, quality};
 pub use session::{
