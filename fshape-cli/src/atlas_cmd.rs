@@ -53,6 +53,14 @@ struct SubjectSummary {
 }
 
 #[derive(Serialize)]
+struct ModeSummary {
+    /// Standard deviation, in √(2 × energy).
+    sd: f64,
+    /// Share of the total variance.
+    share: f64,
+}
+
+#[derive(Serialize)]
 struct Summary<'a> {
     template_start: String,
     config: String,
@@ -73,6 +81,9 @@ struct Summary<'a> {
     /// error after matching.
     mean_distance: f64,
     mean_signal_rms: Option<f64>,
+    /// The principal modes of the initial momenta (energy metric): their
+    /// standard deviations and shares of the variance.
+    modes: Vec<ModeSummary>,
     /// The smallest share of a subject's data term the atlas removed
     /// (subjects that start at A = 0 left out).
     min_attachment_fall: f64,
@@ -233,6 +244,46 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
     let pairs: Vec<(&FShape, &FShape)> = subjects.iter().zip(&matched).take(GRID_ROWS * GRID_PAIRS).collect();
     let (grid, width, height) = grid(&pairs, &view);
     push("subjects.png".into(), render::png_sized(&grid, width, height)?);
+    // The population's main modes of variation: principal components of
+    // the initial momenta in the energy metric, the template shot to ±2
+    // standard deviations along each.
+    let pca = atlas.principal_modes(&result, MODES)?;
+    let mut scores = std::iter::once("subject".to_string())
+        .chain((0..pca.modes.len()).map(|k| format!("mode_{}", k + 1)))
+        .collect::<Vec<_>>()
+        .join(",")
+        + "\n";
+    for (i, row) in pca.scores.iter().enumerate() {
+        let cells: Vec<String> = std::iter::once(i.to_string()).chain(row.iter().map(|v| format!("{v:e}"))).collect();
+        scores.push_str(&(cells.join(",") + "\n"));
+    }
+    push("pca.csv".into(), scores.into_bytes());
+    let mut mode_rows: Vec<[FShape; 3]> = Vec::new();
+    let mut mode_summaries = Vec::new();
+    for (k, mode) in pca.modes.iter().enumerate() {
+        let at = |c: f64| -> (Vec<f64>, Vec<f64>) {
+            let p0 = pca.mean_p0.iter().zip(&mode.p0).map(|(m, e)| m + c * mode.sd * e).collect();
+            let pf = pca.mean_pf.iter().zip(&mode.pf).map(|(m, e)| m + c * mode.sd * e).collect();
+            (p0, pf)
+        };
+        let mut row = Vec::new();
+        for c in [-2.0, 0.0, 2.0] {
+            let (p0, pf) = at(c);
+            row.push(atlas.shoot_template(&result, &p0, &pf)?);
+        }
+        for (c, shape) in [("minus2sd", &row[0]), ("plus2sd", &row[2])] {
+            let mut bytes = Vec::new();
+            io::write_to(&mut bytes, shape, io::Format::Ply, Encoding::Binary)?;
+            push(format!("mode_{}_{c}.ply", k + 1), bytes);
+        }
+        mode_summaries.push(ModeSummary { sd: mode.sd, share: mode.share });
+        mode_rows.push([row[0].clone(), row[1].clone(), row[2].clone()]);
+    }
+    if !mode_rows.is_empty() {
+        let pairs: Vec<(&FShape, &FShape, &FShape)> = mode_rows.iter().map(|r| (&r[0], &r[1], &r[2])).collect();
+        let (rgb, width, height) = mode_grid(&pairs, &view);
+        push("modes.png".into(), render::png_sized(&rgb, width, height)?);
+    }
     let (svg, png) = crate::match_cmd::energy_plot(&result.stages, model.gamma_w())?;
     push("energy.svg".into(), svg.into_bytes());
     push("energy.png".into(), png);
@@ -265,6 +316,7 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
         mean_distance,
         mean_signal_rms,
         min_attachment_fall,
+        modes: mode_summaries,
         iterations: result.iterations,
         evaluations: result.evaluations,
         seconds: result.seconds + after.elapsed().as_secs_f64(),
@@ -296,6 +348,33 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
         100.0 * min_attachment_fall
     );
     Ok(())
+}
+
+/// Principal modes written and drawn.
+const MODES: usize = 3;
+
+/// One row per mode: the template shot to −2, 0 and +2 standard
+/// deviations, at half the render size: (RGB, width, height).
+fn mode_grid(rows: &[(&FShape, &FShape, &FShape)], view: &View) -> (Vec<u8>, u32, u32) {
+    let tile = SIZE / 2;
+    let (width, height) = (3 * tile, rows.len() * tile);
+    let mut rgb = vec![255u8; width * height * 3];
+    for (r, (a, b, c)) in rows.iter().enumerate() {
+        for (col, shape) in [a, b, c].iter().enumerate() {
+            let full = render::rasterise(shape, view);
+            for y in 0..tile {
+                for x in 0..tile {
+                    let dst = ((r * tile + y) * width + col * tile + x) * 3;
+                    for ch in 0..3 {
+                        let sum: usize =
+                            (0..4).map(|b| usize::from(full[((2 * y + b / 2) * SIZE + 2 * x + b % 2) * 3 + ch])).sum();
+                        rgb[dst + ch] = (sum / 4) as u8;
+                    }
+                }
+            }
+        }
+    }
+    (rgb, width as u32, height as u32)
 }
 
 /// Rows and subject pairs per row of the subjects' picture.

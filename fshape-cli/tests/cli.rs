@@ -805,9 +805,20 @@ fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
         "subjects.png",
         "energy.png",
         "subject_002/matched.ply",
+        "modes.png",
+        "mode_1_minus2sd.ply",
+        "mode_2_plus2sd.ply",
     ] {
         assert!(whole.join(f).exists(), "{f}");
     }
+    // Three subjects: two principal modes, their scores one row per subject.
+    let modes = summary["modes"].as_array().unwrap();
+    assert_eq!(modes.len(), 2);
+    let share: f64 = modes.iter().map(|m| m["share"].as_f64().unwrap()).sum();
+    assert!((share - 1.0).abs() < 1e-9, "{modes:?}");
+    let pca = std::fs::read_to_string(whole.join("pca.csv")).unwrap();
+    assert_eq!(pca.lines().next().unwrap(), "subject,mode_1,mode_2");
+    assert_eq!(pca.lines().count(), 4);
     // Stopped after 2 iterations and resumed: the same template, bit for bit.
     run(&parts, &["--stop-after", "2"]);
     assert!(!parts.join("template.ply").exists());

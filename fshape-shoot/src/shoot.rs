@@ -126,6 +126,14 @@ impl Trajectory {
         &self.node(k)[self.layout.pf()]
     }
 
+    /// The velocities (ẋ, ḟ) at node k: K p / γ_V at the points and, for
+    /// metamorphosis, the signal velocity D_s⁻¹p^f/γ_f (zeros otherwise).
+    /// ⟨p, ẋ⟩ + ⟨p^f, ḟ⟩ is twice the Hamiltonian there.
+    pub fn velocity(&self, k: usize) -> (&[f64], &[f64]) {
+        let z = self.slope(k);
+        (&z[self.layout.x()], &z[self.layout.f()])
+    }
+
     /// (x, f) at any t ∈ [0, 1]: cubic Hermite interpolation between the
     /// steps with the field's ẋ, ḟ at both ends (exact at the steps). For
     /// the tangential model f is the paper's affine path f_0 + tζ.

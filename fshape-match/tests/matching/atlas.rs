@@ -309,3 +309,83 @@ fn known_template(more: &str, gamma_v0: f64) {
     assert!(got.mean_distance <= tol_x, "{got:?} against {tol_x}");
     assert!(got.signal_rms.unwrap() <= tol_f, "{got:?} against {tol_f}");
 }
+
+#[test]
+fn the_jacobi_eigensolver_agrees_with_faer_and_reconstructs_its_matrix() {
+    for (n, seed) in [(1, 1), (5, 2), (20, 3)] {
+        let r = random_vector_field(n * n, 1, 1.0, seed);
+        let a: Vec<f64> = (0..n * n).map(|k| r[k] + r[(k % n) * n + k / n]).collect();
+        let (values, vectors) = fshape_match::atlas::symmetric_eigen(&a, n);
+        let m = faer::Mat::<f64>::from_fn(n, n, |i, j| a[i * n + j]);
+        let mut theirs = m.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+        theirs.reverse();
+        let scale = a.iter().map(|x| x.abs()).fold(0.0, f64::max);
+        for (x, y) in values.iter().zip(&theirs) {
+            assert!((x - y).abs() < 1e-12 * scale, "{values:?} against {theirs:?}");
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let back: f64 = (0..n).map(|k| vectors[i * n + k] * values[k] * vectors[j * n + k]).sum();
+                let id: f64 = (0..n).map(|k| vectors[k * n + i] * vectors[k * n + j]).sum();
+                assert!((back - a[i * n + j]).abs() < 1e-12 * scale);
+                assert!((id - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+    }
+}
+
+#[test]
+fn principal_modes_are_orthonormal_in_the_energy_metric_and_their_scores_give_back_the_gram_matrix() {
+    use fshape_shoot::Problem;
+    for (kind, norm) in [("metamorphosis", "h1"), ("tangential", "l2"), ("lddmm", "l2-lumped")] {
+        let mut config = config(kind, norm);
+        config.optimizer.max_iterations = 4;
+        let subjects = subjects();
+        let mut atlas = Atlas::new(&template(), &subjects, &config).unwrap();
+        atlas.run(&mut ()).unwrap();
+        let r = atlas.result().unwrap();
+        let pca = atlas.principal_modes(&r, 10).unwrap();
+        // Three subjects: at most two modes, largest first.
+        assert_eq!(pca.modes.len(), 2, "{kind}");
+        assert!(pca.modes[0].sd >= pca.modes[1].sd);
+        let share: f64 = pca.modes.iter().map(|m| m.share).sum();
+        assert!((share - 1.0).abs() < 1e-9, "{kind}: {share}");
+        // ⟨m, m'⟩ by the model's own energy: 2H(m) = ⟨m, m⟩, and the
+        // tangential model's signal term (γ_f/2)ζᵀDζ, which H leaves out.
+        let problem = Problem::new(&r.template, atlas.plan().model.clone()).unwrap();
+        let fem = fshape_fem::SignalNorm::try_new(&r.template, atlas.plan().model.norm()).unwrap();
+        let norm2 = |p0: &[f64], pf: &[f64]| {
+            let h = 2.0 * problem.shoot(p0, pf).unwrap().hamiltonian[0];
+            let g = atlas.plan().model.gamma_f();
+            match kind {
+                "tangential" => {
+                    h + g * pf.iter().zip(fem.matvec(r.template.points(), pf).unwrap()).map(|(a, b)| a * b).sum::<f64>()
+                }
+                _ => h,
+            }
+        };
+        let (a, b) = (&pca.modes[0], &pca.modes[1]);
+        let sum = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x + y).collect::<Vec<f64>>();
+        assert!((norm2(&a.p0, &a.pf) - 1.0).abs() < 1e-9, "{kind}");
+        assert!((norm2(&b.p0, &b.pf) - 1.0).abs() < 1e-9, "{kind}");
+        // ‖a + b‖² = 2 + 2⟨a, b⟩.
+        assert!((norm2(&sum(&a.p0, &b.p0), &sum(&a.pf, &b.pf)) - 2.0).abs() < 1e-9, "{kind}");
+        // The scores of subjects i and j give ⟨m_i − m̄, m_j − m̄⟩.
+        let centred = |i: usize| {
+            let s = &r.subjects[i];
+            let d0: Vec<f64> = s.p0.iter().zip(&pca.mean_p0).map(|(x, m)| x - m).collect();
+            let df: Vec<f64> = s.pf.iter().zip(&pca.mean_pf).map(|(x, m)| x - m).collect();
+            (d0, df)
+        };
+        for (i, j) in [(0, 0), (0, 1), (1, 2)] {
+            let (ci, cj) = (centred(i), centred(j));
+            let inner =
+                0.5 * (norm2(&sum(&ci.0, &cj.0), &sum(&ci.1, &cj.1)) - norm2(&ci.0, &ci.1) - norm2(&cj.0, &cj.1));
+            let from_scores: f64 = pca.scores[i].iter().zip(&pca.scores[j]).map(|(x, y)| x * y).sum();
+            assert!(
+                (inner - from_scores).abs() < 1e-8 * norm2(&ci.0, &ci.1).max(1e-30),
+                "{kind} {i} {j}: {inner} against {from_scores}"
+            );
+        }
+    }
+}
