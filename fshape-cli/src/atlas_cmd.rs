@@ -284,7 +284,8 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
         let (rgb, width, height) = mode_grid(&pairs, &view);
         push("modes.png".into(), render::png_sized(&rgb, width, height)?);
     }
-    let (svg, png) = crate::match_cmd::energy_plot(&result.stages, model.gamma_w())?;
+    let (svg, png) =
+        crate::match_cmd::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
     push("energy.svg".into(), svg.into_bytes());
     push("energy.png".into(), png);
     let n = result.subjects.len() as f64;

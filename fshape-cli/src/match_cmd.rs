@@ -211,7 +211,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     }
     outputs.push((a.out.join("target.png"), crate::render::png(&crate::render::rasterise(&target, &view))?));
     files.push("target.png".into());
-    let (svg, png) = energy_plot(&result.stages, model.gamma_w())?;
+    let (svg, png) = energy_plot(&result.stages, model.gamma_w(), "matching: objective by iteration")?;
     outputs.push((a.out.join("energy.svg"), svg.into_bytes()));
     outputs.push((a.out.join("energy.png"), png));
     files.extend(["energy.svg".into(), "energy.png".into()]);
@@ -264,7 +264,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
 
 /// J, the energy and γ_W·A against the iteration number (log scale), all
 /// stages one after the other, as (SVG text, PNG bytes).
-pub(crate) fn energy_plot(stages: &[StageRecord], gamma_w: f64) -> Result<(String, Vec<u8>)> {
+pub(crate) fn energy_plot(stages: &[StageRecord], gamma_w: f64, title: &str) -> Result<(String, Vec<u8>)> {
     use plotters::prelude::*;
     let mut series: [Vec<(f64, f64)>; 3] = Default::default();
     let mut n = 0usize;
@@ -280,9 +280,9 @@ pub(crate) fn energy_plot(stages: &[StageRecord], gamma_w: f64) -> Result<(Strin
     }
     register_plot_font()?;
     let mut svg = String::new();
-    draw_energy(SVGBackend::with_string(&mut svg, PLOT_SIZE).into_drawing_area(), &series, n)?;
+    draw_energy(SVGBackend::with_string(&mut svg, PLOT_SIZE).into_drawing_area(), &series, n, title)?;
     let mut rgb = vec![0u8; (PLOT_SIZE.0 * PLOT_SIZE.1 * 3) as usize];
-    draw_energy(BitMapBackend::with_buffer(&mut rgb, PLOT_SIZE).into_drawing_area(), &series, n)?;
+    draw_energy(BitMapBackend::with_buffer(&mut rgb, PLOT_SIZE).into_drawing_area(), &series, n, title)?;
     let png = crate::render::png_sized(&rgb, PLOT_SIZE.0, PLOT_SIZE.1)?;
     Ok((svg, png))
 }
@@ -310,6 +310,7 @@ fn draw_energy<DB: plotters::prelude::DrawingBackend>(
     root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
     series: &[Vec<(f64, f64)>; 3],
     n: usize,
+    title: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("plot: {e}");
@@ -321,16 +322,25 @@ fn draw_energy<DB: plotters::prelude::DrawingBackend>(
         .margin(12)
         .x_label_area_size(36)
         .y_label_area_size(64)
-        .caption("matching: objective by iteration", ("sans-serif", 18))
+        .caption(title, ("sans-serif", 18))
         .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, (lo..hi).log_scale())
         .map_err(err)?;
-    chart.configure_mesh().x_desc("iteration").draw().map_err(err)?;
+    // Iterations are whole numbers: label them so, at most 10 ticks.
+    chart
+        .configure_mesh()
+        .x_desc("iteration")
+        .x_labels(n.clamp(2, 11))
+        .x_label_formatter(&|x| format!("{}", x.round() as i64))
+        .draw()
+        .map_err(err)?;
+    // Lines and legend swatches two pixels wide, so that each swatch shows
+    // its colour (a one-pixel blue swatch reads as black).
     for (k, (name, color)) in [("J", BLACK), ("energy H", BLUE), ("γ_W·A", RED)].into_iter().enumerate() {
         chart
-            .draw_series(LineSeries::new(series[k].clone(), color))
+            .draw_series(LineSeries::new(series[k].clone(), color.stroke_width(2)))
             .map_err(err)?
             .label(name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)));
     }
     chart.configure_series_labels().background_style(WHITE).border_style(BLACK).draw().map_err(err)?;
     root.present().map_err(err)?;

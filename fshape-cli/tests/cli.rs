@@ -532,6 +532,18 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     assert!(count(&|p| p == [255, 255, 255]) > px.len() / 2);
     assert!(count(&|p| p == [0, 0, 0]) > 500);
     assert!(count(&|p| p[0] == p[1] && p[1] == p[2] && p[0] > 40 && p[0] < 215) > 200, "no anti-aliased text");
+    // The energy's curve and its legend swatch in blue, γ_W·A's in red,
+    // two pixels wide: the legend's swatches show their colours in rows
+    // next to each other.
+    let rows_with = |c: [u8; 3]| {
+        (0..info.height as usize)
+            .filter(|y| (600..700).any(|x| px[y * info.width as usize + x] == c))
+            .collect::<Vec<usize>>()
+    };
+    for c in [[0, 0, 255], [255, 0, 0]] {
+        let rows = rows_with(c);
+        assert!(rows.windows(2).any(|w| w[1] == w[0] + 1), "{c:?}: {rows:?}");
+    }
 }
 
 #[test]
