@@ -344,7 +344,7 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
     let signal = mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
     println!(
         "  subjects matched from the template: mean distance {:.3}% of the diagonal (mean over subjects){signal}; \
-         every subject's data term fell by at least {:.1}%",
+         every subject's data term fell by at least {:.2}%",
         100.0 * mean_distance,
         100.0 * min_attachment_fall
     );

@@ -228,9 +228,10 @@ enum Command {
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo {
-        /// Which experiment: digits, bunny, cortex, or atlas-digits (an
-        /// atlas of 64 writers' 3s; `fshape atlas` outputs).
-        #[arg(value_parser = ["digits", "bunny", "cortex", "atlas-digits"])]
+        /// Which experiment: digits, bunny, cortex, atlas-digits (an atlas
+        /// of 64 writers' 3s) or atlas-spheres (an atlas with a known
+        /// answer); the atlases write `fshape atlas` outputs.
+        #[arg(value_parser = ["digits", "bunny", "cortex", "atlas-digits", "atlas-spheres"])]
         name: String,
         /// Output directory.
         #[arg(long, default_value = "demo-output")]
@@ -377,6 +378,7 @@ fn main() -> ExitCode {
                 }
                 "bunny" => demo::bunny(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick }),
                 "cortex" => demo::cortex(&demo::RunArgs { out: &out, data: &data, max_iterations, gamma_w, quick }),
+                "atlas-spheres" => demo::atlas_spheres(&out, max_iterations, gamma_w),
                 "atlas-digits" => demo::atlas_digits(
                     &demo::DigitsArgs { out: &out, data: &data, ratios: &ratios, max_iterations, gamma_w },
                     subjects,

@@ -862,3 +862,57 @@ fn atlas_refuses_a_bad_list_line_naming_the_file_and_line() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no subjects"));
 }
+
+#[test]
+fn demo_atlas_digits_reads_the_population_and_writes_an_atlas() {
+    // Two of the shipped 3s, a few iterations: the wiring (the digits on
+    // one square, the template from their mean image, fshape atlas).
+    let out = tmp("atlas_digits_out");
+    let o = fshape(&[
+        "demo",
+        "atlas-digits",
+        "--subjects",
+        "2",
+        "--max-iterations",
+        "1",
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dir = out.join("atlas-digits");
+    let list = std::fs::read_to_string(dir.join("subjects/subjects.csv")).unwrap();
+    assert_eq!(list.lines().filter(|l| !l.starts_with('#')).count(), 2);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("atlas/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["subjects"].as_array().unwrap().len(), 2);
+    assert_eq!(summary["stages"].as_array().unwrap().len(), 2);
+    // Both digits on one square, which the template keeps; each carries a
+    // digit (values up to 0.6), not a blank square.
+    use fshape_mesh::io::{ReadOptions, read_mesh};
+    let read = |p: &str| read_mesh(&dir.join(p), &ReadOptions::default()).unwrap();
+    let (a, b) = (read("subjects/mnist5k_1500_label3.ply"), read("subjects/mnist5k_1501_label3.ply"));
+    let template = read("atlas/template.ply");
+    assert_eq!((a.points(), a.cells()), (b.points(), b.cells()));
+    assert_eq!((template.n_vertices(), template.cells()), (a.n_vertices(), a.cells()));
+    for s in [&a, &b] {
+        assert!(s.signal().unwrap().iter().any(|v| *v > 0.3), "a digit, not a blank square");
+    }
+    assert!(summary["min_attachment_fall"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn demo_atlas_spheres_reports_the_template_against_the_truth() {
+    let out = tmp("atlas_spheres_out");
+    let o = fshape(&["demo", "atlas-spheres", "--max-iterations", "2", "--out", &out.display().to_string()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("the template against the truth"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("atlas-spheres/truth.json")).unwrap()).unwrap();
+    let num = |k: &str| report[k].as_f64().unwrap();
+    // Six iterations already bring the sphere closer to the ellipsoid.
+    assert!(num("truth_distance") < num("truth_distance_start"), "{report}");
+    assert!((num("bound") - num("bias") - num("residual")).abs() < 1e-15);
+    for f in ["truth.png", "estimate.png", "truth.ply", "atlas/template.ply", "subjects/subject_09.ply"] {
+        assert!(out.join("atlas-spheres").join(f).exists(), "{f}");
+    }
+}
