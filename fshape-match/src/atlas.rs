@@ -375,8 +375,13 @@ impl Atlas {
             Some(_) => template.clone(),
             None => template.clone().with_signal(Some(vec![0.0; template.n_vertices()]))?,
         };
-        let problems =
-            subjects.iter().map(|_| Problem::new(&template, plan.model.clone())).collect::<Result<Vec<_>, _>>()?;
+        // Parallel over the subjects, each subject's work serial (the same
+        // bits as parallel problems): the subjects fill the threads without
+        // nested parallelism.
+        let problems = subjects
+            .iter()
+            .map(|_| Problem::new(&template, plan.model.clone()).map(|p| p.with_parallel(false)))
+            .collect::<Result<Vec<_>, _>>()?;
         let unknowns = Unknowns::scaled(&problems[0], plan.metrics, plan.scales)?;
         let metric = TemplateMetric::new(&template, plan.model.kernel(), plan.scales)?;
         let section = config.atlas.clone().unwrap_or_default();
