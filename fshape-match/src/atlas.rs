@@ -467,8 +467,9 @@ impl Atlas {
         self.len() == 0
     }
 
-    /// The starting unknowns: the initial template and zero momenta.
-    fn start(&self) -> Vec<f64> {
+    /// The starting unknowns ([`Atlas::len`] values): the initial template
+    /// (P_0 = 0 for the hypertemplate) and zero momenta.
+    pub fn initial_unknowns(&self) -> Vec<f64> {
         let mut x: Vec<f64> = match self.hyper {
             // P_0 = 0: the template starts as the hypertemplate.
             Some(_) => vec![0.0; self.template.points().len()],
@@ -553,7 +554,7 @@ impl Atlas {
             };
             let current = self.checkpoint.current.take();
             let warm = self.checkpoint.warm.clone();
-            let x0 = warm.unwrap_or_else(|| self.start());
+            let x0 = warm.unwrap_or_else(|| self.initial_unknowns());
             let file = self.checkpoint_file.clone();
             let mut checkpoint = std::mem::replace(&mut self.checkpoint, Checkpoint::empty());
             let mut objective = self.objective();
@@ -603,15 +604,16 @@ impl Atlas {
         Ok(Outcome::Finished)
     }
 
-    /// The estimated template at the unknowns `x`, and its hypertemplate
-    /// momenta (hypertemplate model).
-    fn template_at(&self, x: &[f64]) -> Result<(FShape, Option<Vec<f64>>), MatchError> {
+    /// The estimated template at the unknowns `x`, its hypertemplate
+    /// momenta and their energy (hypertemplate model; 0 without one).
+    fn template_at(&self, x: &[f64]) -> Result<(FShape, Option<Vec<f64>>, f64), MatchError> {
         let pn = self.template.n_vertices() * self.template.dim();
         let p = self.template.n_vertices();
-        let (points, _) = positions(self.hyper.as_ref(), &self.metric, &x[..pn])?;
+        let (points, traj) = positions(self.hyper.as_ref(), &self.metric, &x[..pn])?;
         let signal = x[pn..pn + p].iter().map(|u| u * self.metric.signal).collect();
         let momenta = self.hyper.as_ref().map(|h| h.unknowns.unpack(&x[..pn]).0);
-        Ok((self.template.clone().with_points(points)?.with_signal(Some(signal))?, momenta))
+        let energy = traj.map_or(0.0, |t| t.hamiltonian[0]);
+        Ok((self.template.clone().with_points(points)?.with_signal(Some(signal))?, momenta, energy))
     }
 
     /// The result of a finished run: the template, and every subject's
@@ -622,7 +624,7 @@ impl Atlas {
         }
         self.stage_target(self.plan.stages.len() - 1)?;
         let x = self.checkpoint.warm.clone().ok_or(MatchError::NotFinished)?;
-        let (template, template_momenta) = self.template_at(&x)?;
+        let (template, template_momenta, hyper_energy) = self.template_at(&x)?;
         let len = self.unknowns.len();
         let offset = template.n_vertices() * (template.dim() + 1);
         let n = self.subjects.len() as f64;
@@ -656,10 +658,6 @@ impl Atlas {
             });
         }
         let done = &self.checkpoint.done;
-        let hyper_energy = match (&self.hyper, &template_momenta) {
-            (Some(h), Some(p0)) => h.problem.shoot(p0, &vec![0.0; template.n_vertices()])?.hamiltonian[0],
-            _ => 0.0,
-        };
         energies.value += hyper_energy;
         energies.energy += hyper_energy;
         Ok(AtlasResult {
@@ -695,17 +693,6 @@ impl Atlas {
     pub fn precondition(&mut self, v: &mut [f64]) {
         use crate::optimize::Objective;
         self.objective().precondition(v);
-    }
-
-    /// The starting unknowns ([`Atlas::len`] values): the initial template,
-    /// zero momenta.
-    pub fn initial_unknowns(&self) -> Vec<f64> {
-        self.start()
-    }
-
-    /// Whether the model has a signal control (p^f or ζ) per subject.
-    pub fn has_signal_control(&self) -> bool {
-        self.plan.model.kind() != ModelKind::Lddmm
     }
 }
 
