@@ -55,8 +55,17 @@ fn adjacency(lower: SymbolicSparseColMatRef<'_, usize>) -> (Vec<usize>, Vec<usiz
     (ptr, adj)
 }
 
+/// Held across every METIS call. METIS draws its random numbers (for the
+/// matchings of its coarsening) from GKlib's Mersenne Twister, whose state
+/// is a process-wide static (`GKlib/random.c`): each call reseeds it, but
+/// two calls at once in two threads interleave their draws, a data race
+/// that gave two atlases run side by side in one process other orderings,
+/// so other roundings of the Cholesky factor, than each run alone.
+static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// METIS_NodeND with default options: `order[k]` is the original index of
-/// the k-th row of the permuted matrix (METIS's `perm`).
+/// the k-th row of the permuted matrix (METIS's `perm`). One call at a time
+/// in the process ([`METIS`]).
 #[allow(unsafe_code)]
 fn metis_node_nd(n: usize, (ptr, adj): &(Vec<usize>, Vec<usize>)) -> Option<Vec<usize>> {
     use metis_sys::idx_t;
@@ -64,6 +73,9 @@ fn metis_node_nd(n: usize, (ptr, adj): &(Vec<usize>, Vec<usize>)) -> Option<Vec<
     let mut xadj: Vec<idx_t> = ptr.iter().map(|&v| idx_t::try_from(v)).collect::<Result<_, _>>().ok()?;
     let mut adjncy: Vec<idx_t> = adj.iter().map(|&v| idx_t::try_from(v)).collect::<Result<_, _>>().ok()?;
     let (mut perm, mut iperm) = (vec![0 as idx_t; n], vec![0 as idx_t; n]);
+    // A poisoned lock only means another call panicked; METIS reseeds its
+    // generator on entry, so the state it left does not matter.
+    let _one_at_a_time = METIS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     // SAFETY: METIS reads nvtxs + 1 offsets and xadj[n] neighbours, and
     // writes n values to each of perm and iperm; every buffer has exactly
     // that length. Null vwgt and options mean unit weights and defaults.
@@ -250,5 +262,48 @@ mod tests {
                 assert_eq!(a, Some(v), "{u} in the span of {v}'s subtree");
             }
         }
+    }
+
+    /// A triangulated w × h grid's adjacency (CSR, no diagonal).
+    fn grid(w: usize, h: usize) -> (Vec<usize>, Vec<usize>) {
+        let n = w * h;
+        let mut nbrs = vec![Vec::new(); n];
+        for y in 0..h {
+            for x in 0..w {
+                let v = y * w + x;
+                for (dx, dy) in [(1, 0), (0, 1), (1, 1)] {
+                    if x + dx < w && y + dy < h {
+                        let u = (y + dy) * w + x + dx;
+                        nbrs[v].push(u);
+                        nbrs[u].push(v);
+                    }
+                }
+            }
+        }
+        let mut ptr = vec![0];
+        let mut adj = Vec::new();
+        for mut list in nbrs {
+            list.sort_unstable();
+            adj.extend(list);
+            ptr.push(adj.len());
+        }
+        (ptr, adj)
+    }
+
+    #[test]
+    fn metis_orders_the_same_when_called_from_many_threads_at_once() {
+        // METIS's random generator is one process-wide state: without the
+        // lock, calls at once interleave their draws and order differently.
+        let adj = grid(90, 80);
+        let reference = metis_node_nd(90 * 80, &adj).expect("METIS orders a grid");
+        std::thread::scope(|s| {
+            let handles: Vec<_> =
+                (0..4).map(|_| s.spawn(|| (0..6).map(|_| metis_node_nd(90 * 80, &adj)).collect::<Vec<_>>())).collect();
+            for h in handles {
+                for order in h.join().expect("no panic") {
+                    assert!(order.as_ref() == Some(&reference), "an ordering computed alongside others differs");
+                }
+            }
+        });
     }
 }
