@@ -31,6 +31,8 @@ pub struct AtlasArgs<'a> {
     pub signal_name: Option<String>,
     /// Azimuth and elevation of the renders, degrees.
     pub view: (f64, f64),
+    /// Coarser initial templates, one per stage before the last.
+    pub stage_templates: &'a [PathBuf],
 }
 
 #[derive(Serialize)]
@@ -158,6 +160,17 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
     let atlas = match Atlas::new(&template, &subjects, &config) {
         Err(MatchError::Shapes(why)) => bail!("{}: {why}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
+    };
+    let atlas = if a.stage_templates.is_empty() {
+        atlas
+    } else {
+        let mut templates = a
+            .stage_templates
+            .iter()
+            .map(|p| crate::load(p, a.signal_name.clone(), None).map(Some))
+            .collect::<Result<Vec<_>>>()?;
+        templates.push(None);
+        atlas.with_stage_templates(templates).context("--stage-templates")?
     };
     let checkpoint_path = a.out.join("checkpoint.json");
     let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };

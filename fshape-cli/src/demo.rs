@@ -253,6 +253,7 @@ pub fn atlas_digits(a: &DigitsArgs<'_>, subjects: usize) -> Result<()> {
         stop_after: None,
         signal_name: None,
         view: (0.0, 90.0),
+        stage_templates: &[],
     })
 }
 
@@ -329,6 +330,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
         stop_after: None,
         signal_name: None,
         view: (30.0, 20.0),
+        stage_templates: &[],
     })?;
     // The estimate against the truth, and the bound.
     let estimate = io::read_mesh(&run.join("template.ply"), &io::ReadOptions::default())?;

@@ -224,6 +224,12 @@ enum Command {
         /// Camera of the renders: azimuth,elevation in degrees.
         #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
         view: Vec<f64>,
+        /// Coarser versions of the initial template (same surface, fewer
+        /// vertices; without a signal they take the template's), one per
+        /// stage before the last: the coarse stages run on them and carry
+        /// the template and momenta to the next.
+        #[arg(long, value_delimiter = ',')]
+        stage_templates: Vec<PathBuf>,
     },
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
@@ -349,7 +355,18 @@ fn main() -> ExitCode {
                 stage_templates: &stage_templates,
             })
         }
-        Command::Atlas { subjects, list, template, config, out, resume, stop_after, signal_name, view } => {
+        Command::Atlas {
+            subjects,
+            list,
+            template,
+            config,
+            out,
+            resume,
+            stop_after,
+            signal_name,
+            view,
+            stage_templates,
+        } => {
             let (azimuth, elevation) = match view[..] {
                 [a, e] if a.is_finite() && e.is_finite() => (a, e),
                 _ => {
@@ -368,6 +385,7 @@ fn main() -> ExitCode {
                 stop_after,
                 signal_name,
                 view: (azimuth, elevation),
+                stage_templates: &stage_templates,
             })
         }
         Command::Demo { name, out, data, max_iterations, ratios, gamma_w, quick, subjects } => {

@@ -841,6 +841,59 @@ fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
 }
 
 #[test]
+fn atlas_runs_its_first_stage_on_a_coarser_template() {
+    let (files, list, config) = atlas_inputs("atlas_levels");
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, format!("{text}[schedule]\nkernel_geom = [\"gaussian:0.15\", \"gaussian:0.1\"]\n"))
+        .unwrap();
+    // The initial template a sphere (its signal the subjects' mean), the
+    // first stage on the same sphere at level 1.
+    let (fine, coarse) = (tmp("atlas_levels_fine.ply"), tmp("atlas_levels_coarse.ply"));
+    for (path, level) in [(&fine, 2), (&coarse, 1)] {
+        let sphere = fshape_mesh::generate::icosphere(level, 0.5);
+        fshape_mesh::io::write_mesh(path, &sphere, fshape_mesh::io::Encoding::Binary).unwrap();
+    }
+    let out = tmp("atlas_levels_out");
+    let fine = fine.display().to_string();
+    let args = |templates: &str| {
+        [
+            "atlas",
+            files[0].as_str(),
+            "--subjects",
+            &list,
+            "--config",
+            &config,
+            "--out",
+            &out.display().to_string(),
+            "--template",
+            &fine,
+            "--stage-templates",
+            templates,
+        ]
+        .map(String::from)
+    };
+    let coarse = coarse.display().to_string();
+    let o = fshape(&args(&coarse).each_ref().map(String::as_str));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let stages = summary["stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 2);
+    // The template is the initial one's (162 vertices), and the second
+    // stage starts below where the first did.
+    let template =
+        fshape_mesh::io::read_mesh(&out.join("template.ply"), &fshape_mesh::io::ReadOptions::default()).unwrap();
+    assert_eq!(template.n_vertices(), 162);
+    let value = |s: &serde_json::Value| s["initial"]["value"].as_f64().unwrap();
+    assert!(value(&stages[1]) < value(&stages[0]), "{stages:?}");
+    // One stage template per stage before the last.
+    let o = fshape(&args(&format!("{coarse},{coarse}")).each_ref().map(String::as_str));
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--stage-templates") && err.contains("3 stage templates for 2 stages"), "{err}");
+}
+
+#[test]
 fn atlas_refuses_a_bad_list_line_naming_the_file_and_line() {
     let (files, list, config) = atlas_inputs("atlas_bad");
     std::fs::write(&list, "a.ply\nb.ply,b.csv,extra\n").unwrap();

@@ -40,7 +40,10 @@
 //! template is the default: it is fshapesTk's, costs nothing more than the
 //! subjects, and on the known-answer test comes back as close.
 //!
-//! Not here yet: stages on coarser templates.
+//! Stages may run on coarser versions of the initial template
+//! ([`Atlas::with_stage_templates`]), each with its own unknowns; between
+//! them the template's displacement and signal change are interpolated as
+//! functions and the momenta carried as densities, as in matching.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -323,17 +326,110 @@ pub struct AtlasResult {
     pub seconds: f64,
 }
 
-/// An atlas estimation run: stages of the schedule one after the other,
-/// with a checkpoint after every accepted iteration and resume to the same
-/// bits, as [`crate::Session`] for one registration.
-pub struct Atlas {
-    plan: Plan,
-    problems: Vec<Problem>,
+/// One resolution's working set: the initial template at it (with a
+/// signal), the subjects' problems on it, the packing of their momenta,
+/// the template blocks' metric and the hypertemplate's shooting.
+struct Level {
     template: FShape,
-    subjects: Vec<FShape>,
+    problems: Vec<Problem>,
     unknowns: Unknowns,
     metric: TemplateMetric,
     hyper: Option<Hyper>,
+}
+
+impl Level {
+    fn new(
+        template: &FShape,
+        subjects: usize,
+        plan: &Plan,
+        hyper: Option<&fshape_shoot::Model>,
+    ) -> Result<Level, MatchError> {
+        // Parallel over the subjects, each subject's work serial (the same
+        // bits as parallel problems): the subjects fill the threads without
+        // nested parallelism.
+        let problems = (0..subjects)
+            .map(|_| Problem::new(template, plan.model.clone()).map(|p| p.with_parallel(false)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let unknowns = Unknowns::scaled(&problems[0], plan.metrics, plan.scales)?;
+        let metric = TemplateMetric::new(template, plan.model.kernel(), plan.scales)?;
+        let hyper = match hyper {
+            None => None,
+            Some(model) => {
+                let problem = Problem::new(template, model.clone())?;
+                let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales)?;
+                Some(Hyper { problem, unknowns })
+            }
+        };
+        Ok(Level { template: template.clone(), problems, unknowns, metric, hyper })
+    }
+
+    /// The template's positions and signal at the unknowns `x` of this
+    /// level, and the hypertemplate's momenta and energy (0 without one).
+    fn template_at(&self, x: &[f64]) -> Result<(FShape, Option<Vec<f64>>, f64), MatchError> {
+        let pn = self.template.n_vertices() * self.template.dim();
+        let p = self.template.n_vertices();
+        let (points, traj) = positions(self.hyper.as_ref(), &self.metric, &x[..pn])?;
+        let signal = x[pn..pn + p].iter().map(|u| u * self.metric.signal).collect();
+        let momenta = self.hyper.as_ref().map(|h| h.unknowns.unpack(&x[..pn]).0);
+        let energy = traj.map_or(0.0, |t| t.hamiltonian[0]);
+        Ok((self.template.clone().with_points(points)?.with_signal(Some(signal))?, momenta, energy))
+    }
+
+    /// The unknowns at the start: the initial template (P_0 = 0 for the
+    /// hypertemplate) and zero momenta.
+    fn start(&self, subjects: usize) -> Vec<f64> {
+        let mut x: Vec<f64> = match self.hyper {
+            // P_0 = 0: the template starts as the hypertemplate.
+            Some(_) => vec![0.0; self.template.points().len()],
+            None => self.template.points().iter().map(|v| v / self.metric.length).collect(),
+        };
+        x.extend(self.template.signal().expect("levels carry a signal").iter().map(|v| v / self.metric.signal));
+        x.resize(x.len() + subjects * self.unknowns.len(), 0.0);
+        x
+    }
+
+    fn objective(&mut self) -> AtlasObjective<'_> {
+        let t = &self.template;
+        AtlasObjective {
+            pn: t.n_vertices() * t.dim(),
+            p: t.n_vertices(),
+            problems: &mut self.problems,
+            unknowns: self.unknowns.clone(),
+            metric: &self.metric,
+            hyper: self.hyper.as_ref(),
+            recent: Vec::new(),
+            evaluations: 0,
+        }
+    }
+}
+
+/// What a stage's solution says, independently of its mesh: the template
+/// (its displacement and signal change from the level's initial template)
+/// and every subject's momenta, with the hypertemplate's momenta.
+struct Solution {
+    initial: FShape,
+    template: FShape,
+    hyper_p0: Option<Vec<f64>>,
+    momenta: Vec<(Vec<f64>, Vec<f64>)>,
+}
+
+/// An atlas estimation run: stages of the schedule one after the other,
+/// with a checkpoint after every accepted iteration and resume to the same
+/// bits, as [`crate::Session`] for one registration. Stages may run on
+/// coarser versions of the initial template ([`Atlas::with_stage_templates`]).
+pub struct Atlas {
+    plan: Plan,
+    /// The initial template at full resolution (with a signal).
+    source: FShape,
+    subjects: Vec<FShape>,
+    /// Per stage, its coarser initial template or `None` (the source).
+    stage_templates: Vec<Option<FShape>>,
+    /// Per stage, the index of the first stage template equal to its own
+    /// (`None`: the source): stages on one key share a level.
+    keys: Vec<Option<usize>>,
+    hyper_model: Option<fshape_shoot::Model>,
+    level: Level,
+    on: Option<usize>,
     checkpoint: Checkpoint,
     checkpoint_file: Option<PathBuf>,
     staged: Option<usize>,
@@ -350,6 +446,11 @@ pub fn atlas_fingerprint(template: &FShape, subjects: &[FShape], config: &Config
     }
     h.eat(config.to_toml().as_bytes());
     h.hex()
+}
+
+/// The number of a subject's unknowns on a template of `n` vertices in R^dim.
+fn subject_len(n: usize, dim: usize, kind: ModelKind) -> usize {
+    n * dim + if kind == ModelKind::Lddmm { 0 } else { n }
 }
 
 impl Atlas {
@@ -371,21 +472,12 @@ impl Atlas {
             }
         }
         let plan = config.plan(template, first)?;
-        let template = match template.signal() {
+        let source = match template.signal() {
             Some(_) => template.clone(),
             None => template.clone().with_signal(Some(vec![0.0; template.n_vertices()]))?,
         };
-        // Parallel over the subjects, each subject's work serial (the same
-        // bits as parallel problems): the subjects fill the threads without
-        // nested parallelism.
-        let problems = subjects
-            .iter()
-            .map(|_| Problem::new(&template, plan.model.clone()).map(|p| p.with_parallel(false)))
-            .collect::<Result<Vec<_>, _>>()?;
-        let unknowns = Unknowns::scaled(&problems[0], plan.metrics, plan.scales)?;
-        let metric = TemplateMetric::new(&template, plan.model.kernel(), plan.scales)?;
         let section = config.atlas.clone().unwrap_or_default();
-        let hyper = match section.template {
+        let hyper_model = match section.template {
             crate::TemplateKind::Free => None,
             crate::TemplateKind::Hypertemplate => {
                 let g = section.gamma_v0;
@@ -400,32 +492,88 @@ impl Atlas {
                     _ => g,
                 };
                 let m = &plan.model;
-                let model = m.clone().with_kind(ModelKind::Lddmm).with_weights(gamma_v0, m.gamma_f(), m.gamma_w())?;
-                let problem = Problem::new(&template, model)?;
-                let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales)?;
-                Some(Hyper { problem, unknowns })
+                Some(m.clone().with_kind(ModelKind::Lddmm).with_weights(gamma_v0, m.gamma_f(), m.gamma_w())?)
             }
         };
+        let level = Level::new(&source, subjects.len(), &plan, hyper_model.as_ref())?;
         let checkpoint = Checkpoint {
             format: CHECKPOINT_FORMAT,
-            fingerprint: atlas_fingerprint(&template, subjects, config),
+            fingerprint: atlas_fingerprint(&source, subjects, config),
             done: Vec::new(),
             current: None,
             warm: None,
             seconds: 0.0,
         };
+        let stages = plan.stages.len();
         Ok(Atlas {
             plan,
-            problems,
-            template,
+            source,
             subjects: subjects.to_vec(),
-            unknowns,
-            metric,
-            hyper,
+            stage_templates: vec![None; stages],
+            keys: vec![None; stages],
+            hyper_model,
+            level,
+            on: None,
             checkpoint,
             checkpoint_file: None,
             staged: None,
         })
+    }
+
+    /// Runs stage k on a coarser initial template `templates[k]` (the same
+    /// surface at a lower resolution), or on the initial template where it
+    /// is `None`; the last stage is always the initial template. A stage
+    /// template without a signal takes the initial template's, read at its
+    /// vertices. Between stages on different templates the solution is
+    /// carried over: the template's displacement and signal change as
+    /// functions (interpolated at the finer vertices), the momenta as
+    /// densities ([`crate::resolution::prolongate`]). The templates enter
+    /// the checkpoint's fingerprint: call this before [`Atlas::resume`].
+    pub fn with_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Atlas, MatchError> {
+        let n = self.plan.stages.len();
+        if templates.len() != n {
+            return Err(MatchError::Shapes(format!("{} stage templates for {n} stages", templates.len())));
+        }
+        if templates.last().is_some_and(Option::is_some) {
+            return Err(MatchError::Shapes(
+                "the last stage runs on the initial template: its stage template must be None".into(),
+            ));
+        }
+        let source = &self.source;
+        let mut filled = Vec::with_capacity(n);
+        for (k, t) in templates.into_iter().enumerate() {
+            let t = match t {
+                None => None,
+                Some(t) if t.dim() != source.dim() || t.kind() != source.kind() || t.n_cells() == 0 => {
+                    return Err(MatchError::Shapes(format!(
+                        "stage {k}'s template is not a non-empty mesh of the initial template's kind and dimension"
+                    )));
+                }
+                Some(t) if t.signal().is_some() => Some(t),
+                Some(t) => {
+                    let signal = crate::resolution::sample(source, &t, source.signal().expect("set in new"), 1)?;
+                    Some(t.with_signal(Some(signal))?)
+                }
+            };
+            filled.push(t);
+        }
+        let mut h = Fnv::new();
+        h.eat(self.checkpoint.fingerprint.as_bytes());
+        for t in &filled {
+            match t {
+                Some(t) => h.shape(t),
+                None => h.eat(b"source"),
+            }
+        }
+        self.checkpoint.fingerprint = h.hex();
+        self.keys = (0..n)
+            .map(|k| match &filled[k] {
+                Some(t) if *t != self.source => filled.iter().position(|u| u.as_ref() == Some(t)),
+                _ => None,
+            })
+            .collect();
+        self.stage_templates = filled;
+        Ok(self)
     }
 
     /// Writes the checkpoint to `path` after every accepted iteration, at
@@ -442,7 +590,7 @@ impl Atlas {
 
     /// The initial template (with a zero signal if it had none).
     pub fn initial_template(&self) -> &FShape {
-        &self.template
+        &self.source
     }
 
     /// The checkpoint as of now.
@@ -455,11 +603,25 @@ impl Atlas {
         self.checkpoint.done.len() == self.plan.stages.len()
     }
 
-    /// The number of unknowns: the template's positions and signal, then
-    /// every subject's momenta.
+    /// The initial template of stage k and its key.
+    fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
+        match self.keys.get(k) {
+            Some(Some(j)) => (Some(*j), self.stage_templates[*j].as_ref().expect("a key names a template")),
+            _ => (None, &self.source),
+        }
+    }
+
+    /// The number of unknowns of stage `stage`: its template's positions
+    /// and signal, then every subject's momenta.
+    pub fn len_at(&self, stage: usize) -> usize {
+        let t = self.template_of(stage).1;
+        let n = t.n_vertices();
+        n * (t.dim() + 1) + self.subjects.len() * subject_len(n, t.dim(), self.plan.model.kind())
+    }
+
+    /// The number of unknowns at full resolution (the last stage's).
     pub fn len(&self) -> usize {
-        let t = &self.template;
-        t.n_vertices() * (t.dim() + 1) + self.subjects.len() * self.unknowns.len()
+        self.len_at(self.plan.stages.len() - 1)
     }
 
     /// Whether there are no unknowns (never: a template has vertices).
@@ -467,17 +629,18 @@ impl Atlas {
         self.len() == 0
     }
 
-    /// The starting unknowns ([`Atlas::len`] values): the initial template
-    /// (P_0 = 0 for the hypertemplate) and zero momenta.
-    pub fn initial_unknowns(&self) -> Vec<f64> {
-        let mut x: Vec<f64> = match self.hyper {
-            // P_0 = 0: the template starts as the hypertemplate.
-            Some(_) => vec![0.0; self.template.points().len()],
-            None => self.template.points().iter().map(|v| v / self.metric.length).collect(),
-        };
-        x.extend(self.template.signal().expect("set in new").iter().map(|v| v / self.metric.signal));
-        x.resize(self.len(), 0.0);
-        x
+    /// The starting unknowns of stage `stage`'s template
+    /// ([`Atlas::len_at`] values): the initial template (P_0 = 0 for the
+    /// hypertemplate) and zero momenta.
+    pub fn initial_unknowns_at(&mut self, stage: usize) -> Result<Vec<f64>, MatchError> {
+        self.check_stage(stage)?;
+        self.ensure_level(stage)?;
+        Ok(self.level.start(self.subjects.len()))
+    }
+
+    /// [`Atlas::initial_unknowns_at`] the last stage (full resolution).
+    pub fn initial_unknowns(&mut self) -> Result<Vec<f64>, MatchError> {
+        self.initial_unknowns_at(self.plan.stages.len() - 1)
     }
 
     /// Continues from `checkpoint` after checking it belongs to these
@@ -494,7 +657,7 @@ impl Atlas {
                 "the checkpoint was written for other inputs (template, subjects or configuration changed); remove it or start without resuming",
             ));
         }
-        crate::session::validate_arrays(&checkpoint, self.plan.stages.len(), |_| self.len())?;
+        crate::session::validate_arrays(&checkpoint, self.plan.stages.len(), |k| self.len_at(k))?;
         self.checkpoint = checkpoint;
         Ok(self)
     }
@@ -508,10 +671,23 @@ impl Atlas {
         self.resume(checkpoint).map_err(|e| e.in_file(path))
     }
 
+    /// Makes stage k's template the working level.
+    fn ensure_level(&mut self, k: usize) -> Result<(), MatchError> {
+        let (key, template) = self.template_of(k);
+        if key != self.on {
+            let level = Level::new(template, self.subjects.len(), &self.plan, self.hyper_model.as_ref())?;
+            self.level = level;
+            self.on = key;
+            self.staged = None;
+        }
+        Ok(())
+    }
+
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
+        self.ensure_level(k)?;
         if self.staged != Some(k) {
             let stage = &self.plan.stages[k];
-            for (problem, subject) in self.problems.iter_mut().zip(&self.subjects) {
+            for (problem, subject) in self.level.problems.iter_mut().zip(&self.subjects) {
                 problem.set_target(subject, stage.kernel.clone())?;
                 problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
             }
@@ -520,18 +696,97 @@ impl Atlas {
         Ok(())
     }
 
-    fn objective(&mut self) -> AtlasObjective<'_> {
-        let t = &self.template;
-        AtlasObjective {
-            pn: t.n_vertices() * t.dim(),
-            p: t.n_vertices(),
-            problems: &mut self.problems,
-            unknowns: self.unknowns.clone(),
-            metric: &self.metric,
-            hyper: self.hyper.as_ref(),
-            recent: Vec::new(),
-            evaluations: 0,
+    /// Stage k's unknowns `x` read as a [`Solution`].
+    fn solution(&mut self, k: usize, x: &[f64]) -> Result<Solution, MatchError> {
+        self.ensure_level(k)?;
+        let level = &self.level;
+        let (template, hyper_p0, _) = level.template_at(x)?;
+        let offset = level.template.n_vertices() * (level.template.dim() + 1);
+        let momenta = x[offset..].chunks_exact(level.unknowns.len()).map(|xi| level.unknowns.unpack(xi)).collect();
+        Ok(Solution { initial: level.template.clone(), template, hyper_p0, momenta })
+    }
+
+    /// A solution carried to stage k's (finer) template, as its unknowns.
+    fn prolongate(&mut self, k: usize, coarse: &Solution) -> Result<Vec<f64>, MatchError> {
+        use crate::resolution::{prolongate, sample};
+        self.ensure_level(k)?;
+        let level = &self.level;
+        let fine0 = &level.template;
+        let (n, dim) = (fine0.n_vertices(), fine0.dim());
+        let kind = self.plan.model.kind();
+        let change = |now: &[f64], was: &[f64], width| {
+            let d: Vec<f64> = now.iter().zip(was).map(|(a, b)| a - b).collect();
+            sample(&coarse.initial, fine0, &d, width)
+        };
+        let signal: Vec<f64> =
+            change(coarse.template.signal().expect("set"), coarse.initial.signal().expect("set"), 1)?
+                .iter()
+                .zip(fine0.signal().expect("levels carry a signal"))
+                .map(|(d, f)| f + d)
+                .collect();
+        let (mut x, points) = match (&level.hyper, &coarse.hyper_p0) {
+            (Some(h), Some(p0)) => {
+                let zero = vec![0.0; coarse.initial.n_vertices()];
+                let (q0, _) = prolongate(&coarse.initial, fine0, p0, &zero, ModelKind::Lddmm)?;
+                let block = h.unknowns.pack(&q0, &[]);
+                let (points, _) = positions(Some(h), &level.metric, &block)?;
+                (block, points)
+            }
+            _ => {
+                let d = change(coarse.template.points(), coarse.initial.points(), dim)?;
+                let points: Vec<f64> = fine0.points().iter().zip(&d).map(|(a, b)| a + b).collect();
+                (points.iter().map(|v| v / level.metric.length).collect(), points)
+            }
+        };
+        x.extend(signal.iter().map(|v| v / level.metric.signal));
+        let fine = fine0.clone().with_points(points)?;
+        for (p0, pf) in &coarse.momenta {
+            let (q0, qf) = prolongate(&coarse.template, &fine, p0, pf, kind)?;
+            x.extend(level.unknowns.pack(&q0, &qf));
         }
+        debug_assert_eq!(x.len(), n * (dim + 1) + self.subjects.len() * level.unknowns.len());
+        Ok(x)
+    }
+
+    /// Stage `stage`'s unknowns `x` read as the template they put (its
+    /// positions and signal) and every subject's momenta (p_0, p^f).
+    #[allow(clippy::type_complexity)]
+    pub fn unpack(&mut self, stage: usize, x: &[f64]) -> Result<(FShape, Vec<(Vec<f64>, Vec<f64>)>), MatchError> {
+        self.check_len(stage, x)?;
+        let s = self.solution(stage, x)?;
+        Ok((s.template, s.momenta))
+    }
+
+    /// Stage `from`'s unknowns `x` carried to stage `to`'s template (as
+    /// [`Atlas::run`] does between stages on different templates; `x`
+    /// itself when the two stages share one).
+    pub fn prolongate_unknowns(&mut self, from: usize, x: &[f64], to: usize) -> Result<Vec<f64>, MatchError> {
+        self.check_len(from, x)?;
+        self.check_stage(to)?;
+        if self.template_of(from).0 == self.template_of(to).0 {
+            return Ok(x.to_vec());
+        }
+        let coarse = self.solution(from, x)?;
+        self.prolongate(to, &coarse)
+    }
+
+    /// Errors unless `stage` is in the schedule.
+    fn check_stage(&self, stage: usize) -> Result<(), MatchError> {
+        if stage >= self.plan.stages.len() {
+            return Err(MatchError::Shapes(format!("stage {stage} of a schedule of {}", self.plan.stages.len())));
+        }
+        Ok(())
+    }
+
+    /// Errors unless `stage` is in the schedule and `x` has its number of
+    /// unknowns.
+    fn check_len(&self, stage: usize, x: &[f64]) -> Result<(), MatchError> {
+        self.check_stage(stage)?;
+        let n = self.len_at(stage);
+        if x.len() != n {
+            return Err(MatchError::Shapes(format!("{} unknowns for stage {stage} of an atlas of {n}", x.len())));
+        }
+        Ok(())
     }
 
     /// Runs the remaining stages until each stops by its rule, or until
@@ -544,6 +799,17 @@ impl Atlas {
         let stages = self.plan.stages.len();
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
+            let current = self.checkpoint.current.take();
+            let x0 = match (&current, self.checkpoint.warm.clone()) {
+                (Some(_), _) => Vec::new(),
+                (None, None) => self.initial_unknowns_at(k)?,
+                (None, Some(w)) if self.template_of(k - 1).0 != self.template_of(k).0 => {
+                    // A finer template: carry the solution over.
+                    let coarse = self.solution(k - 1, &w)?;
+                    self.prolongate(k, &coarse)?
+                }
+                (None, Some(w)) => w,
+            };
             self.stage_target(k)?;
             let spec = self.plan.stages[k].clone();
             let settings = Settings {
@@ -552,12 +818,9 @@ impl Atlas {
                 decrease_window: spec.decrease.1,
                 ..self.plan.settings
             };
-            let current = self.checkpoint.current.take();
-            let warm = self.checkpoint.warm.clone();
-            let x0 = warm.unwrap_or_else(|| self.initial_unknowns());
             let file = self.checkpoint_file.clone();
             let mut checkpoint = std::mem::replace(&mut self.checkpoint, Checkpoint::empty());
-            let mut objective = self.objective();
+            let mut objective = self.level.objective();
             let mut current = match current {
                 Some(c) => c,
                 None => {
@@ -604,18 +867,6 @@ impl Atlas {
         Ok(Outcome::Finished)
     }
 
-    /// The estimated template at the unknowns `x`, its hypertemplate
-    /// momenta and their energy (hypertemplate model; 0 without one).
-    fn template_at(&self, x: &[f64]) -> Result<(FShape, Option<Vec<f64>>, f64), MatchError> {
-        let pn = self.template.n_vertices() * self.template.dim();
-        let p = self.template.n_vertices();
-        let (points, traj) = positions(self.hyper.as_ref(), &self.metric, &x[..pn])?;
-        let signal = x[pn..pn + p].iter().map(|u| u * self.metric.signal).collect();
-        let momenta = self.hyper.as_ref().map(|h| h.unknowns.unpack(&x[..pn]).0);
-        let energy = traj.map_or(0.0, |t| t.hamiltonian[0]);
-        Ok((self.template.clone().with_points(points)?.with_signal(Some(signal))?, momenta, energy))
-    }
-
     /// The result of a finished run: the template, and every subject's
     /// momenta shot once more with the last stage's data term.
     pub fn result(&mut self) -> Result<AtlasResult, MatchError> {
@@ -624,19 +875,20 @@ impl Atlas {
         }
         self.stage_target(self.plan.stages.len() - 1)?;
         let x = self.checkpoint.warm.clone().ok_or(MatchError::NotFinished)?;
-        let (template, template_momenta, hyper_energy) = self.template_at(&x)?;
-        let len = self.unknowns.len();
+        let level = &mut self.level;
+        let (template, template_momenta, hyper_energy) = level.template_at(&x)?;
+        let len = level.unknowns.len();
         let offset = template.n_vertices() * (template.dim() + 1);
         let n = self.subjects.len() as f64;
         let mut energies = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
         let mut subjects = Vec::with_capacity(self.subjects.len());
-        let start = self.template.clone();
+        let start = &self.source;
         let zeros = (vec![0.0; start.n_vertices() * start.dim()], vec![0.0; start.n_vertices()]);
-        for (i, (problem, subject)) in self.problems.iter_mut().zip(&self.subjects).enumerate() {
+        for (i, (problem, subject)) in level.problems.iter_mut().zip(&self.subjects).enumerate() {
             problem.set_template(start.points(), start.signal())?;
             let initial_attachment = problem.objective(&zeros.0, &zeros.1)?.0.attachment;
             problem.set_template(template.points(), template.signal())?;
-            let (p0, pf) = self.unknowns.unpack(&x[offset + i * len..offset + (i + 1) * len]);
+            let (p0, pf) = level.unknowns.unpack(&x[offset + i * len..offset + (i + 1) * len]);
             let (e, trajectory) = problem.objective(&p0, &pf)?;
             energies.value += e.value / n;
             energies.energy += e.energy / n;
@@ -679,20 +931,19 @@ impl Atlas {
     /// callers that drive an optimiser themselves.
     pub fn value_grad(&mut self, stage: usize, x: &[f64]) -> Result<(f64, Vec<f64>), MatchError> {
         use crate::optimize::Objective;
-        if stage >= self.plan.stages.len() {
-            return Err(MatchError::Shapes(format!("stage {stage} of a schedule of {}", self.plan.stages.len())));
-        }
-        if x.len() != self.len() {
-            return Err(MatchError::Shapes(format!("{} unknowns for an atlas of {}", x.len(), self.len())));
-        }
+        self.check_len(stage, x)?;
         self.stage_target(stage)?;
-        Ok(self.objective().value_grad(x)?)
+        Ok(self.level.objective().value_grad(x)?)
     }
 
-    /// Applies the initial Hessian's shape M⁻¹ (module docs) to `v`.
-    pub fn precondition(&mut self, v: &mut [f64]) {
+    /// Applies stage `stage`'s initial Hessian shape M⁻¹ (module docs) to
+    /// `v` ([`Atlas::len_at`] values).
+    pub fn precondition(&mut self, stage: usize, v: &mut [f64]) -> Result<(), MatchError> {
         use crate::optimize::Objective;
-        self.objective().precondition(v);
+        self.check_len(stage, v)?;
+        self.ensure_level(stage)?;
+        self.level.objective().precondition(v);
+        Ok(())
     }
 }
 
@@ -857,8 +1108,9 @@ impl Atlas {
     /// The template of `result` shot by momenta (p_0, p^f): the shape at
     /// t = 1 (to see a mode at ±2 standard deviations).
     pub fn shoot_template(&mut self, result: &AtlasResult, p0: &[f64], pf: &[f64]) -> Result<FShape, MatchError> {
+        self.ensure_level(self.plan.stages.len() - 1)?;
         let t = &result.template;
-        let problem = &mut self.problems[0];
+        let problem = &mut self.level.problems[0];
         problem.set_template(t.points(), t.signal())?;
         let traj = problem.shoot(p0, pf)?;
         let k = traj.steps();

@@ -46,19 +46,38 @@ pub fn prolongate(
     let density0: Vec<f64> = p0.iter().enumerate().map(|(i, p)| p / mc[i / dim]).collect();
     let densityf: Vec<f64> =
         if signal_density { pf.iter().zip(&mc).map(|(p, m)| p / m).collect() } else { pf.to_vec() };
+    let rho0 = sample(coarse, fine, &density0, dim)?;
+    let rhof = sample(coarse, fine, &densityf, 1)?;
+    let q0 = rho0.iter().enumerate().map(|(i, r)| mf[i / dim] * r).collect();
+    let qf = if signal_density { rhof.iter().zip(&mf).map(|(r, m)| m * r).collect() } else { rhof };
+    Ok((q0, qf))
+}
+
+/// The piecewise-linear function of `coarse` with `width` values per
+/// vertex (`values`, vertex-major) read at every vertex of `fine`, at its
+/// closest point on `coarse`: `width` values per fine vertex.
+pub fn sample(coarse: &FShape, fine: &FShape, values: &[f64], width: usize) -> Result<Vec<f64>, MatchError> {
+    let dim = coarse.dim();
+    if fine.dim() != dim || fine.kind() != coarse.kind() {
+        return Err(MatchError::Shapes("resampling: the meshes differ in dimension or cell type".into()));
+    }
+    if values.len() != coarse.n_vertices() * width {
+        return Err(MatchError::Shapes(format!(
+            "resampling: {} values for {} vertices of {width} each",
+            values.len(),
+            coarse.n_vertices()
+        )));
+    }
     let closest = ClosestPoints::new(coarse)?;
     let k = coarse.kind().n_corners();
-    let (mut q0, mut qf) = (Vec::with_capacity(fine.n_vertices() * dim), Vec::with_capacity(fine.n_vertices()));
-    for (v, m) in mf.iter().enumerate() {
+    let mut out = Vec::with_capacity(fine.n_vertices() * width);
+    for v in 0..fine.n_vertices() {
         let x = fine.point(v);
         let c = closest.closest([x[0], x[1], if dim == 3 { x[2] } else { 0.0 }]);
         let ids = &coarse.cells()[c.cell * k..(c.cell + 1) * k];
-        for axis in 0..dim {
-            let rho: f64 = ids.iter().zip(c.bary).map(|(&u, w)| w * density0[u * dim + axis]).sum();
-            q0.push(m * rho);
+        for axis in 0..width {
+            out.push(ids.iter().zip(c.bary).map(|(&u, w)| w * values[u * width + axis]).sum());
         }
-        let rho: f64 = ids.iter().zip(c.bary).map(|(&u, w)| w * densityf[u]).sum();
-        qf.push(if signal_density { m * rho } else { rho });
     }
-    Ok((q0, qf))
+    Ok(out)
 }
