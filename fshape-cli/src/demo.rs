@@ -83,6 +83,7 @@ fn run_match(
     crate::match_cmd::run(&crate::match_cmd::MatchArgs {
         source,
         target,
+        signals: (None, None),
         config: &cfg,
         out: run,
         resume: false,

@@ -14,6 +14,7 @@ use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
 mod atlas_cmd;
+mod batch_cmd;
 mod demo;
 mod match_cmd;
 mod render;
@@ -179,6 +180,12 @@ enum Command {
         /// Vertex property of both meshes to read as the signal.
         #[arg(long)]
         signal_name: Option<String>,
+        /// Per-vertex signal CSV for the source.
+        #[arg(long)]
+        source_signal: Option<PathBuf>,
+        /// Per-vertex signal CSV for the target.
+        #[arg(long)]
+        target_signal: Option<PathBuf>,
         /// Camera of the PNG renders of surfaces in space: azimuth,elevation in degrees.
         #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
         view: Vec<f64>,
@@ -187,6 +194,46 @@ enum Command {
         /// run on them and carry their momenta to the next.
         #[arg(long, value_delimiter = ',')]
         stage_templates: Vec<PathBuf>,
+    },
+    /// Register every pair of a table: one `fshape match` per row, each in
+    /// OUT/NAME (its own checkpoint and outputs), then OUT/index.csv and
+    /// index.json (every row's status, J, match quality, time and error).
+    /// Run the same command again to resume: finished rows are kept,
+    /// stopped rows resume, failed ones are tried again. A failed row does
+    /// not stop the others (the exit status is 1 if any failed).
+    Batch {
+        /// The pairs: a header naming the columns (source, target, and
+        /// optionally source_signal, target_signal, name), then one pair per
+        /// line; paths relative to the table, `#` comments.
+        pairs: PathBuf,
+        /// The configuration of every registration (as for `fshape match`).
+        #[arg(long)]
+        config: PathBuf,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Rows registered at once on this machine, the cores shared among
+        /// them (results are the same bits in any mode).
+        #[arg(long, default_value_t = 1)]
+        jobs: usize,
+        /// This task's share of the rows, I/N with 0 <= I < N (rows I,
+        /// I + N, ...): a cluster job array. Default: Slurm's
+        /// SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN of SLURM_ARRAY_TASK_COUNT
+        /// when set, else every row.
+        #[arg(long)]
+        shard: Option<String>,
+        /// Only write the index from the rows' directories.
+        #[arg(long)]
+        index_only: bool,
+        /// Times in [0, 1] at which to write each geodesic.
+        #[arg(long, value_delimiter = ',', default_value = "0,0.25,0.5,0.75,1")]
+        times: Vec<f64>,
+        /// Vertex property of every mesh to read as the signal.
+        #[arg(long)]
+        signal_name: Option<String>,
+        /// Camera of the renders: azimuth,elevation in degrees.
+        #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
+        view: Vec<f64>,
     },
     /// Estimate a template from a population (metamorphosis atlas, free
     /// template): the template's positions and signal and every subject's
@@ -331,6 +378,8 @@ fn main() -> ExitCode {
             stop_after,
             times,
             signal_name,
+            source_signal,
+            target_signal,
             view,
             stage_templates,
         } => {
@@ -345,6 +394,7 @@ fn main() -> ExitCode {
             match_cmd::run(&match_cmd::MatchArgs {
                 source: &source,
                 target: &target,
+                signals: (source_signal.as_deref(), target_signal.as_deref()),
                 config: &config,
                 out: &out,
                 resume,
@@ -353,6 +403,34 @@ fn main() -> ExitCode {
                 times: &times,
                 view: (azimuth, elevation),
                 stage_templates: &stage_templates,
+            })
+        }
+        Command::Batch { pairs, config, out, jobs, shard, index_only, times, signal_name, view } => {
+            let (azimuth, elevation) = match view[..] {
+                [a, e] if a.is_finite() && e.is_finite() => (a, e),
+                _ => {
+                    let got: Vec<String> = view.iter().map(f64::to_string).collect();
+                    eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
+                    return ExitCode::from(2);
+                }
+            };
+            let shard = match shard.as_deref().map(batch_cmd::parse_shard).transpose() {
+                Ok(Some(s)) => Ok(Some(s)),
+                Ok(None) => batch_cmd::shard_from_env(),
+                Err(e) => Err(e),
+            };
+            shard.and_then(|shard| {
+                batch_cmd::run(&batch_cmd::BatchArgs {
+                    pairs: &pairs,
+                    config: &config,
+                    out: &out,
+                    jobs,
+                    shard,
+                    index_only,
+                    signal_name,
+                    times: &times,
+                    view: (azimuth, elevation),
+                })
             })
         }
         Command::Atlas {
@@ -422,7 +500,7 @@ fn main() -> ExitCode {
 /// The error and its causes joined by ": ", skipping a cause whose text the
 /// previous message already contains (the library errors name their source
 /// in their own message and also return it from `source()`).
-fn message(e: &anyhow::Error) -> String {
+pub(crate) fn message(e: &anyhow::Error) -> String {
     let mut parts: Vec<String> = Vec::new();
     for cause in e.chain() {
         let m = cause.to_string();

@@ -20,6 +20,8 @@ use serde::Serialize;
 pub struct MatchArgs<'a> {
     pub source: &'a Path,
     pub target: &'a Path,
+    /// Per-vertex signal CSVs of the source and the target.
+    pub signals: (Option<&'a Path>, Option<&'a Path>),
     pub config: &'a Path,
     pub out: &'a Path,
     pub resume: bool,
@@ -126,13 +128,19 @@ impl Observer for Progress {
     }
 }
 
-pub fn run(a: &MatchArgs<'_>) -> Result<()> {
-    let config = Config::read(a.config)?;
-    if let Some(t) = a.times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
+/// Errors unless every time of `--times` is in [0, 1].
+pub(crate) fn check_times(times: &[f64]) -> Result<()> {
+    if let Some(t) = times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
         bail!("--times: {t} is outside [0, 1]");
     }
-    let source = crate::load(a.source, a.signal_name.clone(), None)?;
-    let target = crate::load(a.target, a.signal_name.clone(), None)?;
+    Ok(())
+}
+
+pub fn run(a: &MatchArgs<'_>) -> Result<()> {
+    let config = Config::read(a.config)?;
+    check_times(a.times)?;
+    let source = crate::load(a.source, a.signal_name.clone(), a.signals.0)?;
+    let target = crate::load(a.target, a.signal_name.clone(), a.signals.1)?;
     let session = match Session::new(&source, &target, &config) {
         Err(MatchError::Shapes(why)) => {
             bail!("{} and {} are not the same kind of shape: {why}", a.source.display(), a.target.display())

@@ -969,3 +969,148 @@ fn demo_atlas_spheres_reports_the_template_against_the_truth() {
         assert!(out.join("atlas-spheres").join(f).exists(), "{f}");
     }
 }
+
+/// A batch table in a directory of its own: three sphere-to-ellipsoid
+/// pairs (one with a signal CSV), a pair whose target does not exist and a
+/// line with too few fields; and a fast configuration.
+fn batch_inputs(tag: &str) -> (PathBuf, String) {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    let dir = tmp(tag);
+    std::fs::create_dir_all(&dir).unwrap();
+    let sphere = fshape_mesh::generate::icosphere(2, 0.5);
+    let n = sphere.n_vertices();
+    write_mesh(&dir.join("sphere.ply"), &sphere.clone().with_signal(Some(vec![0.0; n])).unwrap(), Encoding::Binary)
+        .unwrap();
+    for i in 0..3 {
+        let a = 1.1 + 0.1 * i as f64;
+        let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [a * p[0], p[1], p[2] / a]).collect();
+        let f: Vec<f64> = pts.chunks_exact(3).map(|p| p[2] + 0.2 * i as f64).collect();
+        let s = sphere.clone().with_points(pts).unwrap().with_signal(Some(f.clone())).unwrap();
+        write_mesh(&dir.join(format!("ellipsoid{i}.ply")), &s, Encoding::Binary).unwrap();
+        let csv: String = std::iter::once("signal\n".to_string()).chain(f.iter().map(|v| format!("{v}\n"))).collect();
+        std::fs::write(dir.join(format!("signal{i}.csv")), csv).unwrap();
+    }
+    std::fs::write(
+        dir.join("pairs.csv"),
+        "# three pairs, a missing target, a short line\n\
+         source,target,target_signal,name\n\
+         sphere.ply,ellipsoid0.ply,,first\n\
+         sphere.ply,ellipsoid1.ply,signal1.csv,\n\
+         sphere.ply,missing.ply,,lost\n\
+         sphere.ply\n\
+         sphere.ply,ellipsoid2.ply,,third\n",
+    )
+    .unwrap();
+    let config = dir.join("match.toml");
+    std::fs::write(
+        &config,
+        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.4]\n[integrator]\nsteps = 5\n\
+         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+         [optimizer]\nmax_iterations = 6\n",
+    )
+    .unwrap();
+    (dir, config.display().to_string())
+}
+
+#[test]
+fn batch_gives_every_row_the_same_result_in_every_mode_and_a_bad_row_fails_alone() {
+    let (dir, config) = batch_inputs("batch");
+    let pairs = dir.join("pairs.csv").display().to_string();
+    let batch = |out: &str, extra: &[&str], env: &[(&str, &str)]| {
+        let args = [&["batch", pairs.as_str(), "--config", &config, "--out", out, "--times", "0,1"], extra].concat();
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_fshape"));
+        cmd.args(&args);
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        cmd.output().expect("the binary runs")
+    };
+    let out = |name: &str| dir.join(name).display().to_string();
+    // In sequence: the two bad rows fail, the others finish; exit status 1.
+    let o = batch(&out("seq"), &[], &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("seq/index.json")).unwrap()).unwrap();
+    let rows = index["rows"].as_array().unwrap();
+    let status: Vec<&str> = rows.iter().map(|r| r["status"].as_str().unwrap()).collect();
+    assert_eq!(status, ["done", "done", "failed", "failed", "done"]);
+    let names: Vec<&str> = rows.iter().map(|r| r["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["first", "row_002", "lost", "row_004", "third"]);
+    let error = |k: usize| rows[k]["error"].as_str().unwrap().to_string();
+    assert!(error(2).contains("missing.ply"), "{}", error(2));
+    assert!(error(3).contains("pairs.csv:6") && error(3).contains("expected 4 fields"), "{}", error(3));
+    for r in rows.iter().filter(|r| r["status"] == "done") {
+        let d = r["mean_distance"].as_f64().unwrap();
+        assert!(d > 0.0 && d < 0.05 && r["value"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    // The signal CSV was read: that row's target signal is the CSV's.
+    assert!(rows[1]["signal_rms"].as_f64().is_some());
+    let csv = std::fs::read_to_string(dir.join("seq/index.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 6);
+    assert!(csv.lines().nth(3).unwrap().contains(",failed,"));
+    // Two rows at once, and a job array of two tasks (the second from
+    // Slurm's variables, numbered from 1), then the index alone.
+    let o = batch(&out("jobs"), &["--jobs", "2"], &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let o = batch(&out("array"), &["--shard", "0/2"], &[]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(1), "rows 1, 3 and 5: {err}");
+    assert!(err.contains("1 of this shard's 3 rows failed"), "{err}");
+    // The reason once, not repeated by each layer of the error.
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+    let slurm = [("SLURM_ARRAY_TASK_ID", "2"), ("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_COUNT", "2")];
+    let o = batch(&out("array"), &[], &slurm);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(1), "rows 2 and 4: {err}");
+    assert!(err.contains("(1/2)") && err.contains("1 of this shard's 2 rows failed"), "{err}");
+    assert!(batch(&out("array"), &["--index-only"], &[]).status.success());
+    let again: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("array/index.json")).unwrap()).unwrap();
+    assert_eq!((again["done"].as_u64(), again["failed"].as_u64()), (Some(3), Some(2)));
+    for name in ["first", "row_002", "third"] {
+        let a = std::fs::read(dir.join("seq").join(name).join("p0.csv")).unwrap();
+        assert_eq!(a, std::fs::read(dir.join("jobs").join(name).join("p0.csv")).unwrap(), "{name}");
+        assert_eq!(a, std::fs::read(dir.join("array").join(name).join("p0.csv")).unwrap(), "{name}");
+    }
+    // A row stopped midway resumes; finished rows are kept as they are.
+    let stopped = dir.join("resumed/third").display().to_string();
+    let src = dir.join("sphere.ply").display().to_string();
+    let tgt = dir.join("ellipsoid2.ply").display().to_string();
+    let o =
+        fshape(&["match", &src, &tgt, "--config", &config, "--out", &stopped, "--stop-after", "2", "--times", "0,1"]);
+    assert!(o.status.success() && !dir.join("resumed/third/summary.json").exists());
+    batch(&out("resumed"), &[], &[]);
+    let third = std::fs::read(dir.join("resumed/third/p0.csv")).unwrap();
+    assert_eq!(third, std::fs::read(dir.join("seq/third/p0.csv")).unwrap());
+    let o = batch(&out("seq"), &[], &[]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("1 to run"), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn batch_refuses_a_bad_table_and_a_bad_shard() {
+    let (dir, config) = batch_inputs("batch_bad");
+    let pairs = dir.join("pairs.csv");
+    let out = dir.join("out").display().to_string();
+    let run = |extra: &[&str]| {
+        fshape(&[&["batch", pairs.to_str().unwrap(), "--config", &config, "--out", &out], extra].concat())
+    };
+    for shard in ["2/2", "x/2", "1"] {
+        let o = run(&["--shard", shard]);
+        assert_eq!(o.status.code(), Some(1));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--shard"), "{shard}");
+    }
+    std::fs::write(&pairs, "source,target,weight\na.ply,b.ply,1\n").unwrap();
+    let o = run(&[]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("pairs.csv:1: unknown column `weight`"));
+    std::fs::write(&pairs, "# nothing\n").unwrap();
+    assert!(String::from_utf8_lossy(&run(&[]).stderr).contains("no header"));
+    // Two rows of one name, and a name that is a path: those rows fail.
+    std::fs::write(&pairs, "source,target,name\na.ply,b.ply,x\nc.ply,d.ply,x\ne.ply,f.ply,../up\n").unwrap();
+    assert!(run(&["--index-only"]).status.success());
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/index.json")).unwrap()).unwrap();
+    let rows = index["rows"].as_array().unwrap();
+    assert_eq!(rows[0]["status"], "pending");
+    assert!(rows[1]["error"].as_str().unwrap().contains("name `x` is also line 2's"), "{}", rows[1]);
+    assert!(rows[2]["error"].as_str().unwrap().contains("not a plain directory name"), "{}", rows[2]);
+}

@@ -1,0 +1,370 @@
+//! `fshape batch`: one `fshape match` per row of a table of pairs, on one
+//! machine (rows in sequence or `--jobs` at once) or spread over a cluster
+//! job array (`--shard I/N`, or Slurm's array variables). Every row has its
+//! own output directory and checkpoint, so a batch stopped anywhere is
+//! started again with the same command: finished rows are kept, stopped
+//! rows resume, failed rows are tried again. A row that fails (unreadable
+//! mesh, bad signal, a diverging registration) is recorded and the others
+//! go on. After its rows each invocation writes the index of every row
+//! (`index.csv`, `index.json`) from what the row directories hold;
+//! `--index-only` writes it without running anything (for a job that runs
+//! after a job array).
+//!
+//! Registrations give the same bits for any number of threads, so a row's
+//! result does not depend on the mode it ran in.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use anyhow::{Context, Result, bail};
+use fshape_mesh::io;
+use serde::Serialize;
+
+/// The command's arguments.
+pub struct BatchArgs<'a> {
+    /// The table of pairs.
+    pub pairs: &'a Path,
+    pub config: &'a Path,
+    pub out: &'a Path,
+    /// Rows registered at once on this machine.
+    pub jobs: usize,
+    /// This invocation's share of the rows: (index from 0, count).
+    pub shard: Option<(usize, usize)>,
+    /// Only write the index.
+    pub index_only: bool,
+    pub signal_name: Option<String>,
+    pub times: &'a [f64],
+    pub view: (f64, f64),
+}
+
+/// One row of the table.
+#[derive(Clone, Debug)]
+struct Row {
+    /// Its position among the table's rows (from 0) and its line (from 1).
+    index: usize,
+    line: usize,
+    name: String,
+    source: PathBuf,
+    target: PathBuf,
+    source_signal: Option<PathBuf>,
+    target_signal: Option<PathBuf>,
+    /// Why the row cannot run, if it cannot (the others still do).
+    invalid: Option<String>,
+}
+
+const COLUMNS: [&str; 5] = ["source", "target", "source_signal", "target_signal", "name"];
+
+/// Reads the table: `#` comments and blank lines skipped, a header naming
+/// its columns (`source` and `target` required; `source_signal`,
+/// `target_signal` and `name` optional, in any order), then one pair per
+/// line, paths relative to the table. A malformed row is returned with
+/// `invalid` set; a malformed header or an unreadable file is an error.
+fn read_pairs(path: &Path) -> Result<Vec<Row>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut lines =
+        text.lines().enumerate().map(|(k, l)| (k + 1, l.trim())).filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+    let Some((header_line, header)) = lines.next() else {
+        bail!("{}: no header (expected a line naming the columns, such as `source,target,name`)", path.display());
+    };
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    for (k, c) in columns.iter().enumerate() {
+        if !COLUMNS.contains(c) {
+            bail!("{}:{header_line}: unknown column `{c}` (the columns are {})", path.display(), COLUMNS.join(", "));
+        }
+        if columns[..k].contains(c) {
+            bail!("{}:{header_line}: column `{c}` twice", path.display());
+        }
+    }
+    let col = |name: &str| columns.iter().position(|c| *c == name);
+    let (Some(source), Some(target)) = (col("source"), col("target")) else {
+        bail!("{}:{header_line}: the header must name a `source` and a `target` column", path.display());
+    };
+    let mut rows: Vec<Row> = Vec::new();
+    for (index, (line, text)) in lines.enumerate() {
+        let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+        let field = |k: Option<usize>| k.and_then(|k| fields.get(k)).filter(|f| !f.is_empty());
+        let name = field(col("name")).map_or_else(|| format!("row_{:03}", index + 1), |s| s.to_string());
+        let mut row = Row {
+            index,
+            line,
+            name: name.clone(),
+            source: field(Some(source)).map_or_else(PathBuf::new, |f| base.join(f)),
+            target: field(Some(target)).map_or_else(PathBuf::new, |f| base.join(f)),
+            source_signal: field(col("source_signal")).map(|s| base.join(s)),
+            target_signal: field(col("target_signal")).map(|s| base.join(s)),
+            invalid: None,
+        };
+        row.invalid = if fields.len() != columns.len() {
+            Some(format!("expected {} fields ({header}), found {}", columns.len(), fields.len()))
+        } else if field(Some(source)).is_none() || field(Some(target)).is_none() {
+            Some("a source and a target are required".into())
+        } else if name.starts_with('.') || name.contains(['/', '\\']) {
+            Some(format!("name `{name}` is not a plain directory name"))
+        } else {
+            rows.iter().find(|r| r.name == name).map(|other| format!("name `{name}` is also line {}'s", other.line))
+        };
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// A row's state, from its directory.
+#[derive(Serialize)]
+struct Entry {
+    row: usize,
+    line: usize,
+    name: String,
+    source: String,
+    target: String,
+    /// done | failed | incomplete (a checkpoint, no result) | pending
+    status: &'static str,
+    value: Option<f64>,
+    attachment: Option<f64>,
+    mean_distance: Option<f64>,
+    p95_distance: Option<f64>,
+    target_within_1pct: Option<f64>,
+    signal_rms: Option<f64>,
+    iterations: Option<u64>,
+    seconds: Option<f64>,
+    error: Option<String>,
+}
+
+fn entry(out: &Path, pairs: &Path, row: &Row) -> Entry {
+    let dir = out.join(&row.name);
+    let mut e = Entry {
+        row: row.index + 1,
+        line: row.line,
+        name: row.name.clone(),
+        source: row.source.display().to_string(),
+        target: row.target.display().to_string(),
+        status: "pending",
+        value: None,
+        attachment: None,
+        mean_distance: None,
+        p95_distance: None,
+        target_within_1pct: None,
+        signal_rms: None,
+        iterations: None,
+        seconds: None,
+        error: None,
+    };
+    if let Some(why) = &row.invalid {
+        e.status = "failed";
+        e.error = Some(format!("{}:{}: {why}", pairs.display(), row.line));
+        return e;
+    }
+    if let Some(s) = done(&dir) {
+        let q = &s["quality"];
+        e.status = "done";
+        e.value = s["final_value"].as_f64();
+        e.attachment = s["final_attachment"].as_f64();
+        e.mean_distance = q["mean_distance"].as_f64();
+        e.p95_distance = q["p95_distance"].as_f64();
+        e.target_within_1pct = q["target_within_1pct"].as_f64();
+        e.signal_rms = q["signal_rms"].as_f64();
+        e.iterations = s["iterations"].as_u64();
+        e.seconds = s["seconds"].as_f64();
+    } else if let Ok(why) = std::fs::read_to_string(dir.join("error.txt")) {
+        e.status = "failed";
+        e.error = Some(why.trim().to_string());
+    } else if dir.join("checkpoint.json").exists() {
+        e.status = "incomplete";
+    }
+    e
+}
+
+/// The row's summary, if it finished.
+fn done(dir: &Path) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// Writes index.csv and index.json of every row; returns the entries.
+fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
+    let entries: Vec<Entry> = rows.iter().map(|r| entry(a.out, a.pairs, r)).collect();
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:e}"));
+    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    let mut csv = String::from(
+        "row,line,name,source,target,status,value,attachment,mean_distance,p95_distance,target_within_1pct,signal_rms,iterations,seconds,error\n",
+    );
+    for e in &entries {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            e.row,
+            e.line,
+            quote(&e.name),
+            quote(&e.source),
+            quote(&e.target),
+            e.status,
+            opt(e.value),
+            opt(e.attachment),
+            opt(e.mean_distance),
+            opt(e.p95_distance),
+            opt(e.target_within_1pct),
+            opt(e.signal_rms),
+            e.iterations.map_or(String::new(), |i| i.to_string()),
+            e.seconds.map_or(String::new(), |s| format!("{s:.3}")),
+            e.error.as_deref().map_or(String::new(), quote),
+        ));
+    }
+    let count = |s: &str| entries.iter().filter(|e| e.status == s).count();
+    let json = serde_json::json!({
+        "pairs": a.pairs.display().to_string(),
+        "config": a.config.display().to_string(),
+        "rows": entries,
+        "done": count("done"),
+        "failed": count("failed"),
+        "incomplete": count("incomplete"),
+        "pending": count("pending"),
+    });
+    std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    io::write_atomic(&a.out.join("index.csv"), csv.as_bytes(), false)?;
+    io::write_atomic(&a.out.join("index.json"), &serde_json::to_vec_pretty(&json)?, false)?;
+    Ok(entries)
+}
+
+/// Registers one row (resuming its checkpoint if it has one); a failure is
+/// written to its error.txt.
+fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
+    let dir = a.out.join(&row.name);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let error_file = dir.join("error.txt");
+    if error_file.exists() {
+        std::fs::remove_file(&error_file).with_context(|| format!("removing {}", error_file.display()))?;
+    }
+    let resume = dir.join("checkpoint.json").exists();
+    let result = crate::match_cmd::run(&crate::match_cmd::MatchArgs {
+        source: &row.source,
+        target: &row.target,
+        signals: (row.source_signal.as_deref(), row.target_signal.as_deref()),
+        config: a.config,
+        out: &dir,
+        resume,
+        stop_after: None,
+        signal_name: a.signal_name.clone(),
+        times: a.times,
+        view: a.view,
+        stage_templates: &[],
+    });
+    if let Err(e) = &result {
+        let message = crate::message(e);
+        eprintln!("row {} ({}:{}) failed: {message}", row.name, a.pairs.display(), row.line);
+        io::write_atomic(&error_file, format!("{message}\n").as_bytes(), false)?;
+    }
+    result
+}
+
+/// This invocation's shard: `--shard`, else Slurm's array variables, else
+/// all rows.
+pub fn shard_from_env() -> Result<Option<(usize, usize)>> {
+    let Ok(id) = std::env::var("SLURM_ARRAY_TASK_ID") else { return Ok(None) };
+    let number = |name: &str, value: &str| -> Result<usize> {
+        value.trim().parse().with_context(|| format!("{name}={value} is not a task number"))
+    };
+    let id = number("SLURM_ARRAY_TASK_ID", &id)?;
+    let min = match std::env::var("SLURM_ARRAY_TASK_MIN") {
+        Ok(v) => number("SLURM_ARRAY_TASK_MIN", &v)?,
+        Err(_) => 0,
+    };
+    let count = std::env::var("SLURM_ARRAY_TASK_COUNT")
+        .context("SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not")?;
+    let count = number("SLURM_ARRAY_TASK_COUNT", &count)?;
+    match id.checked_sub(min) {
+        Some(i) if i < count => Ok(Some((i, count))),
+        _ => bail!(
+            "SLURM_ARRAY_TASK_ID={id} is not within {count} tasks from SLURM_ARRAY_TASK_MIN={min} \
+             (submit the array as --array=0-{}, contiguous, or pass --shard I/N)",
+            count.saturating_sub(1)
+        ),
+    }
+}
+
+/// Parses `I/N` (I from 0 to N − 1).
+pub fn parse_shard(s: &str) -> Result<(usize, usize)> {
+    let bad = || format!("--shard: expected I/N with 0 <= I < N, got `{s}`");
+    let (i, n) = s.split_once('/').with_context(bad)?;
+    let (i, n): (usize, usize) = (i.trim().parse().with_context(bad)?, n.trim().parse().with_context(bad)?);
+    if i >= n {
+        bail!(bad());
+    }
+    Ok((i, n))
+}
+
+pub fn run(a: &BatchArgs<'_>) -> Result<()> {
+    let rows = read_pairs(a.pairs)?;
+    if a.index_only {
+        let entries = write_index(a, &rows)?;
+        report(a, &entries, None::<fn(&Entry) -> bool>);
+        return Ok(());
+    }
+    crate::match_cmd::check_times(a.times)?;
+    fshape_match::Config::read(a.config)?;
+    let (shard, shards) = a.shard.unwrap_or((0, 1));
+    let mine: Vec<&Row> = rows.iter().filter(|r| r.index % shards == shard).collect();
+    let todo: Vec<&Row> =
+        mine.iter().copied().filter(|r| r.invalid.is_none() && done(&a.out.join(&r.name)).is_none()).collect();
+    eprintln!(
+        "batch: {} rows in {}, {} in this shard ({}/{shards}), {} to run, {} at a time",
+        rows.len(),
+        a.pairs.display(),
+        mine.len(),
+        shard,
+        todo.len(),
+        a.jobs.max(1)
+    );
+    std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let jobs = a.jobs.max(1).min(todo.len().max(1));
+    if jobs == 1 {
+        for row in &todo {
+            let _ = run_row(a, row);
+        }
+    } else {
+        // Each worker a pool of its share of the cores; rows taken in order.
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = (cores / jobs).max(1);
+        let next = AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..jobs {
+                s.spawn(|| {
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build();
+                    loop {
+                        let k = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(row) = todo.get(k) else { break };
+                        let _ = match &pool {
+                            Ok(pool) => pool.install(|| run_row(a, row)),
+                            Err(_) => run_row(a, row),
+                        };
+                    }
+                });
+            }
+        });
+    }
+    let entries = write_index(a, &rows)?;
+    let failed = report(a, &entries, Some(shard_filter(shard, shards)));
+    if failed > 0 {
+        bail!("{failed} of this shard's {} rows failed; see {}", mine.len(), a.out.join("index.csv").display());
+    }
+    Ok(())
+}
+
+fn shard_filter(shard: usize, shards: usize) -> impl Fn(&Entry) -> bool {
+    move |e| (e.row - 1) % shards == shard
+}
+
+/// Prints the counts (of the rows `in_shard` selects, all without one) and
+/// returns the number failed.
+fn report(a: &BatchArgs<'_>, entries: &[Entry], in_shard: Option<impl Fn(&Entry) -> bool>) -> usize {
+    let selected: Vec<&Entry> = entries.iter().filter(|e| in_shard.as_ref().is_none_or(|f| f(e))).collect();
+    let count = |s: &str| selected.iter().filter(|e| e.status == s).count();
+    println!(
+        "batch: {} done, {} failed, {} incomplete, {} pending of {} rows; index in {}",
+        count("done"),
+        count("failed"),
+        count("incomplete"),
+        count("pending"),
+        selected.len(),
+        a.out.join("index.csv").display()
+    );
+    count("failed")
+}
