@@ -76,12 +76,20 @@ pub(crate) struct Progress {
     /// Iterations this invocation may still make.
     budget: Option<usize>,
     bar: Option<indicatif::ProgressBar>,
+    /// Never draw (the other processes of an MPI run).
+    hidden: bool,
 }
 
 impl Progress {
     /// For a model with weight γ_W, stopping after `budget` iterations.
     pub(crate) fn new(gamma_w: f64, budget: Option<usize>) -> Progress {
-        Progress { gamma_w, budget, bar: None }
+        Progress { gamma_w, budget, bar: None, hidden: false }
+    }
+
+    /// The same budget, no bar.
+    pub(crate) fn hidden(mut self) -> Progress {
+        self.hidden = true;
+        self
     }
 
     /// Leaves the bar where it stopped, with `why`.
@@ -94,7 +102,11 @@ impl Progress {
 
 impl Observer for Progress {
     fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
-        let bar = indicatif::ProgressBar::new(spec.max_iterations as u64);
+        let bar = if self.hidden {
+            indicatif::ProgressBar::hidden()
+        } else {
+            indicatif::ProgressBar::new(spec.max_iterations as u64)
+        };
         bar.set_style(
             indicatif::ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} it, ETA {eta} | {msg}")
                 .expect("a valid template")

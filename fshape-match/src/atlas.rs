@@ -133,9 +133,55 @@ struct SubjectEval {
     f0: Vec<f64>,
 }
 
+/// The processes an atlas's subjects are shared among (MPI ranks, say):
+/// process r evaluates the subjects of [`Cluster::subjects`]`(r)`, a
+/// contiguous block, and every process gathers every subject's terms in
+/// subject order and sums them itself, so that J, its gradient and the
+/// optimiser's state are the same bits on every process, and the same as
+/// on one process, for any number of processes. The default is one
+/// process ([`Local`]).
+pub trait Cluster {
+    /// This process's index, from 0.
+    fn rank(&self) -> usize;
+    /// The number of processes.
+    fn size(&self) -> usize;
+    /// Collective: every process's `mine`, concatenated in rank order.
+    fn all_gather(&self, mine: &[f64]) -> Vec<f64>;
+    /// The subjects (of `n`) process `rank` evaluates: contiguous blocks
+    /// in order, of sizes differing by at most one.
+    fn subjects(&self, rank: usize, n: usize) -> std::ops::Range<usize> {
+        let size = self.size().max(1);
+        rank * n / size..(rank + 1) * n / size
+    }
+}
+
+/// One process: gathering is the identity.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Local;
+
+impl Cluster for Local {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        1
+    }
+    fn all_gather(&self, mine: &[f64]) -> Vec<f64> {
+        mine.to_vec()
+    }
+}
+
+/// A subject's record in a gather: its status (0 evaluated, 1 a step too
+/// far, 2 failed), then J_i's four parts, ∂J_i/∂(its unknowns), ∂J_i/∂x̄
+/// and ∂J_i/∂f̄ (zeros unless evaluated).
+fn record_len(len: usize, pn: usize, p: usize) -> usize {
+    5 + len + pn + p
+}
+
 /// The atlas objective in the unknowns (module docs): the subjects'
 /// problems hold the template of the last evaluation.
 pub struct AtlasObjective<'p> {
+    cluster: &'p dyn Cluster,
     problems: &'p mut [Problem],
     unknowns: Unknowns,
     metric: &'p TemplateMetric,
@@ -156,13 +202,13 @@ impl AtlasObjective<'_> {
     /// Past the first point, a shooting that diverged is a step too far,
     /// which the line search undoes (as in matching): `None`, else the
     /// error.
-    fn step_too_far(&self, err: ShootError) -> Result<(), ShootError> {
+    fn step_too_far(&self, err: ShootError) -> Result<(), MatchError> {
         if self.evaluations > 1
             && !matches!(err, ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget)
         {
             Ok(())
         } else {
-            Err(err)
+            Err(err.into())
         }
     }
 
@@ -176,7 +222,7 @@ impl AtlasObjective<'_> {
 }
 
 impl crate::optimize::Objective for AtlasObjective<'_> {
-    type Error = ShootError;
+    type Error = MatchError;
 
     /// Template positions, template signal, then each subject's p_0 and
     /// (with a signal control) p^f.
@@ -213,7 +259,7 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         }
     }
 
-    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
+    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), MatchError> {
         self.evaluations += 1;
         let nan = || Ok((f64::NAN, vec![f64::NAN; x.len()]));
         let (points, traj) = match positions(self.hyper, self.metric, &x[..self.pn]) {
@@ -223,10 +269,11 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         let signal: Vec<f64> = x[self.pn..self.pn + self.p].iter().map(|u| u * self.metric.signal).collect();
         let len = self.subject_len();
         let unknowns = &self.unknowns;
-        let evals: Vec<Result<SubjectEval, ShootError>> = self
-            .problems
+        let n_subjects = self.problems.len();
+        let mine = self.cluster.subjects(self.cluster.rank(), n_subjects);
+        let evals: Vec<Result<SubjectEval, ShootError>> = self.problems[mine.clone()]
             .par_iter_mut()
-            .zip(x[self.pn + self.p..].par_chunks(len))
+            .zip(x[self.pn + self.p..].par_chunks(len).skip(mine.start).take(mine.len()))
             .map(|(problem, xi)| {
                 problem.set_template(&points, Some(&signal))?;
                 let (p0, pf) = unknowns.unpack(xi);
@@ -234,6 +281,60 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
                 Ok(SubjectEval { energies: g.objective, grad: unknowns.pack_grad(&g.p0, &g.pf), x0: g.x0, f0: g.f0 })
             })
             .collect();
+        // This process's records, gathered from all in subject order.
+        let width = record_len(len, self.pn, self.p);
+        let mut records = Vec::with_capacity(evals.len() * width);
+        let mut failure = None;
+        for (k, e) in evals.into_iter().enumerate() {
+            match e {
+                Ok(e) => {
+                    let en = e.energies;
+                    records.extend([0.0, en.value, en.energy, en.signal_energy, en.attachment]);
+                    records.extend(e.grad.iter().chain(&e.x0).chain(&e.f0));
+                }
+                Err(err) => {
+                    let status = match self.step_too_far(err) {
+                        Ok(()) => 1.0,
+                        Err(err) => {
+                            failure.get_or_insert((mine.start + k, err));
+                            2.0
+                        }
+                    };
+                    records.push(status);
+                    records.resize(records.len() + width - 1, 0.0);
+                }
+            }
+        }
+        let all = self.cluster.all_gather(&records);
+        if all.len() != n_subjects * width {
+            return Err(MatchError::Shapes(format!(
+                "the atlas's processes gathered {} values for {n_subjects} subjects of {width}",
+                all.len()
+            )));
+        }
+        let mut evals = Vec::with_capacity(n_subjects);
+        for (i, r) in all.chunks_exact(width).enumerate() {
+            if r[0] == 1.0 {
+                return nan();
+            }
+            if r[0] != 0.0 {
+                return Err(match failure {
+                    Some((j, err)) if j == i => err,
+                    _ => {
+                        let rank = (0..self.cluster.size())
+                            .find(|&q| self.cluster.subjects(q, n_subjects).contains(&i))
+                            .unwrap_or(0);
+                        MatchError::Remote { subject: i, rank }
+                    }
+                });
+            }
+            evals.push(SubjectEval {
+                energies: Energies { value: r[1], energy: r[2], signal_energy: r[3], attachment: r[4] },
+                grad: r[5..5 + len].to_vec(),
+                x0: r[5 + len..5 + len + self.pn].to_vec(),
+                f0: r[5 + len + self.pn..].to_vec(),
+            });
+        }
         let n = evals.len() as f64;
         let mut grad = vec![0.0; x.len()];
         let mut mean = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
@@ -241,10 +342,6 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         let mut gx = vec![0.0; self.pn];
         // Summed in subject order: the same bits for any number of threads.
         for (i, e) in evals.into_iter().enumerate() {
-            let e = match e {
-                Ok(e) => e,
-                Err(err) => return self.step_too_far(err).and_then(|()| nan()),
-            };
             mean.value += e.energies.value / n;
             mean.energy += e.energies.energy / n;
             mean.signal_energy += e.energies.signal_energy / n;
@@ -388,9 +485,10 @@ impl Level {
         x
     }
 
-    fn objective(&mut self) -> AtlasObjective<'_> {
+    fn objective<'a>(&'a mut self, cluster: &'a dyn Cluster) -> AtlasObjective<'a> {
         let t = &self.template;
         AtlasObjective {
+            cluster,
             pn: t.n_vertices() * t.dim(),
             p: t.n_vertices(),
             problems: &mut self.problems,
@@ -430,6 +528,7 @@ pub struct Atlas {
     hyper_model: Option<fshape_shoot::Model>,
     level: Level,
     on: Option<usize>,
+    cluster: Box<dyn Cluster>,
     checkpoint: Checkpoint,
     checkpoint_file: Option<PathBuf>,
     staged: Option<usize>,
@@ -514,6 +613,7 @@ impl Atlas {
             hyper_model,
             level,
             on: None,
+            cluster: Box::new(Local),
             checkpoint,
             checkpoint_file: None,
             staged: None,
@@ -574,6 +674,15 @@ impl Atlas {
             .collect();
         self.stage_templates = filled;
         Ok(self)
+    }
+
+    /// Shares the subjects' evaluations among the processes of `cluster`
+    /// (every process builds the same atlas and runs it; results are the
+    /// same bits as on one process). Give a checkpoint file to one
+    /// process only.
+    pub fn with_cluster(mut self, cluster: Box<dyn Cluster>) -> Atlas {
+        self.cluster = cluster;
+        self
     }
 
     /// Writes the checkpoint to `path` after every accepted iteration, at
@@ -820,7 +929,7 @@ impl Atlas {
             };
             let file = self.checkpoint_file.clone();
             let mut checkpoint = std::mem::replace(&mut self.checkpoint, Checkpoint::empty());
-            let mut objective = self.level.objective();
+            let mut objective = self.level.objective(self.cluster.as_ref());
             let mut current = match current {
                 Some(c) => c,
                 None => {
@@ -933,7 +1042,7 @@ impl Atlas {
         use crate::optimize::Objective;
         self.check_len(stage, x)?;
         self.stage_target(stage)?;
-        Ok(self.level.objective().value_grad(x)?)
+        self.level.objective(self.cluster.as_ref()).value_grad(x)
     }
 
     /// Applies stage `stage`'s initial Hessian shape M⁻¹ (module docs) to
@@ -942,7 +1051,7 @@ impl Atlas {
         use crate::optimize::Objective;
         self.check_len(stage, v)?;
         self.ensure_level(stage)?;
-        self.level.objective().precondition(v);
+        self.level.objective(self.cluster.as_ref()).precondition(v);
         Ok(())
     }
 }

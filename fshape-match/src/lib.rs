@@ -43,7 +43,7 @@ pub mod resolution;
 mod session;
 pub mod unknowns;
 
-pub use atlas::{Atlas, AtlasResult, SubjectResult};
+pub use atlas::{Atlas, AtlasResult, Cluster, Local, SubjectResult};
 pub use config::{
     AtlasSection, AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind,
     ModelSection, NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec,
@@ -112,6 +112,15 @@ pub enum MatchError {
     /// A mesh could not be built.
     #[error(transparent)]
     Shape(#[from] fshape_mesh::ShapeError),
+    /// Another process of a distributed atlas failed (its own message is
+    /// on that process's output).
+    #[error("subject {subject} failed on process {rank} of the atlas")]
+    Remote {
+        /// The subject (from 0).
+        subject: usize,
+        /// The process that evaluated it.
+        rank: usize,
+    },
 }
 
 impl MatchError {

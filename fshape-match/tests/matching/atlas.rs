@@ -532,3 +532,65 @@ fn stage_templates_must_fit_the_schedule_and_the_template() {
     assert!(a.value_grad(1, &x[1..]).err().unwrap().to_string().contains("unknowns for stage 1"));
     assert!(a.value_grad(2, &x).err().unwrap().to_string().contains("stage 2 of a schedule of 2"));
 }
+
+/// Processes simulated by threads: all_gather through shared slots and a
+/// barrier, as MPI's allgather.
+struct Threads {
+    rank: usize,
+    shared: std::sync::Arc<(std::sync::Barrier, std::sync::Mutex<Vec<Vec<f64>>>)>,
+}
+
+impl fshape_match::Cluster for Threads {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+    fn size(&self) -> usize {
+        self.shared.1.lock().unwrap().len()
+    }
+    fn all_gather(&self, mine: &[f64]) -> Vec<f64> {
+        let (barrier, slots) = &*self.shared;
+        slots.lock().unwrap()[self.rank] = mine.to_vec();
+        barrier.wait();
+        let all = slots.lock().unwrap().concat();
+        // Everyone has read before anyone writes the next round.
+        barrier.wait();
+        all
+    }
+}
+
+#[test]
+fn an_atlas_shared_among_processes_gives_the_bits_of_one_process() {
+    let subjects = subjects();
+    let mut config = config("metamorphosis", "h1");
+    config.optimizer.max_iterations = 4;
+    let run = |cluster: Option<Threads>| {
+        let mut atlas = Atlas::new(&template(), &subjects, &config).unwrap();
+        if let Some(c) = cluster {
+            atlas = atlas.with_cluster(Box::new(c));
+        }
+        assert_eq!(atlas.run(&mut ()).unwrap(), Outcome::Finished);
+        let r = atlas.result().unwrap();
+        (bits(r.template.points()), bits(r.template.signal().unwrap()), r.stages)
+    };
+    let alone = run(None);
+    // Two and three processes, and four for three subjects (one idle).
+    for size in [2, 3, 4] {
+        let shared =
+            std::sync::Arc::new((std::sync::Barrier::new(size), std::sync::Mutex::new(vec![Vec::new(); size])));
+        let results: Vec<_> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..size)
+                .map(|rank| {
+                    let c = Threads { rank, shared: shared.clone() };
+                    let run = &run;
+                    s.spawn(move || run(Some(c)))
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        for (rank, got) in results.iter().enumerate() {
+            assert_eq!(got.0, alone.0, "{size} processes, rank {rank}: positions");
+            assert_eq!(got.1, alone.1, "{size} processes, rank {rank}: signal");
+            assert_eq!(got.2, alone.2, "{size} processes, rank {rank}: records");
+        }
+    }
+}
