@@ -8,7 +8,9 @@
 #      subject's momenta and the PCA must be the same bytes;
 #   4. kills one process of a 2-process run midway: mpirun must end the
 #      run within a bounded time with an error, and `--resume` on 3
-#      processes must finish on the same bytes as the single process.
+#      processes must finish on the same bytes as the single process;
+#   5. `fshape batch` under mpirun (rows dealt to 3 processes) gives every
+#      row the bytes of one process, and a bad row fails alone.
 # Usage: scripts/mpi-test.sh [WORKDIR]   (exit status 0 when all hold)
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -90,4 +92,20 @@ echo "== resumed on 3 processes"
 "${mpi[@]}" -n 3 "$fshape" "${args[@]}" --out killed --resume > resumed.log 2>&1
 same killed
 echo "   the same bytes as one process"
-echo "mpi-test: 4 passed, 0 failed"
+echo "== fshape batch under mpirun: rows dealt to 3 processes"
+{
+    echo "source,target,name"
+    for i in 00 01 02 03; do echo "$in/template_start.ply,$in/subjects/subject_$i.ply,s$i"; done
+    echo "$in/template_start.ply,$in/subjects/absent.ply,bad"
+} > pairs.csv
+sed 's/^max_iterations = .*/max_iterations = 8/' config.toml > batch.toml
+batch=(batch pairs.csv --config batch.toml --times 0,1)
+"$fshape" "${batch[@]}" --out batch_one > batch_one.log 2>&1 && { echo "FAIL: the bad row did not fail"; exit 1; }
+"${mpi[@]}" -n 3 "$fshape" "${batch[@]}" --out batch_mpi > batch_mpi.log 2>&1 && { echo "FAIL: the bad row did not fail under mpirun"; exit 1; }
+for i in 00 01 02 03; do
+    cmp -s "batch_one/s$i/p0.csv" "batch_mpi/s$i/p0.csv" || { echo "FAIL: row s$i differs under mpirun"; exit 1; }
+done
+grep -q '"done": 4' batch_mpi/index.json && grep -q '"failed": 1' batch_mpi/index.json \
+    || { echo "FAIL: the index under mpirun"; cat batch_mpi/index.json; exit 1; }
+echo "   the same rows as one process; the bad row failed alone"
+echo "mpi-test: 5 passed, 0 failed"

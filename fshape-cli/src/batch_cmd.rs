@@ -292,12 +292,46 @@ pub fn parse_shard(s: &str) -> Result<(usize, usize)> {
 }
 
 pub fn run(a: &BatchArgs<'_>) -> Result<()> {
+    #[cfg(feature = "mpi")]
+    {
+        if let Some((world, universe)) = crate::processes::init()? {
+            // Under mpirun the rows are dealt to the processes (a given
+            // --shard is refused: one way at a time); process 0 writes the
+            // index once every process has finished its rows.
+            use fshape_match::Cluster;
+            let (rank, size) = (world.rank(), world.size());
+            if a.shard.is_some() || std::env::var_os("SLURM_ARRAY_TASK_ID").is_some() {
+                bail!(
+                    "batch under mpirun deals the rows to its {size} processes: do not also give --shard or run it as a job array"
+                );
+            }
+            let mine = BatchArgs { shard: Some((rank, size)), signal_name: a.signal_name.clone(), ..*a };
+            let rows = read_pairs(a.pairs)?;
+            let failed = if a.index_only { Ok(()) } else { run_rows(&mine, &rows) };
+            crate::processes::barrier(&universe);
+            if rank == 0 {
+                let entries = write_index(a, &rows)?;
+                report(a, &entries, None::<fn(&Entry) -> bool>);
+            }
+            return failed;
+        }
+    }
     let rows = read_pairs(a.pairs)?;
     if a.index_only {
         let entries = write_index(a, &rows)?;
         report(a, &entries, None::<fn(&Entry) -> bool>);
         return Ok(());
     }
+    let failed = run_rows(a, &rows);
+    let (shard, shards) = a.shard.unwrap_or((0, 1));
+    let entries = write_index(a, &rows)?;
+    report(a, &entries, Some(shard_filter(shard, shards)));
+    failed
+}
+
+/// Registers this shard's rows that have not finished; an error when any
+/// of its rows failed.
+fn run_rows(a: &BatchArgs<'_>, rows: &[Row]) -> Result<()> {
     crate::match_cmd::check_times(a.times)?;
     fshape_match::Config::read(a.config)?;
     let (shard, shards) = a.shard.unwrap_or((0, 1));
@@ -340,8 +374,7 @@ pub fn run(a: &BatchArgs<'_>) -> Result<()> {
             }
         });
     }
-    let entries = write_index(a, &rows)?;
-    let failed = report(a, &entries, Some(shard_filter(shard, shards)));
+    let failed = mine.iter().filter(|r| entry(a.out, a.pairs, r).status == "failed").count();
     if failed > 0 {
         bail!("{failed} of this shard's {} rows failed; see {}", mine.len(), a.out.join("index.csv").display());
     }
@@ -352,9 +385,8 @@ fn shard_filter(shard: usize, shards: usize) -> impl Fn(&Entry) -> bool {
     move |e| (e.row - 1) % shards == shard
 }
 
-/// Prints the counts (of the rows `in_shard` selects, all without one) and
-/// returns the number failed.
-fn report(a: &BatchArgs<'_>, entries: &[Entry], in_shard: Option<impl Fn(&Entry) -> bool>) -> usize {
+/// Prints the counts (of the rows `in_shard` selects, all without one).
+fn report(a: &BatchArgs<'_>, entries: &[Entry], in_shard: Option<impl Fn(&Entry) -> bool>) {
     let selected: Vec<&Entry> = entries.iter().filter(|e| in_shard.as_ref().is_none_or(|f| f(e))).collect();
     let count = |s: &str| selected.iter().filter(|e| e.status == s).count();
     println!(
@@ -366,5 +398,4 @@ fn report(a: &BatchArgs<'_>, entries: &[Entry], in_shard: Option<impl Fn(&Entry)
         selected.len(),
         a.out.join("index.csv").display()
     );
-    count("failed")
 }

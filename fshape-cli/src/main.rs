@@ -17,6 +17,8 @@ mod atlas_cmd;
 mod batch_cmd;
 mod demo;
 mod match_cmd;
+#[cfg(feature = "mpi")]
+mod processes;
 mod render;
 
 #[derive(Parser)]
