@@ -4,7 +4,10 @@
 # and libclang (the mpi crate generates its bindings with bindgen). Root
 # only, as on CI's machine; elsewhere install the same packages yourself.
 set -euo pipefail
-if command -v mpirun > /dev/null && ls /usr/lib/llvm-*/lib/libclang*.so* > /dev/null 2>&1; then
+libclang() {
+    compgen -G "/usr/lib/llvm-*/lib/libclang.so*" > /dev/null || compgen -G "/usr/lib/llvm-*/lib/libclang-[0-9]*.so*" > /dev/null
+}
+if command -v mpirun > /dev/null && command -v mpicc > /dev/null && libclang; then
     exit 0
 fi
 echo "installing Open MPI and libclang (Debian packages)"
