@@ -183,16 +183,9 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         Err(MatchError::Shapes(why)) => bail!("{}: {why}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
     };
-    let atlas = if a.stage_templates.is_empty() {
-        atlas
-    } else {
-        let mut templates = a
-            .stage_templates
-            .iter()
-            .map(|p| crate::load(p, a.signal_name.clone(), None).map(Some))
-            .collect::<Result<Vec<_>>>()?;
-        templates.push(None);
-        atlas.with_stage_templates(templates).context("--stage-templates")?
+    let atlas = match crate::stage_templates(a.stage_templates, a.signal_name.clone())? {
+        None => atlas,
+        Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
     };
     let checkpoint_path = a.out.join("checkpoint.json");
     let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };

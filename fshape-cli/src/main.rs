@@ -385,14 +385,7 @@ fn main() -> ExitCode {
             view,
             stage_templates,
         } => {
-            let (azimuth, elevation) = match view[..] {
-                [a, e] if a.is_finite() && e.is_finite() => (a, e),
-                _ => {
-                    let got: Vec<String> = view.iter().map(f64::to_string).collect();
-                    eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
-                    return ExitCode::from(2);
-                }
-            };
+            let Some((azimuth, elevation)) = camera(&view) else { return ExitCode::from(2) };
             match_cmd::run(&match_cmd::MatchArgs {
                 source: &source,
                 target: &target,
@@ -408,14 +401,7 @@ fn main() -> ExitCode {
             })
         }
         Command::Batch { pairs, config, out, jobs, shard, index_only, times, signal_name, view } => {
-            let (azimuth, elevation) = match view[..] {
-                [a, e] if a.is_finite() && e.is_finite() => (a, e),
-                _ => {
-                    let got: Vec<String> = view.iter().map(f64::to_string).collect();
-                    eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
-                    return ExitCode::from(2);
-                }
-            };
+            let Some((azimuth, elevation)) = camera(&view) else { return ExitCode::from(2) };
             let shard = match shard.as_deref().map(batch_cmd::parse_shard).transpose() {
                 Ok(Some(s)) => Ok(Some(s)),
                 Ok(None) => batch_cmd::shard_from_env(),
@@ -447,14 +433,7 @@ fn main() -> ExitCode {
             view,
             stage_templates,
         } => {
-            let (azimuth, elevation) = match view[..] {
-                [a, e] if a.is_finite() && e.is_finite() => (a, e),
-                _ => {
-                    let got: Vec<String> = view.iter().map(f64::to_string).collect();
-                    eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
-                    return ExitCode::from(2);
-                }
-            };
+            let Some((azimuth, elevation)) = camera(&view) else { return ExitCode::from(2) };
             atlas_cmd::run(&atlas_cmd::AtlasArgs {
                 subjects: &subjects,
                 list: list.as_deref(),
@@ -497,6 +476,30 @@ fn main() -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// `--view`'s azimuth and elevation, or `None` after saying why.
+fn camera(view: &[f64]) -> Option<(f64, f64)> {
+    match view {
+        [a, e] if a.is_finite() && e.is_finite() => Some((*a, *e)),
+        _ => {
+            let got: Vec<String> = view.iter().map(f64::to_string).collect();
+            eprintln!("error: --view: expected azimuth,elevation (two finite degrees), got {}", got.join(","));
+            None
+        }
+    }
+}
+
+/// `--stage-templates`: the meshes, then `None` for the last stage (none
+/// given: no stage templates).
+fn stage_templates(paths: &[PathBuf], signal_name: Option<String>) -> Result<Option<Vec<Option<FShape>>>> {
+    if paths.is_empty() {
+        return Ok(None);
+    }
+    let mut templates =
+        paths.iter().map(|p| load(p, signal_name.clone(), None).map(Some)).collect::<Result<Vec<_>>>()?;
+    templates.push(None);
+    Ok(Some(templates))
 }
 
 /// The error and its causes joined by ": ", skipping a cause whose text the

@@ -159,16 +159,9 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         }
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,
     };
-    let session = if a.stage_templates.is_empty() {
-        session
-    } else {
-        let mut templates = a
-            .stage_templates
-            .iter()
-            .map(|p| crate::load(p, a.signal_name.clone(), None).map(Some))
-            .collect::<Result<Vec<_>>>()?;
-        templates.push(None);
-        session.with_stage_templates(templates).context("--stage-templates")?
+    let session = match crate::stage_templates(a.stage_templates, a.signal_name.clone())? {
+        None => session,
+        Some(templates) => session.with_stage_templates(templates).context("--stage-templates")?,
     };
     let checkpoint_path = a.out.join("checkpoint.json");
     let session = if a.resume { session.resume_from_file(&checkpoint_path).context("--resume")? } else { session };
