@@ -312,7 +312,13 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
                 all.len()
             )));
         }
-        let mut evals = Vec::with_capacity(n_subjects);
+        let n = n_subjects as f64;
+        let mut grad = vec![0.0; x.len()];
+        let mut mean = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
+        // ∂J/∂x̄, the mean of the subjects'.
+        let mut gx = vec![0.0; self.pn];
+        // Summed in subject order, read from the records: the same bits for
+        // any number of threads or processes.
         for (i, r) in all.chunks_exact(width).enumerate() {
             if r[0] == 1.0 {
                 return nan();
@@ -328,32 +334,21 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
                     }
                 });
             }
-            evals.push(SubjectEval {
-                energies: Energies { value: r[1], energy: r[2], signal_energy: r[3], attachment: r[4] },
-                grad: r[5..5 + len].to_vec(),
-                x0: r[5 + len..5 + len + self.pn].to_vec(),
-                f0: r[5 + len + self.pn..].to_vec(),
-            });
-        }
-        let n = evals.len() as f64;
-        let mut grad = vec![0.0; x.len()];
-        let mut mean = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
-        // ∂J/∂x̄, the mean of the subjects'.
-        let mut gx = vec![0.0; self.pn];
-        // Summed in subject order: the same bits for any number of threads.
-        for (i, e) in evals.into_iter().enumerate() {
-            mean.value += e.energies.value / n;
-            mean.energy += e.energies.energy / n;
-            mean.signal_energy += e.energies.signal_energy / n;
-            mean.attachment += e.energies.attachment / n;
-            for (g, v) in gx.iter_mut().zip(&e.x0) {
+            let (parts, rest) = r[1..].split_at(4);
+            let (g_own, rest) = rest.split_at(len);
+            let (x0, f0) = rest.split_at(self.pn);
+            mean.value += parts[0] / n;
+            mean.energy += parts[1] / n;
+            mean.signal_energy += parts[2] / n;
+            mean.attachment += parts[3] / n;
+            for (g, v) in gx.iter_mut().zip(x0) {
                 *g += v / n;
             }
-            for (g, v) in grad[self.pn..self.pn + self.p].iter_mut().zip(&e.f0) {
+            for (g, v) in grad[self.pn..self.pn + self.p].iter_mut().zip(f0) {
                 *g += v * self.metric.signal / n;
             }
             let start = self.pn + self.p + i * len;
-            for (g, v) in grad[start..start + len].iter_mut().zip(&e.grad) {
+            for (g, v) in grad[start..start + len].iter_mut().zip(g_own) {
                 *g = v / n;
             }
         }
@@ -912,12 +907,8 @@ impl Atlas {
             let x0 = match (&current, self.checkpoint.warm.clone()) {
                 (Some(_), _) => Vec::new(),
                 (None, None) => self.initial_unknowns_at(k)?,
-                (None, Some(w)) if self.template_of(k - 1).0 != self.template_of(k).0 => {
-                    // A finer template: carry the solution over.
-                    let coarse = self.solution(k - 1, &w)?;
-                    self.prolongate(k, &coarse)?
-                }
-                (None, Some(w)) => w,
+                // On a finer template the solution is carried over.
+                (None, Some(w)) => self.prolongate_unknowns(k - 1, &w, k)?,
             };
             self.stage_target(k)?;
             let spec = self.plan.stages[k].clone();
