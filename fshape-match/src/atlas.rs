@@ -818,27 +818,37 @@ impl Atlas {
         let fine0 = &level.template;
         let (n, dim) = (fine0.n_vertices(), fine0.dim());
         let kind = self.plan.model.kind();
-        let change = |now: &[f64], was: &[f64], width| {
-            let d: Vec<f64> = now.iter().zip(was).map(|(a, b)| a - b).collect();
-            sample(&coarse.initial, fine0, &d, width)
-        };
-        let signal: Vec<f64> =
-            change(coarse.template.signal().expect("set"), coarse.initial.signal().expect("set"), 1)?
-                .iter()
-                .zip(fine0.signal().expect("levels carry a signal"))
-                .map(|(d, f)| f + d)
-                .collect();
+        // The template's displacement and signal change, one pass of
+        // closest points: dim + 1 values a vertex.
+        let (now, was) = (&coarse.template, &coarse.initial);
+        let change: Vec<f64> = now
+            .points()
+            .chunks_exact(dim)
+            .zip(was.points().chunks_exact(dim))
+            .zip(now.signal().expect("set").iter().zip(was.signal().expect("set")))
+            .flat_map(|((a, b), (f, g))| a.iter().zip(b).map(|(a, b)| a - b).chain([f - g]))
+            .collect();
+        let change = sample(was, fine0, &change, dim + 1)?;
+        let signal: Vec<f64> = change
+            .chunks_exact(dim + 1)
+            .zip(fine0.signal().expect("levels carry a signal"))
+            .map(|(d, f)| f + d[dim])
+            .collect();
         let (mut x, points) = match (&level.hyper, &coarse.hyper_p0) {
             (Some(h), Some(p0)) => {
-                let zero = vec![0.0; coarse.initial.n_vertices()];
-                let (q0, _) = prolongate(&coarse.initial, fine0, p0, &zero, ModelKind::Lddmm)?;
+                let zero = vec![0.0; was.n_vertices()];
+                let (q0, _) = prolongate(was, fine0, p0, &zero, ModelKind::Lddmm)?;
                 let block = h.unknowns.pack(&q0, &[]);
                 let (points, _) = positions(Some(h), &level.metric, &block)?;
                 (block, points)
             }
             _ => {
-                let d = change(coarse.template.points(), coarse.initial.points(), dim)?;
-                let points: Vec<f64> = fine0.points().iter().zip(&d).map(|(a, b)| a + b).collect();
+                let points: Vec<f64> = fine0
+                    .points()
+                    .chunks_exact(dim)
+                    .zip(change.chunks_exact(dim + 1))
+                    .flat_map(|(a, d)| a.iter().zip(d).map(|(a, d)| a + d))
+                    .collect();
                 (points.iter().map(|v| v / level.metric.length).collect(), points)
             }
         };

@@ -46,10 +46,15 @@ pub fn prolongate(
     let density0: Vec<f64> = p0.iter().enumerate().map(|(i, p)| p / mc[i / dim]).collect();
     let densityf: Vec<f64> =
         if signal_density { pf.iter().zip(&mc).map(|(p, m)| p / m).collect() } else { pf.to_vec() };
-    let rho0 = sample(coarse, fine, &density0, dim)?;
-    let rhof = sample(coarse, fine, &densityf, 1)?;
-    let q0 = rho0.iter().enumerate().map(|(i, r)| mf[i / dim] * r).collect();
-    let qf = if signal_density { rhof.iter().zip(&mf).map(|(r, m)| m * r).collect() } else { rhof };
+    // Both densities in one pass of closest points: dim + 1 values a vertex.
+    let both: Vec<f64> =
+        density0.chunks_exact(dim).zip(&densityf).flat_map(|(d, f)| d.iter().chain([f])).copied().collect();
+    let rho = sample(coarse, fine, &both, dim + 1)?;
+    let (mut q0, mut qf) = (Vec::with_capacity(mf.len() * dim), Vec::with_capacity(mf.len()));
+    for (r, m) in rho.chunks_exact(dim + 1).zip(&mf) {
+        q0.extend(r[..dim].iter().map(|r| m * r));
+        qf.push(if signal_density { m * r[dim] } else { r[dim] });
+    }
     Ok((q0, qf))
 }
 
