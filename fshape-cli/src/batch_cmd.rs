@@ -300,7 +300,8 @@ pub fn run(a: &BatchArgs<'_>) -> Result<()> {
             // index once every process has finished its rows.
             use fshape_match::Cluster;
             let (rank, size) = (world.rank(), world.size());
-            if a.shard.is_some() || std::env::var_os("SLURM_ARRAY_TASK_ID").is_some() {
+            // (`shard` also holds a job array's, from Slurm's variables.)
+            if a.shard.is_some() {
                 bail!(
                     "batch under mpirun deals the rows to its {size} processes: do not also give --shard or run it as a job array"
                 );

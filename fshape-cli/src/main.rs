@@ -402,10 +402,9 @@ fn main() -> ExitCode {
         }
         Command::Batch { pairs, config, out, jobs, shard, index_only, times, signal_name, view } => {
             let Some((azimuth, elevation)) = camera(&view) else { return ExitCode::from(2) };
-            let shard = match shard.as_deref().map(batch_cmd::parse_shard).transpose() {
-                Ok(Some(s)) => Ok(Some(s)),
-                Ok(None) => batch_cmd::shard_from_env(),
-                Err(e) => Err(e),
+            let shard = match shard {
+                Some(s) => batch_cmd::parse_shard(&s).map(Some),
+                None => batch_cmd::shard_from_env(),
             };
             shard.and_then(|shard| {
                 batch_cmd::run(&batch_cmd::BatchArgs {
