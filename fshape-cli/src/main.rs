@@ -31,14 +31,16 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Print counts, dimension, bounding box, total volume, signal range and
-    /// the validation report of a mesh file (.ply, .obj, .vtk, optionally .gz).
+    /// the validation report of a mesh file (.ply, .obj, .vtk, .gii, optionally
+    /// .gz, or a FreeSurfer surface such as lh.pial).
     Info {
         /// The mesh file.
         file: PathBuf,
         /// Vertex property to read as the signal (default: `signal` if present).
         #[arg(long)]
         signal_name: Option<String>,
-        /// Per-vertex signal CSV (one column with a header) replacing the file's signal.
+        /// Per-vertex signal file replacing the mesh's signal: a CSV column with a
+        /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness) or .mgh/.mgz.
         #[arg(long)]
         signal: Option<PathBuf>,
         /// Print JSON for scripts.
@@ -81,10 +83,10 @@ enum Command {
         /// Vertex property to read as the signal of both files (default `signal`).
         #[arg(long)]
         signal_name: Option<String>,
-        /// Per-vertex signal CSV for the source.
+        /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
         #[arg(long)]
         source_signal: Option<PathBuf>,
-        /// Per-vertex signal CSV for the target.
+        /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
         #[arg(long)]
         target_signal: Option<PathBuf>,
         /// Print JSON for scripts.
@@ -117,10 +119,10 @@ enum Command {
         /// Vertex property to read as the signal of both files (default `signal`).
         #[arg(long)]
         signal_name: Option<String>,
-        /// Per-vertex signal CSV for the source.
+        /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
         #[arg(long)]
         source_signal: Option<PathBuf>,
-        /// Per-vertex signal CSV for the target.
+        /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
         #[arg(long)]
         target_signal: Option<PathBuf>,
         /// Print JSON for scripts.
@@ -182,10 +184,10 @@ enum Command {
         /// Vertex property of both meshes to read as the signal.
         #[arg(long)]
         signal_name: Option<String>,
-        /// Per-vertex signal CSV for the source.
-        #[arg(long)]
+        /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
+        #[arg(long, visible_alias = "signal")]
         source_signal: Option<PathBuf>,
-        /// Per-vertex signal CSV for the target.
+        /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
         #[arg(long)]
         target_signal: Option<PathBuf>,
         /// Camera of the PNG renders of surfaces in space: azimuth,elevation in degrees.
@@ -246,7 +248,7 @@ enum Command {
     Atlas {
         /// The subjects' meshes (with a `signal` vertex property).
         subjects: Vec<PathBuf>,
-        /// A list of subjects, one per line: `mesh[,signal.csv]`, paths
+        /// A list of subjects, one per line: `mesh[,signal file]`, paths
         /// relative to the list (read before the positional ones).
         #[arg(long = "subjects")]
         list: Option<PathBuf>,
@@ -312,8 +314,9 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         subjects: usize,
     },
-    /// Convert between mesh formats (by extension: .ply, .obj, .vtk, each
-    /// optionally .gz), optionally attaching a signal from a CSV file.
+    /// Convert between mesh formats (by extension: .ply, .obj, .vtk, .gii,
+    /// each optionally .gz, or a FreeSurfer surface name such as lh.pial),
+    /// optionally attaching a signal from a signal file.
     Convert {
         /// Input mesh.
         input: PathBuf,
@@ -322,7 +325,7 @@ enum Command {
         /// Vertex property of the input to read as the signal.
         #[arg(long)]
         signal_name: Option<String>,
-        /// Per-vertex signal CSV replacing the input's signal.
+        /// Per-vertex signal file replacing the input's signal (CSV, GIfTI, FreeSurfer curv or MGH).
         #[arg(long)]
         signal: Option<PathBuf>,
         /// Write ASCII instead of binary (PLY, VTK).
@@ -515,11 +518,12 @@ pub(crate) fn message(e: &anyhow::Error) -> String {
     parts.join(": ")
 }
 
-/// Reads a mesh and, if given, replaces its signal by a CSV column.
+/// Reads a mesh and, if given, replaces its signal by a signal file's (CSV
+/// column, GIfTI data array, FreeSurfer curv or MGH).
 fn load(path: &Path, signal_name: Option<String>, signal: Option<&Path>) -> Result<FShape> {
     let shape = io::read_mesh(path, &ReadOptions { signal_name })?;
     let Some(csv) = signal else { return Ok(shape) };
-    let column = io::csv::read_signal(csv, false)?;
+    let column = io::read_signal(csv)?;
     shape
         .with_signal(Some(column.values))
         .with_context(|| format!("attaching the signal of {} to {}", csv.display(), path.display()))
@@ -913,7 +917,7 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     }
     let pf = match a.signal_momentum {
         Some(p) => {
-            let v = io::csv::read_signal(p, false)?.values;
+            let v = io::read_signal(p)?.values;
             if v.len() != n {
                 anyhow::bail!("{}: {} values, but {} has {n} vertices", p.display(), v.len(), a.source.display());
             }

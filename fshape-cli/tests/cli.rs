@@ -1114,3 +1114,85 @@ fn batch_refuses_a_bad_table_and_a_bad_shard() {
     assert!(rows[1]["error"].as_str().unwrap().contains("name `x` is also line 2's"), "{}", rows[1]);
     assert!(rows[2]["error"].as_str().unwrap().contains("not a plain directory name"), "{}", rows[2]);
 }
+
+#[test]
+fn info_convert_match_and_atlas_take_gifti_and_freesurfer_files() {
+    use fshape_mesh::io::{self, Encoding, ReadOptions, read_mesh, write_mesh};
+    let (s, t, c) = match_inputs("neuro", 6);
+    let dir = tmp("neuro_files");
+    std::fs::create_dir_all(&dir).unwrap();
+    let source = read_mesh(s.as_ref(), &ReadOptions::default()).unwrap();
+    let target = read_mesh(t.as_ref(), &ReadOptions::default()).unwrap();
+    // The source as FreeSurfer keeps it: a surface and a curv file; the
+    // target as GIfTI, its signal a SHAPE array beside the geometry.
+    write_mesh(&dir.join("lh.pial"), &source, Encoding::Binary).unwrap();
+    io::write_signal(&dir.join("lh.thickness"), "thickness", source.signal().unwrap(), source.n_cells()).unwrap();
+    write_mesh(&dir.join("target.surf.gii"), &target, Encoding::Binary).unwrap();
+    io::write_signal(&dir.join("target.shape.gii"), "thickness", target.signal().unwrap(), 0).unwrap();
+    io::write_signal(&dir.join("target.mgz"), "thickness", target.signal().unwrap(), 0).unwrap();
+    let p = |name: &str| dir.join(name).display().to_string();
+
+    let v = json(&fshape(&["info", &p("lh.pial"), "--signal", &p("lh.thickness"), "--json"]));
+    assert_eq!((v["n_vertices"].as_u64(), v["closed"].as_bool()), (Some(162), Some(true)));
+    let f32_min = source.signal().unwrap().iter().map(|&v| f64::from(v as f32)).fold(f64::INFINITY, f64::min);
+    assert_eq!(v["signal"]["min"].as_f64().unwrap(), f32_min);
+    let v = json(&fshape(&["info", &p("target.surf.gii"), "--json"]));
+    assert!(v["signal"].is_object(), "the GIfTI surface's SHAPE array is its signal");
+    let v = json(&fshape(&["info", &p("target.surf.gii"), "--signal", &p("target.mgz"), "--json"]));
+    assert!(v["signal"].is_object());
+
+    // Conversions both ways, by the output's name.
+    let o = fshape(&["convert", &p("target.surf.gii"), &p("target.vtk")]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = fshape(&["convert", &s, &p("rh.white")]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let white = read_mesh(&dir.join("rh.white"), &ReadOptions::default()).unwrap();
+    assert_eq!(std::fs::read(dir.join("rh.white")).unwrap()[..3], [0xff, 0xff, 0xfe]);
+    assert_eq!(white.cells(), source.cells());
+    let o = fshape(&["convert", &p("lh.pial"), &p("lh.gii"), "--signal", &p("lh.thickness")]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let gii = read_mesh(&dir.join("lh.gii"), &ReadOptions::default()).unwrap();
+    assert_eq!(gii.signal().unwrap().len(), 162);
+
+    // A registration from the FreeSurfer pair to the GIfTI pair reaches
+    // its target as the PLY one does (the same numbers to f32 rounding).
+    let out = dir.join("match");
+    let o = fshape(&[
+        "match",
+        &p("lh.pial"),
+        &p("target.surf.gii"),
+        "--signal",
+        &p("lh.thickness"),
+        "--target-signal",
+        &p("target.shape.gii"),
+        "--config",
+        &c,
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let first = summary["stages"][0]["initial"]["attachment"].as_f64().unwrap();
+    assert!(summary["final_attachment"].as_f64().unwrap() < 0.5 * first, "{summary}");
+
+    // An atlas of subjects given as FreeSurfer and GIfTI files.
+    let list = dir.join("subjects.csv");
+    std::fs::write(&list, "lh.pial,lh.thickness\ntarget.surf.gii,target.mgz\n").unwrap();
+    let out = dir.join("atlas");
+    let o = fshape(&[
+        "atlas",
+        "--subjects",
+        &list.display().to_string(),
+        "--config",
+        &c,
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("template.ply").exists());
+    // A mesh given where a signal belongs is refused, saying what it is.
+    let o = fshape(&["info", &p("lh.pial"), "--signal", &p("rh.white")]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("this is a mesh"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -6,6 +6,8 @@ mod data;
 mod geometry;
 #[path = "mesh/malformed.rs"]
 mod malformed;
+#[path = "mesh/nibabel.rs"]
+mod nibabel;
 #[path = "mesh/roundtrip.rs"]
 mod roundtrip;
 #[path = "mesh/validation.rs"]

@@ -12,7 +12,8 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(shape) = io::parse_mesh(data, Format::Vtk, &opts, Path::new("fuzz.vtk")) {
         let mut bytes = Vec::new();
         io::write_to(&mut bytes, &shape, Format::Vtk, Encoding::Binary).expect("writing to memory succeeds");
-        let back = io::parse_mesh(&bytes, Format::Vtk, &opts, Path::new("rewritten.vtk")).expect("our own output parses");
+        let back =
+            io::parse_mesh(&bytes, Format::Vtk, &opts, Path::new("rewritten.vtk")).expect("our own output parses");
         assert_eq!(back, shape);
     }
 });

@@ -1,4 +1,6 @@
-//! Reading and writing fshapes: PLY, OBJ, VTK legacy, signal CSV, images.
+//! Reading and writing fshapes: PLY, OBJ, VTK legacy, GIfTI, FreeSurfer
+//! surfaces; per-vertex signals as CSV, GIfTI, FreeSurfer curv or MGH;
+//! images.
 //!
 //! Every reader reports bad input as an error naming the file, the line
 //! (text) or byte offset (binary) and what was expected; none panics and
@@ -14,6 +16,8 @@ use crate::shape::{CellKind, FShape, ShapeError};
 
 pub mod csv;
 mod cursor;
+pub mod freesurfer;
+pub mod gifti;
 pub mod image;
 pub mod mtx;
 pub mod obj;
@@ -143,7 +147,10 @@ pub enum ReadError {
         source: std::io::Error,
     },
     /// The file's extension names no format fshape reads.
-    #[error("{path}: unknown format (expected .ply, .obj, .vtk, optionally .gz)", path = .path.display())]
+    #[error(
+        "{path}: unknown format (expected .ply, .obj, .vtk or .gii, optionally .gz, or a FreeSurfer surface)",
+        path = .path.display()
+    )]
     UnknownFormat {
         /// The file.
         path: PathBuf,
@@ -172,6 +179,16 @@ pub enum ReadError {
         path: PathBuf,
         /// The problems.
         source: ShapeError,
+    },
+    /// A signal file holds a value that is not a finite number.
+    #[error("{path}: the value of vertex {vertex} (counting from 0) is {value}; signals must be finite", path = .path.display())]
+    NonFinite {
+        /// The file.
+        path: PathBuf,
+        /// The vertex.
+        vertex: usize,
+        /// Its value.
+        value: f64,
     },
     /// The signal property the caller named is not in the file.
     #[error("{path}: no per-vertex scalar named `{name}` (available: {avail})", path = .path.display(), avail = list(.available))]
@@ -202,7 +219,11 @@ pub enum WriteError {
         source: std::io::Error,
     },
     /// The extension names no format fshape writes.
-    #[error("{path}: unknown output format (expected .ply, .obj, .vtk, optionally .gz)", path = .path.display())]
+    #[error(
+        "{path}: unknown output format (expected .ply, .obj, .vtk or .gii, optionally .gz, or a FreeSurfer surface \
+         name such as lh.pial)",
+        path = .path.display()
+    )]
     UnknownFormat {
         /// The target file.
         path: PathBuf,
@@ -239,7 +260,18 @@ pub enum Format {
     Obj,
     /// VTK legacy POLYDATA (ASCII or binary).
     Vtk,
+    /// GIfTI (`.gii`, `.surf.gii`): POINTSET and TRIANGLE arrays, and a
+    /// per-vertex array as the signal.
+    Gifti,
+    /// A FreeSurfer triangle surface (`lh.pial`, `rh.white`, …; geometry
+    /// only).
+    FreeSurfer,
 }
+
+/// The last name part of FreeSurfer's surface files (`lh.pial`), by which
+/// [`Format::from_path`] knows a path to write; reading goes by the magic.
+pub const FREESURFER_SURFACES: &[&str] =
+    &["pial", "white", "inflated", "sphere", "orig", "smoothwm", "midthickness", "graymid", "reg", "qsphere"];
 
 impl Format {
     /// The format named by a path's extension, looking through a final
@@ -255,9 +287,29 @@ impl Format {
             "ply" => Format::Ply,
             "obj" => Format::Obj,
             "vtk" => Format::Vtk,
+            "gii" => Format::Gifti,
+            e if FREESURFER_SURFACES.contains(&e) => Format::FreeSurfer,
             _ => return None,
         };
         Some((f, gz))
+    }
+
+    /// The format a file's first bytes announce (already gunzipped):
+    /// FreeSurfer's magic, GIfTI's XML, PLY's and VTK's first lines. OBJ
+    /// has no signature.
+    pub fn sniff(data: &[u8]) -> Option<Format> {
+        let text = data.strip_prefix(b"\xef\xbb\xbf").unwrap_or(data);
+        if data.starts_with(&freesurfer::SURFACE_MAGIC) {
+            Some(Format::FreeSurfer)
+        } else if text.starts_with(b"ply") {
+            Some(Format::Ply)
+        } else if text.starts_with(b"# vtk DataFile") {
+            Some(Format::Vtk)
+        } else if text.starts_with(b"<?xml") || text.starts_with(b"<GIFTI") {
+            Some(Format::Gifti)
+        } else {
+            None
+        }
     }
 }
 
@@ -317,9 +369,19 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
 /// println!("{} vertices, signal: {}", s.n_vertices(), s.signal().is_some());
 /// # Ok::<(), fshape_mesh::io::ReadError>(())
 /// ```
+///
+/// A path whose extension names no format (FreeSurfer's `lh.pial`) is read
+/// by its first bytes ([`Format::sniff`]).
 pub fn read_mesh(path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
-    let (format, _) = Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
+    if let Some((format, _)) = Format::from_path(path) {
+        let data = read_bytes(path)?;
+        return parse_mesh(&data, format, opts, path);
+    }
+    if std::fs::metadata(path).is_err() || std::fs::read_dir(path).is_ok() {
+        return Err(ReadError::UnknownFormat { path: path.into() });
+    }
     let data = read_bytes(path)?;
+    let format = Format::sniff(&data).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
     parse_mesh(&data, format, opts, path)
 }
 
@@ -332,12 +394,16 @@ pub fn parse_mesh(data: &[u8], format: Format, opts: &ReadOptions, path: &Path) 
         Format::Ply => ply::parse(data, name).map_err(parse)?,
         Format::Vtk => vtk::parse(data, name).map_err(parse)?,
         Format::Obj => obj::parse(data).map_err(parse)?,
+        Format::Gifti => gifti::to_raw(gifti::parse(data).map_err(parse)?, name).map_err(parse)?,
+        Format::FreeSurfer => freesurfer::parse_surface(data).map_err(parse)?,
     };
     raw.into_shape(path, opts)
 }
 
 /// Writes a mesh in the format its extension names (`.ply`, `.obj`,
-/// `.vtk`, each optionally followed by `.gz`). OBJ carries no signal.
+/// `.vtk`, `.gii`, each optionally followed by `.gz`, or a FreeSurfer
+/// surface name such as `lh.pial`). OBJ and FreeSurfer surfaces carry no
+/// signal; GIfTI and FreeSurfer store single precision.
 /// The write is atomic: a temporary file is renamed into place.
 pub fn write_mesh(path: &Path, shape: &FShape, encoding: Encoding) -> Result<(), WriteError> {
     let (format, gz) = Format::from_path(path).ok_or_else(|| WriteError::UnknownFormat { path: path.into() })?;
@@ -353,7 +419,112 @@ pub fn write_to(w: &mut impl Write, shape: &FShape, format: Format, encoding: En
         Format::Ply => ply::write(w, shape, encoding),
         Format::Vtk => vtk::write(w, shape, encoding),
         Format::Obj => obj::write(w, shape),
+        Format::Gifti => gifti::write(w, shape, encoding),
+        Format::FreeSurfer => freesurfer::write_surface(w, shape),
     }
+}
+
+/// Per-vertex signal file formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SignalFormat {
+    /// One column with a header ([`csv::parse_signal`]).
+    Csv,
+    /// A GIfTI data file (`.shape.gii`, `.func.gii`) with one per-vertex array.
+    Gifti,
+    /// A FreeSurfer curv file (`lh.thickness`, `lh.curv`, …).
+    Curv,
+    /// A FreeSurfer MGH volume of n × 1 × 1 values (`.mgh`, `.mgz`).
+    Mgh,
+}
+
+/// The last name part of FreeSurfer's per-vertex files (`lh.thickness`),
+/// by which [`SignalFormat::from_path`] knows a path to write; reading
+/// goes by the magic.
+pub const FREESURFER_CURVS: &[&str] = &["thickness", "curv", "sulc", "area", "volume", "jacobian_white"];
+
+impl SignalFormat {
+    /// The format a path names: `.gii`, `.mgh`/`.mgz`, a FreeSurfer
+    /// per-vertex name (`lh.thickness`); anything else is CSV.
+    pub fn from_path(path: &Path) -> SignalFormat {
+        let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        let stem = name.strip_suffix(".gz").unwrap_or(&name);
+        match stem.rsplit_once('.').map(|(_, e)| e) {
+            Some("gii") => SignalFormat::Gifti,
+            Some("mgh" | "mgz") => SignalFormat::Mgh,
+            Some(e) if FREESURFER_CURVS.contains(&e) => SignalFormat::Curv,
+            _ => SignalFormat::Csv,
+        }
+    }
+
+    /// The format of a signal file's contents (already gunzipped), by its
+    /// first bytes, with the path's MGH extension as the one tie-breaker
+    /// (MGH has no magic).
+    pub fn detect(data: &[u8], path: &Path) -> SignalFormat {
+        if data.starts_with(&freesurfer::CURV_MAGIC) {
+            SignalFormat::Curv
+        } else if Format::sniff(data) == Some(Format::Gifti) {
+            SignalFormat::Gifti
+        } else if SignalFormat::from_path(path) == SignalFormat::Mgh || data.starts_with(&[0, 0, 0, 1]) {
+            SignalFormat::Mgh
+        } else {
+            SignalFormat::Csv
+        }
+    }
+}
+
+/// Reads a per-vertex signal from a CSV column, a GIfTI data file, a
+/// FreeSurfer curv file or an MGH/MGZ file (chosen by [`SignalFormat::detect`]).
+/// Values must be finite.
+pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
+    let data = read_bytes(path)?;
+    let parse = |source| ReadError::Parse { path: path.into(), source };
+    let stem = || {
+        let n = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        n.rsplit('.').next().unwrap_or(&n).to_string()
+    };
+    if let Some(f) = Format::sniff(&data).filter(|&f| f != Format::Gifti) {
+        return Err(parse(ParseError {
+            at: Location::Byte(0),
+            kind: ParseErrorKind::Unsupported {
+                what: "signal file: this is a mesh (give it as the mesh, and its signal by name)",
+                found: format!("{f:?}"),
+            },
+        }));
+    }
+    let column = match SignalFormat::detect(&data, path) {
+        SignalFormat::Csv => return csv::parse_signal(&data, false).map_err(parse),
+        SignalFormat::Gifti => {
+            let (name, values) = gifti::signal(&gifti::parse(&data).map_err(parse)?).map_err(parse)?;
+            csv::SignalColumn { name, values }
+        }
+        SignalFormat::Curv => csv::SignalColumn { name: stem(), values: freesurfer::parse_curv(&data).map_err(parse)? },
+        SignalFormat::Mgh => csv::SignalColumn { name: stem(), values: freesurfer::parse_mgh(&data).map_err(parse)? },
+    };
+    if let Some(k) = column.values.iter().position(|v| !v.is_finite()) {
+        return Err(ReadError::NonFinite { path: path.into(), vertex: k, value: column.values[k] });
+    }
+    Ok(column)
+}
+
+/// Writes a per-vertex signal in the format the path names
+/// ([`SignalFormat::from_path`]; GIfTI, curv and MGH store single
+/// precision), atomically. `faces` is the surface's triangle count, which
+/// a curv file records.
+pub fn write_signal(path: &Path, name: &str, values: &[f64], faces: usize) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io { path: path.into(), source };
+    let gz = path.extension().is_some_and(|e| e == "gz" || e == "mgz");
+    let bytes = match SignalFormat::from_path(path) {
+        SignalFormat::Csv => return csv::write_signal(path, name, values),
+        SignalFormat::Gifti => {
+            let mut b = Vec::new();
+            gifti::write_arrays(&mut b, &[gifti::signal_array(name, values)], gifti::WriteOptions::default())
+                .map_err(io)?;
+            b
+        }
+        SignalFormat::Curv => freesurfer::curv_bytes(values, faces).map_err(io)?,
+        SignalFormat::Mgh => freesurfer::mgh_bytes(values).map_err(io)?,
+    };
+    write_atomic(path, &bytes, gz)
 }
 
 /// Writes `bytes` (gzipped when `gz`) to a temporary file beside `path`,

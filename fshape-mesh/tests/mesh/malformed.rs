@@ -68,7 +68,13 @@ fn malformed_meshes_give_located_errors() {
 fn every_corpus_file_is_covered_and_the_reference_reads() {
     let ok = read_mesh(&corpus("ok_reference.ply"), &ReadOptions::default()).unwrap();
     assert_eq!((ok.n_vertices(), ok.n_cells()), (4, 2));
-    let mut listed: Vec<&str> = MESH_CASES.iter().map(|c| c.0).chain(CSV_CASES.iter().map(|c| c.0)).collect();
+    let mut listed: Vec<&str> = [MESH_CASES, CSV_CASES, SIGNAL_FILE_CASES, SURFACE_FILE_CASES]
+        .iter()
+        .flat_map(|cases| cases.iter().map(|c| c.0))
+        .collect();
+    listed.dedup(); // fs_cut_faces.pial is read both ways
+    listed.sort_unstable();
+    listed.dedup();
     listed.push("ok_reference.ply");
     listed.sort_unstable();
     let mut present: Vec<String> =
@@ -126,5 +132,64 @@ fn truncating_a_valid_binary_file_anywhere_never_panics() {
         }
         assert_eq!(fshape_mesh::io::parse_mesh(&bytes, format, &ReadOptions::default(), &path).unwrap(), shape);
         std::fs::remove_file(&path).unwrap();
+    }
+}
+
+/// GIfTI and FreeSurfer files read as signals (`fshape --signal`); the
+/// lines and offsets were worked out from the files by hand (they were
+/// written by a few lines of Python: the XML is plain text, and the
+/// FreeSurfer headers are a magic, a comment and big-endian counts).
+const SIGNAL_FILE_CASES: &[(&str, &[&str])] = &[
+    ("gii_bad_base64.shape.gii", &["line 3", "expected base64 data", "Invalid symbol 33, offset 4"]),
+    // Dim0 = 5 FLOAT32 values need 20 bytes; the data decode to 16.
+    ("gii_wrong_dim.shape.gii", &["line 3", "bytes of data against the Dim attributes", "expected 20, found 16"]),
+    (
+        "gii_truncated_zlib.shape.gii",
+        &["line 3", "zlib-compressed data (GZipBase64Binary)", "incomplete deflate stream"],
+    ),
+    ("gii_unknown_encoding.shape.gii", &["line 3", "unsupported GIfTI encoding: `Base32Binary`"]),
+    ("gii_external.shape.gii", &["line 3", "external data files", "ExternalFileBinary"]),
+    ("gii_ascii_wrong_dim.shape.gii", &["line 3", "values in the Data element", "expected 4, found 3"]),
+    ("gii_ascii_non_numeric.shape.gii", &["line 3", "expected a number, found `x`"]),
+    ("gii_unknown_type.shape.gii", &["line 3", "expected a NIfTI data type, found `NIFTI_TYPE_FLOAT128`"]),
+    ("gii_unknown_intent.shape.gii", &["line 3", "NIfTI intent name or code, found `NIFTI_INTENT_THICKNESS`"]),
+    ("gii_no_dimensionality.shape.gii", &["line 3", "missing the DataArray's Dimensionality"]),
+    ("gii_nan.shape.gii", &["the value of vertex 2 (counting from 0) is NaN"]),
+    ("gii_array_count.shape.gii", &["data arrays against NumberOfDataArrays: expected 2, found 1"]),
+    ("gii_unclosed.shape.gii", &["line 4", "well-formed XML", "expected `</Data>`"]),
+    ("gii_not_gifti.gii", &["line 2", "expected the GIFTI root element, found `svg`"]),
+    // Magic (3 bytes), three big-endian counts: the fourth word says 2.
+    ("fs_curv_two_per_vertex.thickness", &["byte 11", "values per vertex (fshape reads 1): `2`"]),
+    // Version, width, height, depth (4 bytes each): the frames are at byte 16.
+    ("fs_frames.mgh", &["byte 20", "MGH frame count", "`3`"]),
+    ("fs_cut_faces.pial", &["byte 0", "this is a mesh"]),
+];
+
+/// GIfTI and FreeSurfer files read as meshes.
+const SURFACE_FILE_CASES: &[(&str, &[&str])] = &[
+    ("gii_no_triangles.surf.gii", &["missing a NIFTI_INTENT_TRIANGLE array (the faces)"]),
+    ("gii_float_triangles.surf.gii", &["an integer type for the triangles, found `NIFTI_TYPE_FLOAT32`"]),
+    ("gii_triangle_out_of_range.surf.gii", &["cell 0 uses vertex 3, but there are only 3 vertices"]),
+    // Magic (3) + "created by hand\n\n" (17) + vertex count (4): the triangle
+    // count is at byte 24; 3 vertices take 36 of the 45 bytes after it.
+    ("fs_cut_faces.pial", &["byte 24", "the header claims 1 triangles after the vertices, but only 9 bytes follow"]),
+    ("fs_quad.white", &["byte 0", "quad file"]),
+];
+
+#[test]
+fn malformed_gifti_and_freesurfer_files_give_located_errors() {
+    for (file, needles) in SIGNAL_FILE_CASES {
+        let msg = fshape_mesh::io::read_signal(&corpus(file)).expect_err(file).to_string();
+        assert!(msg.contains(file), "{msg}");
+        for n in *needles {
+            assert!(msg.contains(n), "{file}: expected `{n}` in: {msg}");
+        }
+    }
+    for (file, needles) in SURFACE_FILE_CASES {
+        let msg = read_mesh(&corpus(file), &ReadOptions::default()).expect_err(file).to_string();
+        assert!(msg.contains(file), "{msg}");
+        for n in *needles {
+            assert!(msg.contains(n), "{file}: expected `{n}` in: {msg}");
+        }
     }
 }

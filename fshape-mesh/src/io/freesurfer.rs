@@ -1,0 +1,349 @@
+//! FreeSurfer's binary files: triangle surfaces (`lh.pial`, `lh.white`, …),
+//! per-vertex "curv" files (`lh.thickness`, `lh.curv`, `lh.sulc`, …) and
+//! MGH/MGZ volumes holding one value per vertex (`lh.thickness.mgh`).
+//!
+//! FreeSurfer names carry no extension, so the surface and curv readers are
+//! chosen by their magic bytes (`FF FF FE` and `FF FF FF`); MGH has none
+//! (it starts with the version, 1) and is chosen by `.mgh`/`.mgz`. All
+//! three are big endian and store single-precision floats: values written
+//! here are rounded to `f32`.
+//!
+//! Written from FreeSurfer's own description (`utils/mrisurf_io.cpp`,
+//! `read_surf.m`, `read_curv.m`, `load_mgh.m`) rather than with the
+//! `neuroformats` crate: that crate reads from a path through its own file
+//! handling (so it cannot be fuzzed on bytes, nor read a gzipped file the
+//! way every other fshape reader does), reports errors without a byte
+//! offset and sizes its arrays from the header's counts before checking
+//! that the file holds them. Each format here is a header and a few arrays.
+
+use std::io::{self, Write};
+
+use super::cursor::Cursor;
+use super::{ParseError, ParseErrorKind, RawMesh};
+use crate::shape::{CellKind, FShape};
+
+/// The first three bytes of a triangle surface file.
+pub const SURFACE_MAGIC: [u8; 3] = [0xff, 0xff, 0xfe];
+/// The first three bytes of a "new" curv file.
+pub const CURV_MAGIC: [u8; 3] = [0xff, 0xff, 0xff];
+/// The MGH header is this long; the data follow it.
+const MGH_HEADER: usize = 284;
+
+fn be_i32(cur: &mut Cursor, what: &'static str) -> Result<i32, ParseError> {
+    let b = cur.take(4, what)?;
+    Ok(i32::from_be_bytes([b[0], b[1], b[2], b[3]]))
+}
+
+/// A count from the header: not negative, and at most what the rest of the
+/// file can hold at `bytes_each` bytes a record (checked before anything is
+/// allocated).
+fn count(cur: &mut Cursor, what: &'static str, bytes_each: usize) -> Result<usize, ParseError> {
+    let at = cur.at();
+    let n = be_i32(cur, what)?;
+    let n = usize::try_from(n).map_err(|_| ParseError {
+        at,
+        kind: ParseErrorKind::BadToken { expected: "a non-negative count", found: n.to_string() },
+    })?;
+    if n.saturating_mul(bytes_each) > cur.remaining() {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::Truncated { what, claimed: n as u64, available: cur.remaining() },
+        });
+    }
+    Ok(n)
+}
+
+fn f32s(cur: &mut Cursor, n: usize, what: &'static str) -> Result<Vec<f64>, ParseError> {
+    let b = cur.take(4 * n, what)?;
+    Ok(b.chunks_exact(4).map(|c| f64::from(f32::from_be_bytes([c[0], c[1], c[2], c[3]]))).collect())
+}
+
+fn magic(cur: &mut Cursor, want: [u8; 3], expected: &'static str) -> Result<(), ParseError> {
+    let at = cur.at();
+    let m = cur.take(3, expected)?;
+    if m != want {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::BadToken { expected, found: format!("{:02x} {:02x} {:02x}", m[0], m[1], m[2]) },
+        });
+    }
+    Ok(())
+}
+
+/// Parses a triangle surface file: the magic, a comment line ("created by
+/// …") and an empty line, the vertex and face counts, the coordinates
+/// (`f32`) and the faces (`i32`). Whatever follows (volume geometry tags)
+/// is ignored. Quad files (FreeSurfer's old format) are refused.
+pub(crate) fn parse_surface(data: &[u8]) -> Result<RawMesh, ParseError> {
+    let mut cur = Cursor::new(data);
+    cur.binary = true;
+    if data.starts_with(&[0xff, 0xff, 0xff]) || data.starts_with(&[0xff, 0xff, 0xfd]) {
+        return Err(cur.error(ParseErrorKind::Unsupported {
+            what: "FreeSurfer surface type",
+            found: "quad file (convert it with mris_convert)".into(),
+        }));
+    }
+    magic(&mut cur, SURFACE_MAGIC, "the FreeSurfer triangle-surface magic ff ff fe")?;
+    // The comment ends at the first newline; FreeSurfer writes a second one.
+    let rest = &data[3..];
+    let end = rest
+        .iter()
+        .position(|&b| b == b'\n')
+        .ok_or_else(|| cur.error(ParseErrorKind::Eof { expected: "the comment line after the magic" }))?;
+    let mut skip = end + 1;
+    if rest.get(skip) == Some(&b'\n') {
+        skip += 1;
+    }
+    cur.take(skip, "the comment line")?;
+    let n = count(&mut cur, "vertices", 12)?;
+    let at = cur.at();
+    let m = count(&mut cur, "triangles", 0)?;
+    let available = cur.remaining() - 12 * n;
+    if m.saturating_mul(12) > available {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::Truncated { what: "triangles after the vertices", claimed: m as u64, available },
+        });
+    }
+    let points = f32s(&mut cur, 3 * n, "vertex coordinates")?;
+    let mut cells = Vec::with_capacity(3 * m);
+    for t in 0..m {
+        for _ in 0..3 {
+            let v = be_i32(&mut cur, "a triangle's vertex index")?;
+            cells.push(
+                usize::try_from(v)
+                    .map_err(|_| cur.error(ParseErrorKind::NegativeIndex { cell: t, value: i64::from(v) }))?,
+            );
+        }
+    }
+    Ok(RawMesh { dim: 3, cell_size: Some(3), points, cells, signal: None, scalars: Vec::new() })
+}
+
+/// Writes a triangle surface file (coordinates rounded to `f32`), as
+/// FreeSurfer's `MRISwriteTriangularSurface` does.
+///
+/// # Errors
+///
+/// `InvalidInput` if the shape is not a triangle surface in 3-D or has more
+/// than `i32::MAX` vertices; otherwise the writer's errors.
+pub fn write_surface(w: &mut impl Write, shape: &FShape) -> io::Result<()> {
+    if shape.kind() != CellKind::Triangle || shape.dim() != 3 {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "FreeSurfer surfaces hold triangles in 3-D; this shape is not one",
+        ));
+    }
+    let big = |n: usize| i32::try_from(n).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "too large"));
+    let mut out = Vec::with_capacity(32 + 12 * (shape.n_vertices() + shape.n_cells()));
+    out.extend_from_slice(&SURFACE_MAGIC);
+    out.extend_from_slice(b"created by fshape\n\n");
+    out.extend_from_slice(&big(shape.n_vertices())?.to_be_bytes());
+    out.extend_from_slice(&big(shape.n_cells())?.to_be_bytes());
+    for &x in shape.points() {
+        out.extend_from_slice(&(x as f32).to_be_bytes());
+    }
+    for &v in shape.cells() {
+        out.extend_from_slice(&big(v)?.to_be_bytes());
+    }
+    w.write_all(&out)
+}
+
+/// Parses a "new" curv file: the magic, the vertex and face counts, the
+/// values per vertex (must be 1), then one `f32` per vertex.
+pub fn parse_curv(data: &[u8]) -> Result<Vec<f64>, ParseError> {
+    let mut cur = Cursor::new(data);
+    cur.binary = true;
+    magic(&mut cur, CURV_MAGIC, "the FreeSurfer curv magic ff ff ff")?;
+    let n = count(&mut cur, "values", 4)?;
+    be_i32(&mut cur, "the face count")?;
+    let at = cur.at();
+    let per = be_i32(&mut cur, "the values per vertex")?;
+    if per != 1 {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::Unsupported { what: "values per vertex (fshape reads 1)", found: per.to_string() },
+        });
+    }
+    if 4 * n > cur.remaining() {
+        return Err(cur.error(ParseErrorKind::Truncated {
+            what: "values",
+            claimed: n as u64,
+            available: cur.remaining(),
+        }));
+    }
+    f32s(&mut cur, n, "values")
+}
+
+/// The bytes of a "new" curv file holding `values` (rounded to `f32`);
+/// `faces` is the surface's triangle count, which the format records.
+///
+/// # Errors
+///
+/// `InvalidInput` if a count exceeds `i32::MAX`.
+pub fn curv_bytes(values: &[f64], faces: usize) -> io::Result<Vec<u8>> {
+    let big = |n: usize| i32::try_from(n).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "too large"));
+    let mut out = Vec::with_capacity(15 + 4 * values.len());
+    out.extend_from_slice(&CURV_MAGIC);
+    out.extend_from_slice(&big(values.len())?.to_be_bytes());
+    out.extend_from_slice(&big(faces)?.to_be_bytes());
+    out.extend_from_slice(&1i32.to_be_bytes());
+    for &v in values {
+        out.extend_from_slice(&(v as f32).to_be_bytes());
+    }
+    Ok(out)
+}
+
+/// Parses an MGH volume holding one value per vertex: version 1, the
+/// dimensions (one of width, height, depth may exceed 1: FreeSurfer stores
+/// surface data as n × 1 × 1), one frame, and data of type uchar, short,
+/// int or float after the 284-byte header. Optional trailing tags are
+/// ignored.
+pub fn parse_mgh(data: &[u8]) -> Result<Vec<f64>, ParseError> {
+    let mut cur = Cursor::new(data);
+    cur.binary = true;
+    let at = cur.at();
+    let version = be_i32(&mut cur, "the MGH version")?;
+    if version != 1 {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::BadToken { expected: "MGH version 1", found: version.to_string() },
+        });
+    }
+    let mut dims = [0usize; 4];
+    for (d, what) in dims.iter_mut().zip(["width", "height", "depth", "frames"]) {
+        let at = cur.at();
+        let v = be_i32(&mut cur, what)?;
+        *d = usize::try_from(v).ok().filter(|&v| v > 0).ok_or_else(|| ParseError {
+            at,
+            kind: ParseErrorKind::BadToken { expected: "a positive dimension", found: v.to_string() },
+        })?;
+    }
+    if dims[3] != 1 {
+        return Err(cur.error(ParseErrorKind::Unsupported {
+            what: "MGH frame count (fshape reads one frame of per-vertex values)",
+            found: dims[3].to_string(),
+        }));
+    }
+    if dims[..3].iter().filter(|&&d| d > 1).count() > 1 {
+        return Err(cur.error(ParseErrorKind::Unsupported {
+            what: "MGH volume shape (per-vertex data is n × 1 × 1)",
+            found: format!("{} × {} × {}", dims[0], dims[1], dims[2]),
+        }));
+    }
+    let n = dims[0] * dims[1] * dims[2];
+    let at = cur.at();
+    let kind = be_i32(&mut cur, "the data type")?;
+    let size = match kind {
+        0 => 1,
+        1 | 3 => 4,
+        4 => 2,
+        _ => {
+            return Err(ParseError {
+                at,
+                kind: ParseErrorKind::Unsupported {
+                    what: "MGH data type (0 uchar, 1 int, 3 float, 4 short)",
+                    found: kind.to_string(),
+                },
+            });
+        }
+    };
+    if data.len() < MGH_HEADER {
+        return Err(cur.error(ParseErrorKind::Eof { expected: "the 284-byte MGH header" }));
+    }
+    cur.take(MGH_HEADER - 24, "the MGH header")?;
+    if n.saturating_mul(size) > cur.remaining() {
+        return Err(cur.error(ParseErrorKind::Truncated {
+            what: "values",
+            claimed: n as u64,
+            available: cur.remaining(),
+        }));
+    }
+    let b = cur.take(n * size, "values")?;
+    Ok(match kind {
+        0 => b.iter().map(|&v| f64::from(v)).collect(),
+        1 => b.chunks_exact(4).map(|c| f64::from(i32::from_be_bytes([c[0], c[1], c[2], c[3]]))).collect(),
+        3 => b.chunks_exact(4).map(|c| f64::from(f32::from_be_bytes([c[0], c[1], c[2], c[3]]))).collect(),
+        _ => b.chunks_exact(2).map(|c| f64::from(i16::from_be_bytes([c[0], c[1]]))).collect(),
+    })
+}
+
+/// The bytes of an MGH file holding `values` as an n × 1 × 1 float volume
+/// of one frame (rounded to `f32`), as FreeSurfer writes surface overlays.
+///
+/// # Errors
+///
+/// `InvalidInput` if there are more than `i32::MAX` values.
+pub fn mgh_bytes(values: &[f64]) -> io::Result<Vec<u8>> {
+    let n = i32::try_from(values.len()).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "too large"))?;
+    let mut out = Vec::with_capacity(MGH_HEADER + 4 * values.len());
+    for v in [1, n, 1, 1, 1, 3, 0] {
+        out.extend_from_slice(&v.to_be_bytes());
+    }
+    out.extend_from_slice(&0i16.to_be_bytes()); // no RAS geometry
+    out.resize(MGH_HEADER, 0);
+    for &v in values {
+        out.extend_from_slice(&(v as f32).to_be_bytes());
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetra() -> FShape {
+        let p = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        FShape::try_new(3, CellKind::Triangle, p, vec![0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], None).unwrap()
+    }
+
+    #[test]
+    fn surface_curv_and_mgh_round_trip() {
+        let mut bytes = Vec::new();
+        write_surface(&mut bytes, &tetra()).unwrap();
+        let raw = parse_surface(&bytes).unwrap();
+        assert_eq!(raw.points, tetra().points());
+        assert_eq!(raw.cells, tetra().cells());
+        let v = [0.5, -2.25, 3.0, 1e-3_f32 as f64];
+        assert_eq!(parse_curv(&curv_bytes(&v, 4).unwrap()).unwrap(), v);
+        assert_eq!(parse_mgh(&mgh_bytes(&v).unwrap()).unwrap(), v);
+    }
+
+    #[test]
+    fn counts_beyond_the_file_and_bad_magic_are_errors_with_offsets() {
+        let mut bytes = Vec::new();
+        write_surface(&mut bytes, &tetra()).unwrap();
+        let e = parse_surface(&bytes[..bytes.len() - 5]).unwrap_err();
+        assert!(
+            matches!(e.kind, ParseErrorKind::Truncated { what: "triangles after the vertices", claimed: 4, .. }),
+            "{e}"
+        );
+        let mut huge = bytes.clone();
+        huge[22..26].copy_from_slice(&i32::MAX.to_be_bytes()); // the vertex count
+        let e = parse_surface(&huge).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("byte 22: the header claims 2147483647 vertices, but only {} bytes follow", bytes.len() - 26)
+        );
+        let e = parse_curv(&bytes).unwrap_err();
+        assert_eq!(e.to_string(), "byte 0: expected the FreeSurfer curv magic ff ff ff, found `ff ff fe`");
+        let mut c = curv_bytes(&[1.0, 2.0], 0).unwrap();
+        c[11..15].copy_from_slice(&3i32.to_be_bytes());
+        assert!(parse_curv(&c).unwrap_err().to_string().starts_with("byte 11: unsupported values per vertex"));
+        let mut m = mgh_bytes(&[1.0, 2.0]).unwrap();
+        m[16..20].copy_from_slice(&2i32.to_be_bytes());
+        assert!(parse_mgh(&m).unwrap_err().to_string().contains("frame count"));
+        assert!(
+            parse_mgh(&mgh_bytes(&[1.0, 2.0]).unwrap()[..290]).unwrap_err().to_string().contains("claims 2 values")
+        );
+    }
+
+    #[test]
+    fn a_negative_face_index_names_its_triangle() {
+        let mut bytes = Vec::new();
+        write_surface(&mut bytes, &tetra()).unwrap();
+        let at = bytes.len() - 4;
+        bytes[at..].copy_from_slice(&(-7i32).to_be_bytes());
+        let e = parse_surface(&bytes).unwrap_err();
+        assert_eq!(e.kind, ParseErrorKind::NegativeIndex { cell: 3, value: -7 });
+    }
+}

@@ -1,0 +1,157 @@
+//! Files written by nibabel (tests/data/nibabel, made by
+//! scripts/make-nibabel-fixtures.sh, which checks each with nibabel's own
+//! reader) read back to the arrays nibabel was given, in every encoding,
+//! byte order and index order; and what fshape writes reads back the same.
+//! (That nibabel reads fshape's files is checked by the Python tests.)
+
+use std::path::{Path, PathBuf};
+
+use fshape_mesh::io::{self, Encoding, ReadOptions, gifti};
+use fshape_mesh::{CellKind, FShape};
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/nibabel").join(name)
+}
+
+struct Expected {
+    points: Vec<f64>,
+    faces: Vec<usize>,
+    thickness: Vec<f64>,
+}
+
+fn expected() -> Expected {
+    let points = io::csv::read_vectors(&fixture("expected_points.csv"), 3).unwrap();
+    let faces = io::csv::read_vectors(&fixture("expected_faces.csv"), 3).unwrap().iter().map(|&v| v as usize).collect();
+    let thickness = io::csv::read_signal(&fixture("expected_thickness.csv"), false).unwrap().values;
+    assert_eq!((points.len(), thickness.len()), (36, 12), "the fixture is the icosahedron");
+    Expected { points, faces, thickness }
+}
+
+/// Binary files hold nibabel's float32 values exactly; nibabel writes ASCII
+/// floats with six decimals.
+fn assert_close(name: &str, got: &[f64], want: &[f64]) {
+    let tol = if name.contains("ascii") { 5e-7 } else { 0.0 };
+    assert_eq!(got.len(), want.len(), "{name}");
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        assert!((g - w).abs() <= tol, "{name}: value {k} is {g}, nibabel wrote {w}");
+    }
+}
+
+const SURFACES: &[&str] = &[
+    "surf_ascii.surf.gii",
+    "surf_base64.surf.gii",
+    "surf_gzipbase64.surf.gii",
+    "surf_colmajor_gzipbase64.surf.gii",
+    "surf_bigendian_gzipbase64.surf.gii",
+];
+
+const SIGNALS: &[&str] = &[
+    "thickness_ascii.shape.gii",
+    "thickness_base64.shape.gii",
+    "thickness_gzipbase64.shape.gii",
+    "thickness_bigendian_base64.shape.gii",
+    "thickness_float64.func.gii",
+    "lh.thickness",
+    "thickness.mgh",
+    "thickness.mgz",
+];
+
+#[test]
+fn gifti_surfaces_from_nibabel_read_back_in_every_encoding_and_order() {
+    let e = expected();
+    for name in SURFACES {
+        let opts = ReadOptions { signal_name: Some("thickness".into()) };
+        let s = io::read_mesh(&fixture(name), &opts).unwrap_or_else(|err| panic!("{name}: {err}"));
+        assert_eq!((s.dim(), s.kind()), (3, CellKind::Triangle), "{name}");
+        assert_close(name, s.points(), &e.points);
+        assert_eq!(s.cells(), e.faces, "{name}");
+        assert_close(name, s.signal().unwrap(), &e.thickness);
+        // Without a name, the signal is the array called `signal` (none here).
+        assert!(io::read_mesh(&fixture(name), &ReadOptions::default()).unwrap().signal().is_none());
+    }
+}
+
+#[test]
+fn a_named_signal_missing_from_a_gifti_surface_lists_the_arrays_it_has() {
+    let opts = ReadOptions { signal_name: Some("curv".into()) };
+    let err = io::read_mesh(&fixture("surf_base64.surf.gii"), &opts).unwrap_err().to_string();
+    assert!(err.contains("no per-vertex scalar named `curv` (available: thickness)"), "{err}");
+}
+
+#[test]
+fn freesurfer_surfaces_from_nibabel_are_read_by_their_magic() {
+    let e = expected();
+    let s = io::read_mesh(&fixture("lh.icosahedron"), &ReadOptions::default()).unwrap();
+    assert_eq!(s.points(), e.points);
+    assert_eq!(s.cells(), e.faces);
+    assert!(s.signal().is_none());
+}
+
+#[test]
+fn signals_from_nibabel_read_back_from_gifti_curv_and_mgh() {
+    let e = expected();
+    for name in SIGNALS {
+        let c = io::read_signal(&fixture(name)).unwrap_or_else(|err| panic!("{name}: {err}"));
+        assert_close(name, &c.values, &e.thickness);
+    }
+    assert_eq!(io::read_signal(&fixture("thickness_base64.shape.gii")).unwrap().name, "thickness");
+    assert_eq!(io::read_signal(&fixture("lh.thickness")).unwrap().name, "thickness");
+    // A surface file has three arrays, one of them per vertex: that one is the signal.
+    assert_eq!(io::read_signal(&fixture("surf_base64.surf.gii")).unwrap().values, e.thickness);
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fshape-nibabel-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn what_fshape_writes_reads_back_the_same_arrays() {
+    let e = expected();
+    let shape =
+        FShape::try_new(3, CellKind::Triangle, e.points.clone(), e.faces.clone(), Some(e.thickness.clone())).unwrap();
+    // Every value is a float32, so every format keeps it exactly.
+    for (name, encoding) in [
+        ("w.gii", Encoding::Ascii),
+        ("w.surf.gii", Encoding::Binary),
+        ("w.gii.gz", Encoding::Binary),
+        ("lh.pial", Encoding::Binary),
+    ] {
+        let path = tmp(name);
+        io::write_mesh(&path, &shape, encoding).unwrap();
+        let back = io::read_mesh(&path, &ReadOptions::default()).unwrap();
+        assert_eq!(back.points(), shape.points(), "{name}");
+        assert_eq!(back.cells(), shape.cells(), "{name}");
+        let signal = if name == "lh.pial" { None } else { shape.signal() };
+        assert_eq!(back.signal(), signal, "{name}");
+    }
+    for name in ["w.shape.gii", "lh.thickness", "w.mgh", "w.mgz", "w.csv"] {
+        let path = tmp(name);
+        io::write_signal(&path, "thickness", &e.thickness, e.faces.len() / 3).unwrap();
+        assert_eq!(io::read_signal(&path).unwrap().values, e.thickness, "{name}");
+    }
+    // Every encoding, byte order and index order of the GIfTI writer.
+    let arrays = gifti::surface_arrays(&shape, "thickness").unwrap();
+    for encoding in [gifti::GiftiEncoding::Ascii, gifti::GiftiEncoding::Base64, gifti::GiftiEncoding::GzipBase64] {
+        for big_endian in [false, true] {
+            for column_major in [false, true] {
+                let mut bytes = Vec::new();
+                let opts = gifti::WriteOptions { encoding, big_endian, column_major };
+                gifti::write_arrays(&mut bytes, &arrays, opts).unwrap();
+                assert_eq!(gifti::parse(&bytes).unwrap().arrays, arrays, "{opts:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn curves_are_refused_by_the_surface_only_formats() {
+    let curve =
+        FShape::try_new(2, CellKind::Segment, vec![0.0, 0.0, 1.0, 0.0, 1.0, 1.0], vec![0, 1, 1, 2], None).unwrap();
+    for name in ["c.gii", "lh.white"] {
+        let err = io::write_mesh(&tmp(name), &curve, Encoding::Binary).unwrap_err().to_string();
+        assert!(err.contains("triangle"), "{name}: {err}");
+        assert!(!Path::new(&tmp(name)).exists(), "{name}: nothing is left behind");
+    }
+}

@@ -1,0 +1,30 @@
+//! Fuzz the FreeSurfer readers (triangle surface, curv, MGH): no panic on
+//! any input, and whatever parses survives write → parse (the values are
+//! single precision already).
+#![no_main]
+
+use std::path::Path;
+
+use fshape_mesh::io::{self, Encoding, Format, ReadOptions, freesurfer};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let opts = ReadOptions::default();
+    if let Ok(shape) = io::parse_mesh(data, Format::FreeSurfer, &opts, Path::new("lh.fuzz")) {
+        let mut bytes = Vec::new();
+        io::write_to(&mut bytes, &shape, Format::FreeSurfer, Encoding::Binary).expect("writing to memory succeeds");
+        let back = io::parse_mesh(&bytes, Format::FreeSurfer, &opts, Path::new("lh.rewritten"))
+            .expect("our own output parses");
+        assert_eq!(back, shape);
+    }
+    if let Ok(v) = freesurfer::parse_curv(data) {
+        let back =
+            freesurfer::parse_curv(&freesurfer::curv_bytes(&v, 0).expect("small")).expect("our own output parses");
+        assert!(back.iter().zip(&v).all(|(a, b)| a == b || (a.is_nan() && b.is_nan())));
+    }
+    if let Ok(v) = freesurfer::parse_mgh(data) {
+        // Integer volumes are written back as float32.
+        let back = freesurfer::parse_mgh(&freesurfer::mgh_bytes(&v).expect("small")).expect("our own output parses");
+        assert!(back.iter().zip(&v).all(|(a, b)| *a == f64::from(*b as f32) || (a.is_nan() && b.is_nan())));
+    }
+});
