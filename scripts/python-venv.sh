@@ -9,4 +9,4 @@ if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import nibabel, numpy
     "$venv/bin/pip" install --quiet --upgrade pip >&2
     "$venv/bin/pip" install --quiet -r scripts/python-requirements.txt >&2
 fi
-echo "$venv"
+cd "$venv" && pwd

@@ -123,28 +123,6 @@ fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<(PathBuf, Option<PathBuf>)>> {
     Ok(paths)
 }
 
-/// The initial template: `template` or the first subject; without a
-/// signal it takes the subjects' mean, vertex by vertex when every subject
-/// has its vertices (one mesh, several signals, as the digits), else their
-/// mean value.
-fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape> {
-    if template.signal().is_some() {
-        return Ok(template);
-    }
-    let n = template.n_vertices();
-    let signals: Vec<&[f64]> = subjects.iter().filter_map(|s| s.signal()).collect();
-    if signals.is_empty() {
-        return Ok(template);
-    }
-    let mean = if signals.iter().all(|f| f.len() == n) {
-        (0..n).map(|v| signals.iter().map(|f| f[v]).sum::<f64>() / signals.len() as f64).collect()
-    } else {
-        let (sum, count) = signals.iter().fold((0.0, 0usize), |(s, c), f| (s + f.iter().sum::<f64>(), c + f.len()));
-        vec![sum / count.max(1) as f64; n]
-    };
-    Ok(template.with_signal(Some(mean))?)
-}
-
 pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
     #[cfg(feature = "mpi")]
     {
@@ -178,7 +156,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         Some(p) => (p.to_path_buf(), crate::load(p, a.signal_name.clone(), None)?),
         None => (paths[0].0.clone(), subjects[0].clone()),
     };
-    let template = initial_template(template, &subjects)?;
+    let template = fshape_match::atlas::initial_template(template, &subjects)?;
     let atlas = match Atlas::new(&template, &subjects, &config) {
         Err(MatchError::Shapes(why)) => bail!("{}: {why}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,

@@ -376,6 +376,28 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
     }
 }
 
+/// The initial template as the CLI and the Python package take it: a
+/// template without a signal gets the subjects' mean signal, vertex by
+/// vertex when every subject has the template's vertex count, else their
+/// overall mean; with a signal, or when no subject has one, it is kept.
+pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape, MatchError> {
+    if template.signal().is_some() {
+        return Ok(template);
+    }
+    let n = template.n_vertices();
+    let signals: Vec<&[f64]> = subjects.iter().filter_map(|s| s.signal()).collect();
+    if signals.is_empty() {
+        return Ok(template);
+    }
+    let mean = if signals.iter().all(|f| f.len() == n) {
+        (0..n).map(|v| signals.iter().map(|f| f[v]).sum::<f64>() / signals.len() as f64).collect()
+    } else {
+        let (sum, count) = signals.iter().fold((0.0, 0usize), |(s, c), f| (s + f.iter().sum::<f64>(), c + f.len()));
+        vec![sum / count.max(1) as f64; n]
+    };
+    Ok(template.with_signal(Some(mean))?)
+}
+
 /// One subject's part of an atlas result.
 #[derive(Clone, Debug)]
 pub struct SubjectResult {

@@ -95,13 +95,22 @@ pub(crate) fn parse_surface(data: &[u8]) -> Result<RawMesh, ParseError> {
         skip += 1;
     }
     cur.take(skip, "the comment line")?;
-    let n = count(&mut cur, "vertices", 12)?;
-    let at = cur.at();
+    // Both counts come before the arrays: check them against what follows both.
+    let at_n = cur.at();
+    let n = count(&mut cur, "vertices", 0)?;
+    let at_m = cur.at();
     let m = count(&mut cur, "triangles", 0)?;
-    let available = cur.remaining() - 12 * n;
+    let remaining = cur.remaining();
+    if n.saturating_mul(12) > remaining {
+        return Err(ParseError {
+            at: at_n,
+            kind: ParseErrorKind::Truncated { what: "vertices", claimed: n as u64, available: remaining },
+        });
+    }
+    let available = remaining - 12 * n;
     if m.saturating_mul(12) > available {
         return Err(ParseError {
-            at,
+            at: at_m,
             kind: ParseErrorKind::Truncated { what: "triangles after the vertices", claimed: m as u64, available },
         });
     }
@@ -322,8 +331,15 @@ mod tests {
         let e = parse_surface(&huge).unwrap_err();
         assert_eq!(
             e.to_string(),
-            format!("byte 22: the header claims 2147483647 vertices, but only {} bytes follow", bytes.len() - 26)
+            format!("byte 22: the header claims 2147483647 vertices, but only {} bytes follow", bytes.len() - 30)
         );
+        // A vertex count that fits the bytes after it but not after the
+        // triangle count: the 4 bytes of that count are not vertex data.
+        let mut tight = bytes[..30].to_vec();
+        tight[22..26].copy_from_slice(&1i32.to_be_bytes());
+        tight.extend_from_slice(&[0; 8]);
+        let e = parse_surface(&tight).unwrap_err();
+        assert!(matches!(e.kind, ParseErrorKind::Truncated { what: "vertices", claimed: 1, available: 8 }), "{e}");
         let e = parse_curv(&bytes).unwrap_err();
         assert_eq!(e.to_string(), "byte 0: expected the FreeSurfer curv magic ff ff ff, found `ff ff fe`");
         let mut c = curv_bytes(&[1.0, 2.0], 0).unwrap();

@@ -736,7 +736,15 @@ pub fn write_arrays(w: &mut impl Write, arrays: &[DataArray], opts: WriteOptions
         s.push_str("    <Data>");
         match opts.encoding {
             GiftiEncoding::Ascii => {
-                let per_line = if a.dims.len() == 2 { a.dims[1].max(1) } else { 1 };
+                // Row-major 2-D arrays one row a line, as every writer does;
+                // column-major ones on a single line: nibabel reads lines as
+                // rows whatever the order, and a flat sequence in the
+                // declared order, as the format means.
+                let per_line = match a.dims[..] {
+                    [_, c] if !opts.column_major => c.max(1),
+                    _ if opts.column_major => values.len().max(1),
+                    _ => 1,
+                };
                 for (k, v) in values.iter().enumerate() {
                     s.push_str(if k % per_line == 0 { "\n" } else { " " });
                     if a.data_type == DataType::F32 {
@@ -814,6 +822,20 @@ pub fn signal_array(name: &str, values: &[f64]) -> DataArray {
         values: values.to_vec(),
         meta: vec![("Name".into(), name.into())],
     }
+}
+
+/// Writes a surface file (`.gii`, optionally `.gz`) with the writer's
+/// options, atomically; the signal, if any, is a SHAPE array named
+/// `signal`.
+pub fn write_file(path: &std::path::Path, shape: &FShape, opts: WriteOptions) -> Result<(), super::WriteError> {
+    let io = |source| super::WriteError::Io { path: path.into(), source };
+    if super::Format::from_path(path).map(|f| f.0) != Some(super::Format::Gifti) {
+        return Err(super::WriteError::UnknownFormat { path: path.into() });
+    }
+    let mut bytes = Vec::new();
+    write_arrays(&mut bytes, &surface_arrays(shape, super::DEFAULT_SIGNAL_NAME).map_err(io)?, opts).map_err(io)?;
+    let gz = path.extension().is_some_and(|e| e == "gz");
+    super::write_atomic(path, &bytes, gz)
 }
 
 /// Writes a surface (and its signal as a SHAPE array named `signal`) with

@@ -1,0 +1,223 @@
+"""Functional shapes (meshes carrying a signal) and their metamorphoses.
+
+After Charon, Charlier & Trouvé, "Metamorphoses of functional shapes in
+Sobolev spaces". Arrays are numpy: float64 coordinates and signals, int64
+cells. Every function raises FShapeError with the library's message (it
+names the file, line, vertex or configuration key at fault) and releases
+the GIL while it computes.
+"""
+
+from os import PathLike
+from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, TypedDict, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+Config = Union[Mapping[str, Any], str, "PathLike[str]"]
+"""A configuration: the TOML file's tables as nested dicts
+({"deformation": {"widths": [0.4]}, "attachment": {...}}), a path to a
+TOML file, or TOML text. See the README's configuration reference."""
+
+class FShapeError(ValueError):
+    """Bad input or a failed computation; the message says what and where."""
+
+class FShape:
+    """A functional shape: vertices (n x d, d = 2 or 3), cells (m x 2
+    segments or m x 3 triangles) and an optional signal (one value per
+    vertex). Immutable; every value is checked on creation (finite
+    coordinates and signal, indices in range, no repeated index in a cell).
+    """
+
+    def __init__(
+        self,
+        points: npt.ArrayLike,
+        cells: npt.ArrayLike,
+        signal: Optional[npt.ArrayLike] = None,
+    ) -> None: ...
+    @property
+    def points(self) -> npt.NDArray[np.float64]:
+        """The vertex coordinates, n x d (a copy)."""
+    @property
+    def cells(self) -> npt.NDArray[np.int64]:
+        """The cells, m x 2 or m x 3 vertex indices (a copy)."""
+    @property
+    def signal(self) -> Optional[npt.NDArray[np.float64]]:
+        """The signal, one value per vertex, or None."""
+    @property
+    def dim(self) -> int:
+        """The ambient dimension, 2 or 3."""
+    @property
+    def kind(self) -> Literal["triangle", "segment"]:
+        """The cell kind."""
+    @property
+    def n_vertices(self) -> int: ...
+    @property
+    def n_cells(self) -> int: ...
+    def with_signal(self, signal: Optional[npt.ArrayLike]) -> "FShape":
+        """The same shape with another signal (or none)."""
+    def validate(self) -> "Validation":
+        """Errors and warnings, each with its code and a message naming the
+        vertex or cell (unused vertices, zero-area cells, boundaries...)."""
+    def coarsened(self) -> "FShape":
+        """One level of icosahedral subdivision undone (icospheres, fsaverage
+        meshes, whose first vertices are the coarser mesh's)."""
+    def total_volume(self) -> float:
+        """The total area (or length) of the cells."""
+
+class Finding(TypedDict):
+    code: str
+    message: str
+
+class Validation(TypedDict):
+    errors: list[Finding]
+    warnings: list[Finding]
+
+class Distance(TypedDict):
+    value: float
+    """A(X, Y), a squared distance."""
+    xx: float
+    xy: float
+    yy: float
+
+class Quality(TypedDict):
+    """How close a shape is to a target; distances are fractions of the
+    target's bounding-box diagonal, signal errors of its signal's range."""
+
+    diagonal: float
+    mean_distance: float
+    p95_distance: float
+    max_distance: float
+    target_within_1pct: float
+    signal_rms: Optional[float]
+    signal_p99: Optional[float]
+    signal_roughness: Optional[float]
+    signal_range: float
+
+class Energies(TypedDict):
+    value: float
+    """J = energy + gamma_W * A."""
+    energy: float
+    signal_energy: float
+    attachment: float
+
+class Geodesic(TypedDict):
+    times: npt.NDArray[np.float64]
+    points: npt.NDArray[np.float64]
+    """T x n x d."""
+    signals: npt.NDArray[np.float64]
+    """T x n."""
+    hamiltonian: npt.NDArray[np.float64]
+
+class MatchResult(TypedDict):
+    p0: npt.NDArray[np.float64]
+    pf: npt.NDArray[np.float64]
+    energies: Energies
+    quality: Quality
+    initial_quality: Quality
+    stages: list[dict[str, Any]]
+    iterations: int
+    evaluations: int
+    seconds: float
+    geodesic: Geodesic
+    matched: FShape
+    config: dict[str, Any]
+
+class SubjectResult(TypedDict):
+    p0: npt.NDArray[np.float64]
+    pf: npt.NDArray[np.float64]
+    energies: Energies
+    quality: Quality
+    template_quality: Quality
+    initial_attachment: float
+    geodesic: Geodesic
+
+class AtlasResult(TypedDict):
+    template: FShape
+    template_momenta: Optional[npt.NDArray[np.float64]]
+    subjects: list[SubjectResult]
+    energies: Energies
+    stages: list[dict[str, Any]]
+    iterations: int
+    evaluations: int
+    seconds: float
+
+Progress = Callable[[dict[str, Any]], Optional[bool]]
+"""Called with {"event": "stage" | "iteration" | "stage_finished", ...};
+returning True stops the run, as in scipy.optimize (FShapeError)."""
+
+def read_mesh(path: Union[str, "PathLike[str]"], signal_name: Optional[str] = None) -> FShape:
+    """Reads PLY, OBJ, VTK legacy, GIfTI (.gii) or a FreeSurfer surface
+    (lh.pial...), optionally gzipped; the signal is the per-vertex scalar
+    named signal_name (default: "signal", if present)."""
+
+def write_mesh(
+    path: Union[str, "PathLike[str]"],
+    shape: FShape,
+    ascii: bool = False,
+    *,
+    gifti_encoding: Optional[Literal["ascii", "base64", "gzip-base64"]] = None,
+    big_endian: bool = False,
+    column_major: bool = False,
+) -> None:
+    """Writes the format the name says (.ply, .obj, .vtk, .gii, each
+    optionally .gz, or a FreeSurfer name such as lh.pial), atomically.
+    GIfTI files may choose their encoding (default gzip-base64, or ascii
+    with ascii=True), byte order and index order; the other formats refuse
+    these options."""
+
+def read_signal(path: Union[str, "PathLike[str]"]) -> Tuple[str, npt.NDArray[np.float64]]:
+    """Reads a per-vertex signal (CSV column, GIfTI .shape.gii/.func.gii,
+    FreeSurfer curv such as lh.thickness, .mgh/.mgz): (name, values)."""
+
+def write_signal(
+    path: Union[str, "PathLike[str]"], values: npt.ArrayLike, name: str = "signal", faces: int = 0
+) -> None:
+    """Writes a per-vertex signal in the format the name says (.csv, .gii,
+    .mgh/.mgz, lh.thickness...); faces is recorded by curv files."""
+
+def signal_norm(shape: FShape, norm: Literal["l2-lumped", "l2", "h1"] = "h1", length: float = 1.0) -> float:
+    """The squared signal norm f^T D_s(x) f (H1: P1 mass + length^2 x stiffness)."""
+
+def attachment(
+    source: FShape, target: FShape, kernel_geom: str, kernel_grass: str, kernel_signal: Optional[str] = None
+) -> Distance:
+    """The data attachment A(X, Y) of `fshape distance`; kernels as there:
+    kernel_geom "gaussian:0.1", kernel_grass "binet" | "linear" |
+    "gaussian-oriented:s" | "gaussian-unoriented:s", kernel_signal "gaussian:s"."""
+
+def attachment_grad(
+    source: FShape, target: FShape, kernel_geom: str, kernel_grass: str, kernel_signal: Optional[str] = None
+) -> Tuple[Distance, npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """A(X, Y) with its gradient in the source's vertices (n x d) and signal (n)."""
+
+def quality(shape: FShape, target: FShape) -> Quality:
+    """How close shape is to target (the numbers every result reports)."""
+
+def shoot(
+    shape: FShape, p0: npt.ArrayLike, config: Config, pf: Optional[npt.ArrayLike] = None
+) -> Geodesic:
+    """The geodesic from shape with momenta p0 (n x d) and pf (n) under the
+    config's model (normalize must be false), at every time step."""
+
+def match(
+    source: FShape,
+    target: FShape,
+    config: Config,
+    progress: Optional[Progress] = None,
+    stage_templates: Optional[Sequence[FShape]] = None,
+    times: Optional[Sequence[float]] = None,
+) -> MatchResult:
+    """Registers source onto target as `fshape match` does; the result has
+    the momenta, the geodesic at `times` (default 0, 0.25, ..., 1), the
+    energies, the match quality, and the config with the weights used."""
+
+def atlas(
+    subjects: Sequence[FShape],
+    config: Config,
+    template: Optional[FShape] = None,
+    progress: Optional[Progress] = None,
+    stage_templates: Optional[Sequence[FShape]] = None,
+) -> AtlasResult:
+    """Estimates a metamorphosis atlas as `fshape atlas` does."""

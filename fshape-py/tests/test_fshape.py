@@ -1,0 +1,284 @@
+"""The fshape Python package against the library's own answers: the CLI's
+output for the same inputs, nibabel for the file formats, and facts that
+hold whatever the implementation (round trips, shapes, error messages)."""
+
+import json
+import os
+import subprocess
+import threading
+from pathlib import Path
+
+import nibabel as nib
+import numpy as np
+import pytest
+
+import fshape
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "data"
+NIBABEL = ROOT / "fshape-mesh" / "tests" / "data" / "nibabel"
+
+
+def cli(*args):
+    """Runs the fshape program (FSHAPE_BIN, else the debug build)."""
+    exe = os.environ.get("FSHAPE_BIN", str(ROOT / "target" / "debug" / "fshape"))
+    out = subprocess.run([exe, *map(str, args)], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+def sphere_pair():
+    """An icosahedron (12 vertices) carrying z, and a stretched copy carrying z + x/2."""
+    t = (1 + 5**0.5) / 2
+    base = fshape.FShape(
+        np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]) / np.sqrt(1 + t * t),
+        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+         [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+         [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    p = base.points
+    src = fshape.FShape(0.5 * p, base.cells, p[:, 2])
+    tgt = fshape.FShape(0.5 * p * [1.3, 1.0, 0.8], base.cells, p[:, 2] + 0.5 * p[:, 0])
+    return src, tgt
+
+
+CONFIG = {
+    "model": {"norm": "h1", "length": 0.2, "gamma_w": 400.0},
+    "deformation": {"widths": [0.4, 0.2]},
+    "integrator": {"steps": 5},
+    "attachment": {"kernel_geom": "gaussian:0.1", "kernel_signal": "gaussian:0.5"},
+    "optimizer": {"max_iterations": 10},
+    "schedule": {"kernel_geom": ["gaussian:0.3", "gaussian:0.1"]},
+}
+
+
+def test_numpy_round_trip_keeps_every_value_and_dtype():
+    rng = np.random.default_rng(7)
+    points = rng.normal(size=(12, 3))
+    cells = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7], [8, 9, 10], [9, 10, 11]], dtype=np.int32)
+    signal = rng.normal(size=12)
+    s = fshape.FShape(points, cells, signal)
+    assert np.array_equal(s.points, points) and s.points.dtype == np.float64
+    assert np.array_equal(s.cells, cells) and s.cells.dtype == np.int64
+    assert np.array_equal(s.signal, signal)
+    assert (s.dim, s.kind, s.n_vertices, s.n_cells) == (3, "triangle", 12, 5)
+    assert fshape.FShape(s.points, s.cells, s.signal) == s
+    curve = fshape.FShape([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], [[0, 1], [1, 2]])
+    assert (curve.kind, curve.signal, curve.total_volume()) == ("segment", None, 2.0)
+
+
+def test_bad_input_raises_fshape_error_naming_the_problem():
+    with pytest.raises(fshape.FShapeError, match="vertex 2 has a NaN"):
+        fshape.FShape([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]], [[0, 1, 2]])
+    with pytest.raises(fshape.FShapeError, match="cell 0 uses vertex 3, but there are only 3"):
+        fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]])
+    with pytest.raises(fshape.FShapeError, match="negative index -1"):
+        fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, -1]])
+    with pytest.raises(fshape.FShapeError, match="4 columns"):
+        fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2, 3]])
+    with pytest.raises(fshape.FShapeError, match=r"ply_no_magic.ply: line 1"):
+        fshape.read_mesh(ROOT / "fshape-mesh" / "tests" / "malformed" / "ply_no_magic.ply")
+    with pytest.raises(fshape.FShapeError, match="gii_truncated_zlib.shape.gii: line 3"):
+        fshape.read_signal(ROOT / "fshape-mesh" / "tests" / "malformed" / "gii_truncated_zlib.shape.gii")
+    src, tgt = sphere_pair()
+    with pytest.raises(fshape.FShapeError, match="modle: unknown field"):
+        fshape.match(src, tgt, {**CONFIG, "modle": {}})
+    with pytest.raises(fshape.FShapeError, match="model.gamma_w"):
+        fshape.match(src, tgt, {**CONFIG, "model": {"gamma_w": -1.0}})
+    with pytest.raises(fshape.FShapeError, match="unknown kernel|gaussian"):
+        fshape.attachment(src, tgt, "gauss:0.1", "binet")
+
+
+def test_validation_reports_warnings_with_their_place():
+    s = fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]], [[0, 1, 2]])
+    v = s.validate()
+    assert v["errors"] == []
+    codes = {w["code"]: w["message"] for w in v["warnings"]}
+    assert "unused_vertex" in codes and "3" in codes["unused_vertex"]
+
+
+def test_the_attachment_equals_the_cli_distance_on_the_shipped_cortex(tmp_path):
+    lh = fshape.read_mesh(DATA / "fsaverage5" / "lh.pial.thick.ply.gz")
+    rh = fshape.read_mesh(DATA / "fsaverage5" / "rh.pial.ply.gz")
+    _, thick = fshape.read_signal(DATA / "fsaverage5" / "rh.thick.csv.gz")
+    target = rh.with_signal(thick)
+    kernels = ("gaussian:10", "gaussian-unoriented:0.5", "gaussian:0.5")
+    mine = fshape.attachment(lh, target, *kernels)
+    theirs = json.loads(cli("distance", DATA / "fsaverage5" / "lh.pial.thick.ply.gz",
+                            DATA / "fsaverage5" / "rh.pial.ply.gz", "--target-signal",
+                            DATA / "fsaverage5" / "rh.thick.csv.gz", "--kernel-geom", kernels[0],
+                            "--kernel-grass", kernels[1], "--kernel-signal", kernels[2], "--json"))
+    for k in ("value", "xx", "xy", "yy"):
+        assert mine[k] == theirs[k], k
+
+
+def test_the_attachment_gradient_matches_central_differences():
+    src, tgt = sphere_pair()
+    kernels = ("gaussian:0.2", "binet", "gaussian:0.5")
+    value, gp, gf = fshape.attachment_grad(src, tgt, *kernels)
+    assert gp.shape == (12, 3) and gf.shape == (12,)
+    assert value == fshape.attachment(src, tgt, *kernels)
+    h = 1e-6
+    for v, c in [(0, 0), (5, 2), (9, 1)]:
+        plus, minus = src.points.copy(), src.points.copy()
+        plus[v, c] += h
+        minus[v, c] -= h
+        a = lambda p: fshape.attachment(fshape.FShape(p, src.cells, src.signal), tgt, *kernels)["value"]  # noqa: E731
+        assert abs((a(plus) - a(minus)) / (2 * h) - gp[v, c]) < 1e-6 * max(1.0, abs(gp[v, c]))
+    f = src.signal.copy()
+    f[3] += h
+    up = fshape.attachment(src.with_signal(f), tgt, *kernels)["value"]
+    f[3] -= 2 * h
+    down = fshape.attachment(src.with_signal(f), tgt, *kernels)["value"]
+    assert abs((up - down) / (2 * h) - gf[3]) < 1e-6 * max(1.0, abs(gf[3]))
+
+
+def test_signal_norms_of_a_constant_signal_are_the_area():
+    src, _ = sphere_pair()
+    one = src.with_signal(np.ones(src.n_vertices))
+    area = src.total_volume()
+    for norm in ("l2-lumped", "l2", "h1"):
+        assert fshape.signal_norm(one, norm, length=0.3) == pytest.approx(area, rel=1e-12)
+    # H1 adds length^2 times the Dirichlet energy of a varying signal.
+    assert fshape.signal_norm(src, "h1", 1.0) > fshape.signal_norm(src, "l2")
+
+
+def test_a_small_match_equals_the_cli_on_the_same_inputs_and_config(tmp_path):
+    src, tgt = sphere_pair()
+    fshape.write_mesh(tmp_path / "src.ply", src)
+    fshape.write_mesh(tmp_path / "tgt.ply", tgt)
+    lines = [
+        '[model]\nnorm = "h1"\nlength = 0.2\ngamma_w = 400.0',
+        "[deformation]\nwidths = [0.4, 0.2]",
+        "[integrator]\nsteps = 5",
+        '[attachment]\nkernel_geom = "gaussian:0.1"\nkernel_signal = "gaussian:0.5"',
+        "[optimizer]\nmax_iterations = 10",
+        '[schedule]\nkernel_geom = ["gaussian:0.3", "gaussian:0.1"]',
+    ]
+    (tmp_path / "match.toml").write_text("\n".join(lines) + "\n")
+    cli("match", tmp_path / "src.ply", tmp_path / "tgt.ply", "--config", tmp_path / "match.toml",
+        "--out", tmp_path / "run")
+    events = []
+    result = fshape.match(src, tgt, CONFIG, progress=events.append)
+    # The same optimisation: the same momenta to the last bit, the same end.
+    p0 = np.loadtxt(tmp_path / "run" / "p0.csv", delimiter=",", skiprows=1)
+    pf = np.loadtxt(tmp_path / "run" / "pf.csv", delimiter=",", skiprows=1)
+    assert np.array_equal(result["p0"], p0) and np.array_equal(result["pf"], pf)
+    end = fshape.read_mesh(tmp_path / "run" / "state_004.ply")
+    assert np.array_equal(result["matched"].points, end.points)
+    assert np.array_equal(result["geodesic"]["points"][-1], end.points)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert result["energies"]["value"] == summary["final_value"]
+    assert result["quality"]["mean_distance"] == summary["quality"]["mean_distance"]
+    assert result["quality"]["mean_distance"] < result["initial_quality"]["mean_distance"]
+    # The progress callback saw both stages and every iteration.
+    assert [e["stage"] for e in events if e["event"] == "stage"] == [0, 1]
+    assert sum(e["event"] == "iteration" for e in events) == result["iterations"]
+    g = result["geodesic"]
+    assert g["points"].shape == (5, 12, 3) and g["signals"].shape == (5, 12)
+    # The weights it used shoot the momenta to the same end.
+    shot = fshape.shoot(src, result["p0"], result["config"], pf=result["pf"])
+    assert np.array_equal(shot["points"][-1], end.points)
+
+
+def test_the_callback_stops_a_run_and_its_exceptions_propagate():
+    src, tgt = sphere_pair()
+    with pytest.raises(fshape.FShapeError, match="stopped by the progress callback"):
+        fshape.match(src, tgt, CONFIG, progress=lambda e: e["event"] == "iteration")
+
+    def boom(event):
+        raise RuntimeError("from the callback")
+
+    with pytest.raises(RuntimeError, match="from the callback"):
+        fshape.match(src, tgt, CONFIG, progress=boom)
+
+
+def test_the_gil_is_released_while_the_library_computes():
+    # The cortex's attachment takes seconds. While a thread computes it,
+    # this thread keeps running Python: it ticks every millisecond. Were
+    # the GIL held, it could not tick at all until the computation ended.
+    lh = fshape.read_mesh(DATA / "fsaverage5" / "lh.pial.thick.ply.gz")
+    rh = fshape.read_mesh(DATA / "fsaverage5" / "rh.pial.ply.gz")
+    worker = threading.Thread(target=fshape.attachment, args=(lh, rh, "gaussian:10", "binet"))
+    ticks = 0
+    worker.start()
+    while worker.is_alive():
+        ticks += 1
+        worker.join(0.001)
+    assert ticks > 50
+
+
+def test_shooting_with_zero_momenta_stays_put_and_bad_lengths_are_refused():
+    src, _ = sphere_pair()
+    config = {"model": {"normalize": False}, "deformation": {"widths": [0.3]}, "integrator": {"steps": 4}}
+    g = fshape.shoot(src, np.zeros((12, 3)), config)
+    assert g["points"].shape == (5, 12, 3)
+    assert np.array_equal(g["points"][-1], src.points)
+    with pytest.raises(fshape.FShapeError, match="p0: shape"):
+        fshape.shoot(src, np.zeros((11, 3)), config)
+    with pytest.raises(fshape.FShapeError, match="normalize"):
+        fshape.shoot(src, np.zeros((12, 3)), {"deformation": {"widths": [0.3]}})
+
+
+def test_an_atlas_of_three_subjects_brings_its_template_closer():
+    src, tgt = sphere_pair()
+    mid = fshape.FShape(0.5 * (src.points + tgt.points), src.cells, 0.5 * (src.signal + tgt.signal))
+    config = {**CONFIG, "optimizer": {"max_iterations": 6}}
+    del config["schedule"]
+    far = fshape.FShape(src.points * [0.8, 1.1, 1.2], src.cells, src.signal - 0.3)
+    r = fshape.atlas([src, tgt, far], config, template=mid)
+    assert isinstance(r["template"], fshape.FShape) and len(r["subjects"]) == 3
+    assert r["stages"][0]["iterations"][-1]["value"] < r["stages"][0]["initial"]["value"]
+    assert all(s["p0"].shape == (12, 3) for s in r["subjects"])
+    after = sum(s["energies"]["attachment"] for s in r["subjects"])
+    before = sum(s["initial_attachment"] for s in r["subjects"])
+    assert 0 < after < 0.5 * before
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "base64", "gzip-base64"])
+@pytest.mark.parametrize("big_endian", [False, True])
+@pytest.mark.parametrize("column_major", [False, True])
+def test_nibabel_reads_the_gifti_fshape_writes(tmp_path, encoding, big_endian, column_major):
+    src, _ = sphere_pair()
+    path = tmp_path / "s.surf.gii"
+    fshape.write_mesh(path, src, gifti_encoding=encoding, big_endian=big_endian, column_major=column_major)
+    g = nib.load(path)
+    assert g.darrays[0].endian == (nib.gifti.util.gifti_endian_codes.code["big" if big_endian else "little"])
+    assert np.array_equal(g.agg_data("pointset"), src.points.astype(np.float32))
+    assert np.array_equal(g.agg_data("triangle"), src.cells)
+    assert np.array_equal(g.agg_data("shape"), src.signal.astype(np.float32))
+    fshape.write_signal(tmp_path / "f.shape.gii", src.signal, name="thickness")
+    d = nib.load(tmp_path / "f.shape.gii").darrays[0]
+    assert d.meta["Name"] == "thickness" and np.array_equal(d.data, src.signal.astype(np.float32))
+
+
+def test_the_default_gifti_encodings_are_gzip_base64_and_ascii(tmp_path):
+    src, _ = sphere_pair()
+    fshape.write_mesh(tmp_path / "b.gii", src)
+    fshape.write_mesh(tmp_path / "a.gii", src, ascii=True)
+    assert 'Encoding="GZipBase64Binary"' in (tmp_path / "b.gii").read_text()
+    assert 'Encoding="ASCII"' in (tmp_path / "a.gii").read_text()
+    with pytest.raises(fshape.FShapeError, match="unknown output format"):
+        fshape.write_mesh(tmp_path / "s.ply", src, big_endian=True)
+    assert not (tmp_path / "s.ply").exists()
+
+
+def test_nibabel_reads_the_freesurfer_files_fshape_writes(tmp_path):
+    src, _ = sphere_pair()
+    fshape.write_mesh(tmp_path / "lh.pial", src)
+    p, f = nib.freesurfer.read_geometry(tmp_path / "lh.pial")
+    assert np.array_equal(p, src.points.astype(np.float32)) and np.array_equal(f, src.cells)
+    fshape.write_signal(tmp_path / "lh.thickness", src.signal, faces=src.n_cells)
+    assert np.array_equal(nib.freesurfer.read_morph_data(tmp_path / "lh.thickness"), src.signal.astype(np.float32))
+    for ext in ("mgh", "mgz"):
+        fshape.write_signal(tmp_path / f"t.{ext}", src.signal)
+        data = np.asarray(nib.load(tmp_path / f"t.{ext}").dataobj).ravel()
+        assert np.array_equal(data, src.signal.astype(np.float32))
+
+
+def test_the_nibabel_fixtures_read_back_through_the_package():
+    points = np.loadtxt(NIBABEL / "expected_points.csv", delimiter=",", skiprows=1)
+    thickness = np.loadtxt(NIBABEL / "expected_thickness.csv", skiprows=1)
+    s = fshape.read_mesh(NIBABEL / "surf_bigendian_gzipbase64.surf.gii", signal_name="thickness")
+    assert np.array_equal(s.points, points) and np.array_equal(s.signal, thickness)
+    assert np.array_equal(fshape.read_signal(NIBABEL / "lh.thickness")[1], thickness)

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The Python package as a user gets it: `pip install ./fshape-py` into the
+# project's venv (scripts/python-venv.sh), then its tests (pytest) and the
+# README's example, run as written. The tests compare with the fshape
+# program, built here in debug (cargo test's build) unless FSHAPE_BIN names one.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+venv=$(bash scripts/python-venv.sh)
+export PYO3_PYTHON="$venv/bin/python"
+# Share one target directory between runs (pip builds in a temporary copy otherwise).
+export CARGO_TARGET_DIR="$PWD/target/py"
+echo "== fshape-py: rustfmt and clippy"
+cargo fmt --manifest-path fshape-py/Cargo.toml --check
+cargo clippy --manifest-path fshape-py/Cargo.toml --release -- -D warnings
+echo "== fshape-py: pip install ./fshape-py"
+"$venv/bin/pip" install --quiet --force-reinstall --no-deps ./fshape-py
+cargo build --quiet -p fshape-cli --target-dir target
+export FSHAPE_BIN="${FSHAPE_BIN:-$PWD/target/debug/fshape}"
+echo "== fshape-py: pytest"
+"$venv/bin/python" -m pytest -q fshape-py/tests
+echo "== README's Python example"
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+"$venv/bin/python" - "$tmp/example.py" <<'PY'
+import re, sys
+text = open("README.md").read()
+block = text.split("<!-- python-example", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+open(sys.argv[1], "w").write(block)
+PY
+(cd "$tmp" && ln -s "$OLDPWD/data" data && "$venv/bin/python" example.py)
+test -s "$tmp/matched.surf.gii"
+echo "README example ran"
