@@ -153,6 +153,16 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     check_times(a.times)?;
     let source = crate::load(a.source, a.signal_name.clone(), a.signals.0)?;
     let target = crate::load(a.target, a.signal_name.clone(), a.signals.1)?;
+    // (A source without a signal starts from f_0 = 0; the target's signal
+    // is what the attachment compares with.)
+    if target.signal().is_none() && config.attachment.as_ref().is_some_and(|at| at.kernel_signal.is_some()) {
+        bail!(
+            "{}: the target has no signal, but [attachment] kernel_signal compares signals: give one with \
+             --target-signal FILE (or name a PLY/VTK/GIfTI property with --signal-name), or remove kernel_signal \
+             for a purely geometric match",
+            a.target.display()
+        );
+    }
     let session = match Session::new(&source, &target, &config) {
         Err(MatchError::Shapes(why)) => {
             bail!("{} and {} are not the same kind of shape: {why}", a.source.display(), a.target.display())

@@ -1196,3 +1196,108 @@ fn info_convert_match_and_atlas_take_gifti_and_freesurfer_files() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("this is a mesh"), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// A closed curve of `n` points: an ellipse of half-axes (a, b), in R² or
+/// lifted into R³ (z = c·cos θ + d·sin θ); written as OBJ (which carries no
+/// signal) with its signal `sin θ + e·cos θ` as a CSV column.
+fn curve_files(tag: &str, dim: usize, (a, b, c, d, e): (f64, f64, f64, f64, f64)) -> (String, String) {
+    use fshape_mesh::io::{self, Encoding, write_mesh};
+    let n = 48;
+    let theta: Vec<f64> = (0..n).map(|k| std::f64::consts::TAU * k as f64 / n as f64).collect();
+    let points: Vec<f64> = theta
+        .iter()
+        .flat_map(|t| {
+            let p = [a * t.cos(), b * t.sin(), c * t.cos() + d * t.sin()];
+            p[..dim].to_vec()
+        })
+        .collect();
+    let signal: Vec<f64> = theta.iter().map(|t| t.sin() + e * t.cos()).collect();
+    let (mesh, csv) = (tmp(&format!("{tag}.obj")), tmp(&format!("{tag}.csv")));
+    write_mesh(&mesh, &fshape_mesh::generate::polyline(dim, points, true).unwrap(), Encoding::Binary).unwrap();
+    io::write_signal(&csv, "f", &signal, 0).unwrap();
+    (mesh.display().to_string(), csv.display().to_string())
+}
+
+#[test]
+fn match_registers_curves_in_the_plane_and_in_space_given_signal_files() {
+    let config = tmp("curves.toml");
+    std::fs::write(
+        &config,
+        "[model]\nnorm = \"h1\"\nlength = 0.3\n[deformation]\nwidths = [0.8]\n[integrator]\nsteps = 5\n\
+         [attachment]\nkernel_geom = \"gaussian:0.3\"\nkernel_signal = \"gaussian:0.5\"\n[optimizer]\nmax_iterations = 40\n",
+    )
+    .unwrap();
+    let config = config.display().to_string();
+    for dim in [2, 3] {
+        let (s, sf) = curve_files(&format!("curve{dim}_src"), dim, (1.0, 1.0, 0.3, 0.0, 0.0));
+        let (t, tf) = curve_files(&format!("curve{dim}_tgt"), dim, (1.4, 0.8, 0.3, 0.2, 0.5));
+        let out = tmp(&format!("curve{dim}_run"));
+        let args = ["match", &s, &t, "--source-signal", &sf, "--target-signal", &tf, "--config", &config, "--out"];
+        let o = fshape(&[&args[..], &[&out.display().to_string()]].concat());
+        assert!(o.status.success(), "{dim}-D: {}", String::from_utf8_lossy(&o.stderr));
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        let (q0, q) = (&summary["quality_before"], &summary["quality"]);
+        let num = |q: &serde_json::Value, k: &str| q[k].as_f64().unwrap();
+        // The ellipse is reached: the mean distance and the signal error
+        // fall below a twentieth of where they started (seen: 1/200 and
+        // less, the stage ending on its gradient test).
+        assert!(num(q, "mean_distance") < 0.05 * num(q0, "mean_distance"), "{dim}-D: {q0} -> {q}");
+        assert!(num(q, "signal_rms") < 0.05 * num(q0, "signal_rms"), "{dim}-D: {q0} -> {q}");
+        // Without the target's signal the error names the target's file.
+        let o = fshape(&[
+            "match",
+            &s,
+            &t,
+            "--source-signal",
+            &sf,
+            "--config",
+            &config,
+            "--out",
+            &out.display().to_string(),
+        ]);
+        assert_eq!(o.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(&format!("{t}: the target has no signal")), "{err}");
+    }
+}
+
+#[test]
+fn match_registers_a_flat_square_with_an_image_like_signal() {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    // A flat square of side 2 (as the digits) carrying a bump; the target
+    // carries the bump moved: the signal must follow, the square stays.
+    let square = fshape_mesh::generate::square(300, 3);
+    let bump = |cx: f64| -> Vec<f64> {
+        square.points().chunks_exact(2).map(|p| (-((p[0] - cx).powi(2) + p[1].powi(2)) / 0.18).exp()).collect()
+    };
+    let (s, t) = (tmp("flat_src.ply"), tmp("flat_tgt.ply"));
+    write_mesh(&s, &square.clone().with_signal(Some(bump(-0.3))).unwrap(), Encoding::Binary).unwrap();
+    write_mesh(&t, &square.clone().with_signal(Some(bump(0.3))).unwrap(), Encoding::Binary).unwrap();
+    let config = tmp("flat.toml");
+    std::fs::write(
+        &config,
+        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.5]\n[integrator]\nsteps = 5\n\
+         [attachment]\nkernel_geom = \"gaussian:0.2\"\nkernel_signal = \"gaussian:0.3\"\n[optimizer]\nmax_iterations = 40\n",
+    )
+    .unwrap();
+    let out = tmp("flat_run");
+    let o = fshape(&[
+        "match",
+        &s.display().to_string(),
+        &t.display().to_string(),
+        "--config",
+        &config.display().to_string(),
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let (q0, q) = (&summary["quality_before"], &summary["quality"]);
+    let num = |q: &serde_json::Value, k: &str| q[k].as_f64().unwrap();
+    // The bump moves (seen: 29.9 % of the range to 0.5 %).
+    assert!(num(q, "signal_rms") < 0.1 * num(q0, "signal_rms"), "{q0} -> {q}");
+    // The square stays a square: its boundary within 2 % of the diagonal.
+    assert!(num(q, "max_distance") < 0.02, "{q}");
+}

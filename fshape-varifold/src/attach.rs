@@ -139,6 +139,11 @@ impl Attachment {
 
     /// The same from features.
     pub fn from_features(target: CellFeatures, kernel: VarifoldKernel) -> Result<Self, VarifoldError> {
+        // ⟨Y,Y⟩ below pairs the target with itself: say it is the target
+        // that lacks a signal, not the "source" of that pairing.
+        if kernel.signal() != SignalKernel::Constant && target.signal().is_none() {
+            return Err(VarifoldError::MissingSignal { which: "target" });
+        }
         let (yy, _) = inner(&target, &target, &kernel, false, true)?;
         Ok(Attachment { target, kernel, yy, parallel: true })
     }

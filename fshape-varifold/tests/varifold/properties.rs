@@ -153,3 +153,19 @@ fn flipping_one_cell_changes_exactly_what_each_direction_kernel_says() {
         }
     }
 }
+
+#[test]
+fn a_missing_signal_is_blamed_on_the_shape_that_lacks_it() {
+    use fshape_varifold::{Attachment, VarifoldError};
+    let with = fshape_mesh::generate::circle(16, 1.0);
+    let f: Vec<f64> = with.points().chunks_exact(2).map(|p| p[0]).collect();
+    let with = with.with_signal(Some(f)).unwrap();
+    let without = fshape_mesh::generate::circle(16, 1.2);
+    let k = VarifoldKernel::parse("gaussian:0.5", Some("gaussian:1"), "binet").unwrap();
+    let e = Attachment::new(&without, k.clone()).unwrap_err();
+    assert_eq!(e, VarifoldError::MissingSignal { which: "target" });
+    let e = Attachment::new(&with, k.clone()).unwrap().eval(&without).unwrap_err();
+    assert_eq!(e, VarifoldError::MissingSignal { which: "source" });
+    assert_eq!(distance(&without, &with, &k).unwrap_err(), VarifoldError::MissingSignal { which: "source" });
+    assert_eq!(distance(&with, &without, &k).unwrap_err(), VarifoldError::MissingSignal { which: "target" });
+}
