@@ -13,7 +13,8 @@ use fshape_match::{
 };
 use fshape_mesh::FShape;
 use fshape_mesh::io;
-use fshape_shoot::ModelKind;
+use fshape_shoot::{ModelKind, ShootError};
+use fshape_varifold::VarifoldError;
 use serde::Serialize;
 
 /// The command's arguments.
@@ -148,21 +149,26 @@ pub(crate) fn check_times(times: &[f64]) -> Result<()> {
     Ok(())
 }
 
+/// The library says "the target shape has no signal"; the user knows it by
+/// its file. (A source without a signal starts from f_0 = 0: only the
+/// target's signal is compared.)
+fn name_the_target(e: MatchError, target: &Path) -> anyhow::Error {
+    match e {
+        MatchError::Shoot(ShootError::Varifold(VarifoldError::MissingSignal { which: "target" })) => anyhow::anyhow!(
+            "{}: the target has no signal, but [attachment] kernel_signal compares signals: give one with \
+             --target-signal FILE (or name a PLY/VTK/GIfTI property with --signal-name), or remove kernel_signal \
+             for a purely geometric match",
+            target.display()
+        ),
+        e => e.into(),
+    }
+}
+
 pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let config = Config::read(a.config)?;
     check_times(a.times)?;
     let source = crate::load(a.source, a.signal_name.clone(), a.signals.0)?;
     let target = crate::load(a.target, a.signal_name.clone(), a.signals.1)?;
-    // (A source without a signal starts from f_0 = 0; the target's signal
-    // is what the attachment compares with.)
-    if target.signal().is_none() && config.attachment.as_ref().is_some_and(|at| at.kernel_signal.is_some()) {
-        bail!(
-            "{}: the target has no signal, but [attachment] kernel_signal compares signals: give one with \
-             --target-signal FILE (or name a PLY/VTK/GIfTI property with --signal-name), or remove kernel_signal \
-             for a purely geometric match",
-            a.target.display()
-        );
-    }
     let session = match Session::new(&source, &target, &config) {
         Err(MatchError::Shapes(why)) => {
             bail!("{} and {} are not the same kind of shape: {why}", a.source.display(), a.target.display())
@@ -180,7 +186,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let model = session.plan().model.clone();
     let metrics = session.plan().metrics;
     let mut progress = Progress::new(model.gamma_w(), a.stop_after);
-    if session.run(&mut progress)? == Outcome::Interrupted {
+    if session.run(&mut progress).map_err(|e| name_the_target(e, a.target))? == Outcome::Interrupted {
         progress.abandon("stopped by --stop-after; continue with --resume");
         eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());
         return Ok(());
