@@ -53,6 +53,11 @@ fn count(cur: &mut Cursor, what: &'static str, bytes_each: usize) -> Result<usiz
     Ok(n)
 }
 
+/// A count as the formats store it (`i32`).
+fn i32_count(n: usize) -> io::Result<i32> {
+    i32::try_from(n).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "more than i32::MAX items"))
+}
+
 fn f32s(cur: &mut Cursor, n: usize, what: &'static str) -> Result<Vec<f64>, ParseError> {
     let b = cur.take(4 * n, what)?;
     Ok(b.chunks_exact(4).map(|c| f64::from(f32::from_be_bytes([c[0], c[1], c[2], c[3]]))).collect())
@@ -142,17 +147,16 @@ pub fn write_surface(w: &mut impl Write, shape: &FShape) -> io::Result<()> {
             "FreeSurfer surfaces hold triangles in 3-D; this shape is not one",
         ));
     }
-    let big = |n: usize| i32::try_from(n).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "too large"));
     let mut out = Vec::with_capacity(32 + 12 * (shape.n_vertices() + shape.n_cells()));
     out.extend_from_slice(&SURFACE_MAGIC);
     out.extend_from_slice(b"created by fshape\n\n");
-    out.extend_from_slice(&big(shape.n_vertices())?.to_be_bytes());
-    out.extend_from_slice(&big(shape.n_cells())?.to_be_bytes());
+    out.extend_from_slice(&i32_count(shape.n_vertices())?.to_be_bytes());
+    out.extend_from_slice(&i32_count(shape.n_cells())?.to_be_bytes());
     for &x in shape.points() {
         out.extend_from_slice(&(x as f32).to_be_bytes());
     }
     for &v in shape.cells() {
-        out.extend_from_slice(&big(v)?.to_be_bytes());
+        out.extend_from_slice(&i32_count(v)?.to_be_bytes());
     }
     w.write_all(&out)
 }
@@ -190,11 +194,10 @@ pub fn parse_curv(data: &[u8]) -> Result<Vec<f64>, ParseError> {
 ///
 /// `InvalidInput` if a count exceeds `i32::MAX`.
 pub fn curv_bytes(values: &[f64], faces: usize) -> io::Result<Vec<u8>> {
-    let big = |n: usize| i32::try_from(n).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "too large"));
     let mut out = Vec::with_capacity(15 + 4 * values.len());
     out.extend_from_slice(&CURV_MAGIC);
-    out.extend_from_slice(&big(values.len())?.to_be_bytes());
-    out.extend_from_slice(&big(faces)?.to_be_bytes());
+    out.extend_from_slice(&i32_count(values.len())?.to_be_bytes());
+    out.extend_from_slice(&i32_count(faces)?.to_be_bytes());
     out.extend_from_slice(&1i32.to_be_bytes());
     for &v in values {
         out.extend_from_slice(&(v as f32).to_be_bytes());
@@ -283,7 +286,7 @@ pub fn parse_mgh(data: &[u8]) -> Result<Vec<f64>, ParseError> {
 ///
 /// `InvalidInput` if there are more than `i32::MAX` values.
 pub fn mgh_bytes(values: &[f64]) -> io::Result<Vec<u8>> {
-    let n = i32::try_from(values.len()).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "too large"))?;
+    let n = i32_count(values.len())?;
     let mut out = Vec::with_capacity(MGH_HEADER + 4 * values.len());
     for v in [1, n, 1, 1, 1, 3, 0] {
         out.extend_from_slice(&v.to_be_bytes());

@@ -621,11 +621,11 @@ fn finish(data: &[u8], h: Header, text: Option<String>) -> Result<DataArray, Par
 /// The mesh of a parsed file: its POINTSET (n × 3) and TRIANGLE (m × 3)
 /// arrays, and as signal the per-vertex array whose `Name` is
 /// `signal_name`, if one is.
-pub(crate) fn to_raw(g: Gifti, signal_name: &str) -> Result<RawMesh, ParseError> {
+pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseError> {
     let at = Location::Line(1);
-    let find = |code: i32, what: &'static str| -> Result<&DataArray, ParseError> {
-        let mut it = g.arrays.iter().filter(|a| a.intent == code);
-        let a = it.next().ok_or(ParseError { at, kind: ParseErrorKind::Missing { what } })?;
+    let find = |code: i32, what: &'static str| -> Result<usize, ParseError> {
+        let mut it = g.arrays.iter().enumerate().filter(|(_, a)| a.intent == code);
+        let (k, a) = it.next().ok_or(ParseError { at, kind: ParseErrorKind::Missing { what } })?;
         if it.next().is_some() {
             return Err(ParseError {
                 at,
@@ -644,34 +644,39 @@ pub(crate) fn to_raw(g: Gifti, signal_name: &str) -> Result<RawMesh, ParseError>
                 },
             });
         }
-        Ok(a)
+        Ok(k)
     };
     let p = find(intent::POINTSET, "a NIFTI_INTENT_POINTSET array (the vertex coordinates)")?;
     let t = find(intent::TRIANGLE, "a NIFTI_INTENT_TRIANGLE array (the faces)")?;
-    if !t.data_type.is_integer() {
+    let tri = &g.arrays[t];
+    if !tri.data_type.is_integer() {
         return Err(ParseError {
             at,
-            kind: ParseErrorKind::BadToken { expected: "an integer type for the triangles", found: t.data_type.name() },
+            kind: ParseErrorKind::BadToken {
+                expected: "an integer type for the triangles",
+                found: tri.data_type.name(),
+            },
         });
     }
-    let mut cells = Vec::with_capacity(t.values.len());
-    for (k, &v) in t.values.iter().enumerate() {
+    let mut cells = Vec::with_capacity(tri.values.len());
+    for (k, &v) in tri.values.iter().enumerate() {
         if v < 0.0 {
             return Err(ParseError { at, kind: ParseErrorKind::NegativeIndex { cell: k / 3, value: v as i64 } });
         }
         cells.push(v as usize);
     }
-    let n = p.dims[0];
-    let scalars: Vec<(usize, &DataArray)> =
-        g.arrays.iter().enumerate().filter(|(_, a)| a.per_vertex(Some(n))).collect();
-    let signal = scalars.iter().find(|(_, a)| a.name() == Some(signal_name)).map(|(_, a)| a.values.clone());
+    let n = g.arrays[p].dims[0];
+    let scalars: Vec<usize> = (0..g.arrays.len()).filter(|&k| g.arrays[k].per_vertex(Some(n))).collect();
+    let labels = scalars.iter().map(|&k| g.arrays[k].label(k)).collect();
+    let signal = scalars.iter().find(|&&k| g.arrays[k].name() == Some(signal_name)).copied();
+    // The arrays are ours: move the values out rather than copy them.
     Ok(RawMesh {
         dim: 3,
         cell_size: Some(3),
-        points: p.values.clone(),
+        points: std::mem::take(&mut g.arrays[p].values),
         cells,
-        signal,
-        scalars: scalars.iter().map(|(k, a)| a.label(*k)).collect(),
+        signal: signal.map(|k| std::mem::take(&mut g.arrays[k].values)),
+        scalars: labels,
     })
 }
 

@@ -269,7 +269,7 @@ pub enum Format {
 }
 
 /// The last name part of FreeSurfer's surface files (`lh.pial`), by which
-/// [`Format::from_path`] knows a path to write; reading goes by the magic.
+/// [`Format::from_path`] knows them; other names are read by their magic.
 pub const FREESURFER_SURFACES: &[&str] =
     &["pial", "white", "inflated", "sphere", "orig", "smoothwm", "midthickness", "graymid", "reg", "qsphere"];
 
@@ -478,9 +478,12 @@ impl SignalFormat {
 pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
     let data = read_bytes(path)?;
     let parse = |source| ReadError::Parse { path: path.into(), source };
+    // lh.thickness and lh.thickness.mgz are both "thickness".
     let stem = || {
         let n = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        n.rsplit('.').next().unwrap_or(&n).to_string()
+        let n = n.strip_suffix(".gz").unwrap_or(&n);
+        let n = n.strip_suffix(".mgh").or_else(|| n.strip_suffix(".mgz")).unwrap_or(n);
+        n.rsplit('.').next().unwrap_or(n).to_string()
     };
     if let Some(f) = Format::sniff(&data).filter(|&f| f != Format::Gifti) {
         return Err(parse(ParseError {

@@ -72,9 +72,8 @@ fn every_corpus_file_is_covered_and_the_reference_reads() {
         .iter()
         .flat_map(|cases| cases.iter().map(|c| c.0))
         .collect();
-    listed.dedup(); // fs_cut_faces.pial is read both ways
     listed.sort_unstable();
-    listed.dedup();
+    listed.dedup(); // fs_cut_faces.pial is read both ways
     listed.push("ok_reference.ply");
     listed.sort_unstable();
     let mut present: Vec<String> =

@@ -96,6 +96,7 @@ fn signals_from_nibabel_read_back_from_gifti_curv_and_mgh() {
     }
     assert_eq!(io::read_signal(&fixture("thickness_base64.shape.gii")).unwrap().name, "thickness");
     assert_eq!(io::read_signal(&fixture("lh.thickness")).unwrap().name, "thickness");
+    assert_eq!(io::read_signal(&fixture("thickness.mgz")).unwrap().name, "thickness");
     // A surface file has three arrays, one of them per vertex: that one is the signal.
     assert_eq!(io::read_signal(&fixture("surf_base64.surf.gii")).unwrap().values, e.thickness);
 }
