@@ -256,8 +256,15 @@ fn signal_norm(py: Python<'_>, shape: &Bound<'_, PyAny>, norm: &str, length: f64
     py.detach(|| fshape_fem::SignalNorm::try_new(&s, norm).and_then(|n| n.quadratic(s.points(), &f))).map_err(err)
 }
 
-fn kernel(geom: &str, signal: Option<&str>, grass: &str) -> PyResult<fshape_varifold::VarifoldKernel> {
-    fshape_varifold::VarifoldKernel::parse(geom, signal, grass).map_err(err)
+/// The attachment's inputs: the two shapes and the kernel parsed as
+/// `fshape distance` parses it.
+fn attachment_inputs(
+    source: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    (geom, grass, signal): (&str, &str, Option<&str>),
+) -> PyResult<(FShape, FShape, fshape_varifold::VarifoldKernel)> {
+    let kernel = fshape_varifold::VarifoldKernel::parse(geom, signal, grass).map_err(err)?;
+    Ok((shape_of(source)?, shape_of(target)?, kernel))
 }
 
 fn distance_dict<'py>(py: Python<'py>, d: &fshape_varifold::Distance) -> PyResult<Bound<'py, PyDict>> {
@@ -282,8 +289,7 @@ fn attachment<'py>(
     kernel_grass: &str,
     kernel_signal: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (x, y) = (shape_of(source)?, shape_of(target)?);
-    let k = kernel(kernel_geom, kernel_signal, kernel_grass)?;
+    let (x, y, k) = attachment_inputs(source, target, (kernel_geom, kernel_grass, kernel_signal))?;
     let d = py.detach(|| fshape_varifold::Attachment::new(&y, k).and_then(|a| a.eval(&x))).map_err(err)?;
     distance_dict(py, &d)
 }
@@ -301,8 +307,7 @@ fn attachment_grad<'py>(
     kernel_grass: &str,
     kernel_signal: Option<&str>,
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, numpy::PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
-    let (x, y) = (shape_of(source)?, shape_of(target)?);
-    let k = kernel(kernel_geom, kernel_signal, kernel_grass)?;
+    let (x, y, k) = attachment_inputs(source, target, (kernel_geom, kernel_grass, kernel_signal))?;
     let (d, g) = py.detach(|| fshape_varifold::Attachment::new(&y, k).and_then(|a| a.eval_grad(&x))).map_err(err)?;
     Ok((distance_dict(py, &d)?, rows(py, g.points, x.dim()), g.signal.into_pyarray(py)))
 }
