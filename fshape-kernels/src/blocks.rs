@@ -17,6 +17,31 @@ use crate::fast::L;
 /// Sources per block.
 const LEAF: usize = 64;
 
+/// Source blocks from which [`RunSearch::Auto`] finds runs with the BVH
+/// rather than by testing every source block (measured: README, "Truncated
+/// sums at scale").
+const BVH_MIN_BLOCKS: usize = 256;
+
+/// Consecutive target blocks (siblings in the k-d order) that share one
+/// BVH query.
+const GROUP: usize = 4;
+
+/// How [`BlockPairs`] finds, for a truncated kernel, the source blocks
+/// within the support radius of each target block. The runs, and so the
+/// bits of every sum, do not depend on the choice.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RunSearch {
+    /// The BVH for many source blocks, the scan below (where testing every
+    /// block costs less than building the BVH).
+    #[default]
+    Auto,
+    /// An obvhs BVH over the source blocks' bounding boxes: O(log B + hits)
+    /// per target block.
+    Bvh,
+    /// A box test of every source block: O(B) per target block.
+    AllBlocks,
+}
+
 /// Points sorted into blocks, with the blocks' bounding boxes (unused
 /// coordinates of planar points are 0).
 #[derive(Default)]
@@ -38,7 +63,8 @@ impl Blocks {
         order.clear();
         order.extend(0..n);
         start.clear();
-        kd_sort(p, dim, order, size, start, 0);
+        kd_sort(p, dim, order, size);
+        kd_starts(n, size, 0, start);
         start.push(n);
         lo.clear();
         hi.clear();
@@ -78,27 +104,55 @@ impl Blocks {
 }
 
 /// Sorts `idx` into a k-d order whose leaves hold at most `size` points
-/// (all but the last leaf of a split hold exactly a multiple of `size`).
-fn kd_sort(p: &[f64], dim: usize, idx: &mut [usize], size: usize, starts: &mut Vec<usize>, offset: usize) {
+/// (all but the last leaf of a split hold exactly a multiple of `size`),
+/// the two halves of a large split in parallel (each owns its half: the
+/// order does not depend on the threads).
+fn kd_sort(p: &[f64], dim: usize, idx: &mut [usize], size: usize) {
     if idx.len() <= size {
-        if !idx.is_empty() {
+        return;
+    }
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for &i in idx.iter() {
+        for k in 0..dim {
+            let v = p[i * dim + k];
+            lo[k] = lo[k].min(v);
+            hi[k] = hi[k].max(v);
+        }
+    }
+    let axis = (0..dim).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+    let mid = kd_mid(idx.len(), size);
+    idx.select_nth_unstable_by(mid, |&u, &v| p[u * dim + axis].total_cmp(&p[v * dim + axis]).then(u.cmp(&v)));
+    let (left, right) = idx.split_at_mut(mid);
+    if left.len() >= PAR_SORT {
+        rayon::join(|| kd_sort(p, dim, left, size), || kd_sort(p, dim, right, size));
+    } else {
+        kd_sort(p, dim, left, size);
+        kd_sort(p, dim, right, size);
+    }
+}
+
+/// Points from which [`kd_sort`] sorts the two halves of a split in
+/// parallel.
+const PAR_SORT: usize = 1 << 14;
+
+/// Where [`kd_sort`] splits `len` points (> `size`): the first multiple of
+/// `size` from the middle on.
+fn kd_mid(len: usize, size: usize) -> usize {
+    ((len / 2).div_ceil(size) * size).clamp(1, len - 1)
+}
+
+/// The first sorted position of each of [`kd_sort`]'s leaves over `len`
+/// points from `offset` (they depend on the number of points only).
+fn kd_starts(len: usize, size: usize, offset: usize, starts: &mut Vec<usize>) {
+    if len <= size {
+        if len > 0 {
             starts.push(offset);
         }
         return;
     }
-    let spread = |axis: usize| {
-        let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
-            let v = p[i * dim + axis];
-            (lo.min(v), hi.max(v))
-        });
-        hi - lo
-    };
-    let axis = (0..dim).max_by(|&a, &b| spread(a).total_cmp(&spread(b))).unwrap_or(0);
-    let mid = ((idx.len() / 2).div_ceil(size) * size).clamp(1, idx.len() - 1);
-    idx.select_nth_unstable_by(mid, |&u, &v| p[u * dim + axis].total_cmp(&p[v * dim + axis]).then(u.cmp(&v)));
-    let (left, right) = idx.split_at_mut(mid);
-    kd_sort(p, dim, left, size, starts, offset);
-    kd_sort(p, dim, right, size, starts, offset + mid);
+    let mid = kd_mid(len, size);
+    kd_starts(mid, size, offset, starts);
+    kd_starts(len - mid, size, offset + mid, starts);
 }
 
 /// Squared distance between two boxes (0 if they overlap), and the squared
@@ -163,12 +217,26 @@ pub struct BlockPairs {
     run_ptr: Vec<usize>,
     /// Targets per block: [`L`], or the mixed-precision path's own lane count.
     tgt_size: usize,
+    search: RunSearch,
+    used_bvh: bool,
 }
 
 impl BlockPairs {
     /// Sorts targets `x` and sources `y` (`dim` = 2 or 3 coordinates per
     /// point, flat) into blocks for `kernel`'s support radius.
     pub fn try_new(x: &[f64], y: &[f64], dim: usize, kernel: &crate::Kernel) -> Result<Self, crate::KernelError> {
+        BlockPairs::try_new_with_search(x, y, dim, kernel, RunSearch::Auto)
+    }
+
+    /// [`BlockPairs::try_new`] with the source blocks within reach found
+    /// as `search` says; the runs are the same for every choice.
+    pub fn try_new_with_search(
+        x: &[f64],
+        y: &[f64],
+        dim: usize,
+        kernel: &crate::Kernel,
+        search: RunSearch,
+    ) -> Result<Self, crate::KernelError> {
         use crate::KernelError;
         if dim != 2 && dim != 3 {
             return Err(KernelError::PointDimension { found: dim });
@@ -183,17 +251,12 @@ impl BlockPairs {
                 return Err(KernelError::NonFinite { what, index: i / dim });
             }
         }
-        Ok(BlockPairs::with_taper(x, y, dim, kernel.taper()))
+        let mut pairs = BlockPairs { search, ..BlockPairs::default() };
+        pairs.rebuild(x, y, dim, kernel.taper());
+        Ok(pairs)
     }
 
-    /// The same without validation (callers inside the crate validated).
-    pub(crate) fn with_taper(x: &[f64], y: &[f64], dim: usize, taper: Option<crate::Taper>) -> Self {
-        let mut pairs = BlockPairs::default();
-        pairs.rebuild(x, y, dim, taper);
-        pairs
-    }
-
-    /// [`BlockPairs::with_taper`] into this value's memory: no allocation
+    /// [`BlockPairs::try_new`] without validation, into this value's memory: no allocation
     /// once it has held as many points (the shooting rebuilds the blocks at
     /// every evaluation of its vector field, as the points move).
     pub(crate) fn rebuild(&mut self, x: &[f64], y: &[f64], dim: usize, taper: Option<crate::Taper>) {
@@ -223,17 +286,42 @@ impl BlockPairs {
             self.tgt.rebuild_identity(x.len() / dim, tgt_size);
             self.src.rebuild_identity(y.len() / dim, LEAF);
         }
-        // Every target block's runs, in one serial pass over the block
-        // pairs (box tests only: ~0.1 % of the cheapest sum's time).
+        // Every target block's runs, in one serial pass: a scan of all
+        // source blocks while there are few (box tests only, allocation
+        // free), a BVH beyond.
         let mut runs = std::mem::take(&mut self.runs);
+        let mut run_ptr = std::mem::take(&mut self.run_ptr);
         runs.clear();
-        self.run_ptr.clear();
-        self.run_ptr.push(0);
-        for t in 0..self.tgt.n_blocks() {
-            self.push_runs(t, &mut runs);
-            self.run_ptr.push(runs.len());
+        run_ptr.clear();
+        run_ptr.push(0);
+        let bvh = match (taper, self.search) {
+            (None, _) | (_, RunSearch::AllBlocks) => false,
+            (Some(_), RunSearch::Bvh) => true,
+            (Some(_), RunSearch::Auto) => self.src.n_blocks() >= BVH_MIN_BLOCKS,
+        };
+        self.used_bvh = bvh && sort;
+        match taper {
+            Some(taper) if self.used_bvh => self.bvh_runs(taper, &mut runs, &mut run_ptr),
+            _ => {
+                for t in 0..self.tgt.n_blocks() {
+                    self.push_runs(t, 0..self.src.n_blocks(), &mut runs);
+                    run_ptr.push(runs.len());
+                }
+            }
         }
         self.runs = runs;
+        self.run_ptr = run_ptr;
+    }
+
+    /// Sets how the next builds find the source blocks within reach of
+    /// each target block.
+    pub(crate) fn set_search(&mut self, search: RunSearch) {
+        self.search = search;
+    }
+
+    /// Whether the last build found the runs with the BVH.
+    pub fn used_bvh(&self) -> bool {
+        self.used_bvh
     }
 
     /// Target block t's original indices and source runs.
@@ -296,30 +384,98 @@ impl BlockPairs {
         }
     }
 
-    /// Appends the source runs that can reach target block `t` to `runs`.
-    fn push_runs(&self, t: usize, runs: &mut Vec<SourceRun>) {
+    /// Appends to `runs` the runs of the source blocks among `candidates`
+    /// (increasing block indices, a superset of those within reach) that
+    /// can reach target block `t`.
+    fn push_runs(&self, t: usize, candidates: impl Iterator<Item = usize>, runs: &mut Vec<SourceRun>) {
         let first = runs.len();
-        {
-            for s in 0..self.src.n_blocks() {
-                let tapered = match self.taper {
-                    None => false,
-                    Some(taper) => {
-                        let (near, far) = box_dist2(&self.tgt.lo[t], &self.tgt.hi[t], &self.src.lo[s], &self.src.hi[s]);
-                        if near >= taper.u_out {
-                            continue;
-                        }
-                        far > taper.u_in
+        for s in candidates {
+            let tapered = match self.taper {
+                None => false,
+                Some(taper) => {
+                    let (near, far) = box_dist2(&self.tgt.lo[t], &self.tgt.hi[t], &self.src.lo[s], &self.src.hi[s]);
+                    if near >= taper.u_out {
+                        continue;
                     }
-                };
-                let range = self.src.start[s]..self.src.start[s + 1];
-                // Merge with the previous run when contiguous and alike.
-                match runs[first..].last_mut() {
-                    Some(last) if last.range.end == range.start && last.tapered == tapered => {
-                        last.range.end = range.end
-                    }
-                    _ => runs.push(SourceRun { range, tapered }),
+                    far > taper.u_in
                 }
+            };
+            let range = self.src.start[s]..self.src.start[s + 1];
+            // Merge with the previous run when contiguous and alike.
+            match runs[first..].last_mut() {
+                Some(last) if last.range.end == range.start && last.tapered == tapered => last.range.end = range.end,
+                _ => runs.push(SourceRun { range, tapered }),
             }
         }
     }
+
+    /// Every target block's runs, their candidates found by an obvhs BVH
+    /// over the source blocks' boxes (f32, the query box padded beyond f32
+    /// rounding), one query for [`GROUP`] consecutive (k-d sibling) target
+    /// blocks (groups in parallel), marked in a bit set and read back in increasing order, so
+    /// that the exact f64 test of [`BlockPairs::push_runs`] sees the blocks
+    /// in the same order as a scan of all of them and gives the same runs.
+    fn bvh_runs(&self, taper: crate::Taper, runs: &mut Vec<SourceRun>, run_ptr: &mut Vec<usize>) {
+        use glam::Vec3A;
+        use obvhs::aabb::Aabb;
+        let f32s = |p: &[f64; 3]| Vec3A::new(p[0] as f32, p[1] as f32, p[2] as f32);
+        let boxes: Vec<Aabb> =
+            self.src.lo.iter().zip(&self.src.hi).map(|(lo, hi)| Aabb::new(f32s(lo), f32s(hi))).collect();
+        let bvh =
+            obvhs::bvh2::builder::build_bvh2(&boxes, obvhs::BvhBuildParams::fast_build(), &mut Default::default());
+        // f32 rounding moves a coordinate by at most 2⁻²⁴ of its size.
+        let r = taper.u_out.sqrt();
+        let size = self.src.lo.iter().chain(&self.src.hi).chain(&self.tgt.lo).chain(&self.tgt.hi).flatten();
+        let scale = size.fold(0.0f64, |m, v| m.max(v.abs())) + r;
+        let reach = Vec3A::splat((r + 1e-6 * scale) as f32);
+        let words = self.src.n_blocks().div_ceil(64);
+        let n = self.tgt.n_blocks();
+        // Groups in parallel, each into its own runs, joined in order.
+        let group_runs = |marks: &mut Vec<u64>, group: usize| {
+            let blocks = group..(group + GROUP).min(n);
+            let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+            for t in blocks.clone() {
+                lo = lo.min(f32s(&self.tgt.lo[t]));
+                hi = hi.max(f32s(&self.tgt.hi[t]));
+            }
+            marks.clear();
+            marks.resize(words, 0);
+            bvh.aabb_traverse(Aabb::new(lo - reach, hi + reach), |bvh, id| {
+                let node = &bvh.nodes[id as usize];
+                let first = node.first_index as usize;
+                for &s in &bvh.primitive_indices[first..first + node.prim_count as usize] {
+                    marks[s as usize / 64] |= 1 << (s % 64);
+                }
+                true
+            });
+            let mut runs = Vec::new();
+            let mut ends = [0; GROUP];
+            for (k, t) in blocks.enumerate() {
+                self.push_runs(t, set_bits(marks), &mut runs);
+                ends[k] = runs.len();
+            }
+            (runs, ends)
+        };
+        let groups: Vec<_> = (0..n).into_par_iter().step_by(GROUP).map_init(Vec::new, group_runs).collect();
+        for (k, (group, ends)) in groups.into_iter().enumerate() {
+            let base = runs.len();
+            runs.extend(group);
+            let blocks = GROUP.min(n - GROUP * k);
+            run_ptr.extend(ends[..blocks].iter().map(|e| base + e));
+        }
+    }
+}
+
+/// The positions of the set bits of `marks`, in increasing order.
+fn set_bits(marks: &[u64]) -> impl Iterator<Item = usize> + '_ {
+    marks.iter().enumerate().flat_map(|(w, &m)| {
+        let mut m = m;
+        std::iter::from_fn(move || {
+            (m != 0).then(|| {
+                let b = m.trailing_zeros() as usize;
+                m &= m - 1;
+                64 * w + b
+            })
+        })
+    })
 }

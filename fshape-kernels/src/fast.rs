@@ -392,7 +392,7 @@ impl<const D: usize, const BD: usize, const MODE: u8> Block<'_, D, BD, MODE> {
 /// allocates nothing (the shooting calls these at every stage).
 #[derive(Default)]
 pub(crate) struct FastWorkspace {
-    pairs: BlockPairs,
+    pub(crate) pairs: BlockPairs,
     ys: Vec<f64>,
     bs: Vec<f64>,
     dys: Vec<f64>,

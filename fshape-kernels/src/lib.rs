@@ -44,7 +44,7 @@ mod profile;
 mod sums;
 mod symmetric;
 
-pub use blocks::{BlockPairs, SourceRun};
+pub use blocks::{BlockPairs, RunSearch, SourceRun};
 pub use mixed::Precision;
 pub use profile::{Kernel, Profile, TAPER_WIDTH, Taper};
 pub use sums::{KernelSums, Pair, SpatialIndex, SumWorkspace};

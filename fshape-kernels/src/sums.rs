@@ -54,6 +54,7 @@ pub struct KernelSums<'a> {
     tree: OnceLock<Result<Tree, KernelError>>,
     radius2: f64,
     index: SpatialIndex,
+    run_search: crate::RunSearch,
     parallel: bool,
     precision: crate::Precision,
 }
@@ -103,6 +104,7 @@ impl<'a> KernelSums<'a> {
             tree: OnceLock::new(),
             radius2,
             index: SpatialIndex::default(),
+            run_search: crate::RunSearch::Auto,
             parallel: true,
             precision: crate::Precision::F64,
         })
@@ -112,6 +114,14 @@ impl<'a> KernelSums<'a> {
     pub fn with_index(mut self, index: SpatialIndex) -> Self {
         self.index = index;
         self.tree = OnceLock::new();
+        self
+    }
+
+    /// Chooses how the vectorised path finds the source blocks within the
+    /// support of each target block ([`RunSearch`](crate::RunSearch),
+    /// default `Auto`); the results are identical.
+    pub fn with_run_search(mut self, search: crate::RunSearch) -> Self {
+        self.run_search = search;
         self
     }
 
@@ -271,6 +281,7 @@ impl<'a> KernelSums<'a> {
         let Some(terms) = self.kernel.gaussian_terms() else { return Ok(false) };
         self.check_targets(inp.x)?;
         let taper = self.kernel.taper();
+        ws.0.pairs.set_search(self.run_search);
         Ok(fast::gaussian_sum_into::<MODE>(
             &terms,
             taper,

@@ -2,7 +2,7 @@
 //! and degenerate inputs; the truncation bound; symmetry; PSD; serial =
 //! parallel.
 
-use fshape_kernels::{Kernel, KernelSums, Precision};
+use fshape_kernels::{BlockPairs, Kernel, KernelSums, Precision, RunSearch};
 use fshape_mesh::generate::SplitMix64;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
@@ -272,45 +272,96 @@ fn jacobian_vector_products_match_the_brute_force_oracle() {
 
 #[test]
 fn block_pairs_hand_every_pair_within_the_support_to_its_target_once() {
-    use fshape_kernels::BlockPairs;
     for (name, k) in kernels() {
         for (case, (dim, x, y)) in cases(11).into_iter().enumerate() {
             // Larger sets too, so that there are several blocks of each.
             let mut rng = SplitMix64(case as u64);
             let (x, y) = if case == 0 { (uniform(300, dim, &mut rng), uniform(400, dim, &mut rng)) } else { (x, y) };
-            let pairs = BlockPairs::try_new(&x, &y, dim, &k).unwrap();
-            let order = pairs.source_order();
-            let (nx, ny) = (x.len() / dim, y.len() / dim);
-            let mut seen = vec![vec![0u32; ny]; nx]; // visits of each pair (i, j)
-            let mut untapered_ok = true;
-            let u = |i: usize, j: usize| -> f64 { (0..dim).map(|c| (x[i * dim + c] - y[j * dim + c]).powi(2)).sum() };
-            let visits = pairs.map_blocks(true, |targets, runs| {
-                let mut v = Vec::new();
-                for &i in targets {
-                    for run in runs {
-                        for &j in &order[run.range.clone()] {
-                            v.push((i, j, run.tapered));
+            for search in [RunSearch::AllBlocks, RunSearch::Bvh] {
+                let pairs = BlockPairs::try_new_with_search(&x, &y, dim, &k, search).unwrap();
+                assert_eq!(pairs.used_bvh(), search == RunSearch::Bvh && k.taper().is_some(), "{name}, case {case}");
+                let order = pairs.source_order();
+                let (nx, ny) = (x.len() / dim, y.len() / dim);
+                let mut seen = vec![vec![0u32; ny]; nx]; // visits of each pair (i, j)
+                let mut untapered_ok = true;
+                let u =
+                    |i: usize, j: usize| -> f64 { (0..dim).map(|c| (x[i * dim + c] - y[j * dim + c]).powi(2)).sum() };
+                let visits = pairs.map_blocks(true, |targets, runs| {
+                    let mut v = Vec::new();
+                    for &i in targets {
+                        for run in runs {
+                            for &j in &order[run.range.clone()] {
+                                v.push((i, j, run.tapered));
+                            }
                         }
                     }
+                    v
+                });
+                for (i, j, tapered) in visits.into_iter().flatten() {
+                    seen[i][j] += 1;
+                    if let (Some(t), false) = (k.taper(), tapered) {
+                        untapered_ok &= u(i, j) <= t.u_in;
+                    }
                 }
-                v
-            });
-            for (i, j, tapered) in visits.into_iter().flatten() {
-                seen[i][j] += 1;
-                if let (Some(t), false) = (k.taper(), tapered) {
-                    untapered_ok &= u(i, j) <= t.u_in;
-                }
-            }
-            assert!(untapered_ok, "{name}, case {case}: an untapered run holds a pair beyond u_in");
-            for (i, row) in seen.iter().enumerate() {
-                for (j, &count) in row.iter().enumerate() {
-                    let needed = k.support_radius().is_none_or(|r| u(i, j) < r * r);
-                    assert!(count <= 1, "{name}, case {case}: pair ({i}, {j}) visited twice");
-                    assert!(!needed || count == 1, "{name}, case {case}: pair ({i}, {j}) within the support is missed");
+                assert!(untapered_ok, "{name}, case {case}: an untapered run holds a pair beyond u_in");
+                for (i, row) in seen.iter().enumerate() {
+                    for (j, &count) in row.iter().enumerate() {
+                        let needed = k.support_radius().is_none_or(|r| u(i, j) < r * r);
+                        assert!(count <= 1, "{name}, case {case}: pair ({i}, {j}) visited twice");
+                        assert!(
+                            !needed || count == 1,
+                            "{name}, case {case}: pair ({i}, {j}) within the support is missed"
+                        );
+                    }
                 }
             }
         }
     }
+}
+
+/// Every target block's (targets, runs), as `BlockPairs` hands them out.
+fn all_runs(pairs: &fshape_kernels::BlockPairs) -> Vec<(Vec<usize>, Vec<fshape_kernels::SourceRun>)> {
+    pairs.map_blocks(false, |targets, runs| (targets.to_vec(), runs.to_vec()))
+}
+
+proptest! {
+    #![proptest_config(Config { cases: 24, rng_seed: RngSeed::Fixed(4321), failure_persistence: None, ..Config::default() })]
+
+    /// The BVH finds exactly the runs a scan of every source block finds
+    /// (so every sum has the same bits), on random sets of many blocks:
+    /// uniform or clustered, in the plane or in space, narrow or wide kernels.
+    #[test]
+    fn the_bvh_finds_the_runs_of_the_scan(seed in any::<u64>(), nx in 1usize..3000, ny in 1usize..6000,
+                                          sigma in 0.002f64..0.3, dim in 2usize..4, clusters in any::<bool>()) {
+        let mut rng = SplitMix64(seed);
+        let draw = |n, rng: &mut SplitMix64| if clusters { clustered(n, dim, rng) } else { uniform(n, dim, rng) };
+        let (x, y) = (draw(nx, &mut rng), draw(ny, &mut rng));
+        let k = Kernel::gaussian(sigma).unwrap().truncated(1e-6).unwrap();
+        let scan = BlockPairs::try_new_with_search(&x, &y, dim, &k, RunSearch::AllBlocks).unwrap();
+        let bvh = BlockPairs::try_new_with_search(&x, &y, dim, &k, RunSearch::Bvh).unwrap();
+        prop_assert!(bvh.used_bvh() && !scan.used_bvh());
+        prop_assert_eq!(scan.source_order(), bvh.source_order());
+        prop_assert!(all_runs(&scan) == all_runs(&bvh));
+    }
+}
+
+/// `RunSearch::Auto` scans the source blocks of small sets and takes the
+/// BVH from 256 blocks (16384 sources) on, with the same runs.
+#[test]
+fn auto_search_takes_the_bvh_for_many_blocks() {
+    let mut rng = SplitMix64(5);
+    let k = Kernel::gaussian(0.02).unwrap().truncated(1e-6).unwrap();
+    for (ny, bvh) in [(16_320, false), (16_384, true)] {
+        let (x, y) = (uniform(2000, 3, &mut rng), uniform(ny, 3, &mut rng));
+        let auto = BlockPairs::try_new(&x, &y, 3, &k).unwrap();
+        assert_eq!(auto.used_bvh(), bvh, "{ny} sources");
+        let scan = BlockPairs::try_new_with_search(&x, &y, 3, &k, RunSearch::AllBlocks).unwrap();
+        assert!(all_runs(&auto) == all_runs(&scan), "{ny} sources");
+    }
+    // An untapered kernel pairs every block: nothing to search.
+    let exact = Kernel::gaussian(0.02).unwrap();
+    let y = uniform(20_000, 3, &mut rng);
+    assert!(!BlockPairs::try_new(&y, &y, 3, &exact).unwrap().used_bvh());
 }
 
 /// The `_into` sums with one workspace reused across kernels, dimensions
