@@ -248,6 +248,8 @@ mod tests {
     use fshape_mesh::CellKind;
 
     proptest! {
+        #![proptest_config(fshape_mesh::test_support::strategies::config(256, 0x10ca1))]
+
         /// The hand-written f64 triangle formula is the generic one, bit for
         /// bit (same operations in the same order), in the plane and in space.
         #[test]

@@ -2,7 +2,9 @@
 //! target block's source runs by scanning every source block
 //! (`RunSearch::AllBlocks`, the path before the BVH) and by the BVH
 //! (`RunSearch::Bvh`), for the table in the README:
-//! `cargo run --release -p fshape-kernels --example block_timing [N…]`.
+//! `cargo run --release -p fshape-kernels --example block_timing [N…]
+//! [--max-pairs P]` (the sum is skipped, "–", where the runs hold more than
+//! P pairs).
 //!
 //! The points are N area-weighted random samples of pycortex's S1 pial
 //! surface (153k vertices; `data/pycortex_S1`), the same for both searches;
@@ -72,10 +74,19 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
 }
 
 fn main() -> anyhow::Result<()> {
-    let sizes: Vec<usize> = match std::env::args().skip(1).map(|a| a.parse()).collect::<Result<Vec<_>, _>>()? {
-        s if s.is_empty() => vec![10_000, 100_000, 1_000_000],
-        s => s,
-    };
+    let (mut sizes, mut max_pairs) = (Vec::new(), f64::INFINITY);
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--max-pairs" => {
+                max_pairs = args.next().ok_or_else(|| anyhow::anyhow!("--max-pairs needs a number"))?.parse()?
+            }
+            n => sizes.push(n.parse()?),
+        }
+    }
+    if sizes.is_empty() {
+        sizes = vec![10_000, 100_000, 1_000_000];
+    }
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/pycortex_S1/lh.pia.ply.gz");
     let s = read_mesh(&path, &ReadOptions::default())?;
     let diam = s.bounding_box().diagonal();
@@ -91,27 +102,35 @@ fn main() -> anyhow::Result<()> {
             let mut build = Vec::new();
             let mut sum = Vec::new();
             let mut out = Vec::new();
+            let mut n_pairs = 0.0;
             for search in [RunSearch::AllBlocks, RunSearch::Bvh] {
                 let pairs = BlockPairs::try_new_with_search(&x, &x, 3, &k, search)?;
                 assert_eq!(pairs.used_bvh(), search == RunSearch::Bvh);
+                let counts =
+                    pairs.map_blocks(true, |t, runs| t.len() * runs.iter().map(|r| r.range.len()).sum::<usize>());
+                n_pairs = counts.iter().sum::<usize>() as f64;
                 build.push(median_ms(5, || {
                     std::hint::black_box(BlockPairs::try_new_with_search(&x, &x, 3, &k, search).ok());
                 }));
+                if n_pairs > max_pairs {
+                    continue;
+                }
                 let sums = KernelSums::try_new(&k, &x, 3)?.with_run_search(search);
                 sum.push(median_ms(if n >= 1_000_000 { 1 } else { 3 }, || {
                     out.push(sums.conv(&x, &b, 1).ok());
                 }));
             }
+            let cell = |v: Option<&f64>| v.map_or("–".to_string(), |ms| format!("{ms:.0}"));
+            let ratio = if sum.len() == 2 { format!("{:.2}", sum[0] / sum[1]) } else { "–".to_string() };
             // The same runs, so the same bits.
             assert!(out.windows(2).all(|w| w[0] == w[1]));
             println!(
-                "| {n} | {f} | {:.1} | {:.1} | {:.1} | {:.0} | {:.0} | {:.3} |",
+                "| {n} | {f} | {n_pairs:.2e} | {:.1} | {:.1} | {:.1} | {} | {} | {ratio} |",
                 build[0],
                 build[1],
                 build[0] / build[1],
-                sum[0],
-                sum[1],
-                sum[0] / sum[1]
+                cell(sum.first()),
+                cell(sum.get(1)),
             );
         }
     }

@@ -292,7 +292,6 @@ fn run<const D: usize, const BD: usize>(
 mod tests {
     use fshape_mesh::generate::SplitMix64;
     use proptest::prelude::*;
-    use proptest::test_runner::{Config, RngSeed};
 
     use super::{L, exp_lanes_f32};
     use crate::{BlockPairs, Kernel, KernelSums, Precision, Profile};
@@ -389,7 +388,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(Config { cases: 6, rng_seed: RngSeed::Fixed(2024), failure_persistence: None, ..Config::default() })]
+        #![proptest_config(fshape_mesh::test_support::strategies::config(6, 2024))]
 
         #[test]
         fn mixed_precision_sums_are_within_the_stated_bound(seed in any::<u64>()) {

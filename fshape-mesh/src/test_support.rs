@@ -138,6 +138,28 @@ pub fn random_vector_field(n: usize, dim: usize, scale: f64, seed: u64) -> Vec<f
 /// proptest strategies over random fshapes, driven by a random seed.
 pub mod strategies {
     use proptest::prelude::*;
+    use proptest::test_runner::{Config, RngSeed};
+
+    /// The configuration of every property test of the workspace: `cases`
+    /// cases drawn from the fixed `seed`, so that CI checks the same cases
+    /// on every run, unless the environment chooses others:
+    /// `FSHAPE_PROPTEST_SEED` (a u64) replaces the seed and
+    /// `FSHAPE_PROPTEST_CASES` the number of cases, for every property test
+    /// at once (README, "Testing"). A failure prints the minimal failing
+    /// input; the same seed and cases reproduce it.
+    ///
+    /// # Panics
+    /// If a variable is set to something other than a number.
+    pub fn config(cases: u32, seed: u64) -> Config {
+        let var = |name: &str| {
+            std::env::var(name).ok().map(|v| {
+                v.trim().parse::<u64>().unwrap_or_else(|_| panic!("{name} must be a non-negative integer, got {v:?}"))
+            })
+        };
+        let cases = var("FSHAPE_PROPTEST_CASES").map_or(cases, |c| u32::try_from(c).unwrap_or(u32::MAX));
+        let seed = var("FSHAPE_PROPTEST_SEED").unwrap_or(seed);
+        Config { cases, rng_seed: RngSeed::Fixed(seed), failure_persistence: None, ..Config::default() }
+    }
 
     use crate::shape::FShape;
 

@@ -5,7 +5,6 @@ use fshape_mesh::generate::{SplitMix64, icosphere};
 use fshape_mesh::test_support::{observed_order, random_direction};
 use fshape_mesh::{CellKind, FShape};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, RngSeed};
 
 #[test]
 fn solves_invert_the_matrix_and_reuse_the_analysis_as_x_moves() {
@@ -29,7 +28,7 @@ fn solves_invert_the_matrix_and_reuse_the_analysis_as_x_moves() {
 }
 
 proptest! {
-    #![proptest_config(Config { cases: 16, rng_seed: RngSeed::Fixed(77), failure_persistence: None, ..Config::default() })]
+    #![proptest_config(fshape_mesh::test_support::strategies::config(16, 77))]
 
     #[test]
     fn every_norm_is_positive_definite(s in fshape_mesh::test_support::strategies::any_small(), seed in any::<u64>()) {

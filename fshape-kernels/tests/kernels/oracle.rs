@@ -5,7 +5,6 @@
 use fshape_kernels::{BlockPairs, Kernel, KernelSums, Precision, RunSearch};
 use fshape_mesh::generate::SplitMix64;
 use proptest::prelude::*;
-use proptest::test_runner::{Config, RngSeed};
 
 use crate::{clustered, kernels, uniform};
 
@@ -45,7 +44,7 @@ fn cases(seed: u64) -> Vec<(usize, Vec<f64>, Vec<f64>)> {
 }
 
 proptest! {
-    #![proptest_config(Config { cases: 12, rng_seed: RngSeed::Fixed(1234), failure_persistence: None, ..Config::default() })]
+    #![proptest_config(fshape_mesh::test_support::strategies::config(12, 1234))]
 
     #[test]
     fn conv_matches_the_brute_force_oracle(seed in any::<u64>(), bdim in 1usize..4) {
@@ -325,7 +324,7 @@ fn all_runs(pairs: &fshape_kernels::BlockPairs) -> Vec<(Vec<usize>, Vec<fshape_k
 }
 
 proptest! {
-    #![proptest_config(Config { cases: 24, rng_seed: RngSeed::Fixed(4321), failure_persistence: None, ..Config::default() })]
+    #![proptest_config(fshape_mesh::test_support::strategies::config(24, 4321))]
 
     /// The BVH finds exactly the runs a scan of every source block finds
     /// (so every sum has the same bits), on random sets of many blocks:

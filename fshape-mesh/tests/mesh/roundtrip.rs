@@ -8,7 +8,7 @@ use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
 use fshape_mesh::test_support::strategies;
 use fshape_mesh::{CellKind, FShape};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, RngSeed};
+use proptest::test_runner::Config;
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("fshape-mesh-tests-{}", std::process::id()));
@@ -17,7 +17,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn config() -> Config {
-    Config { cases: 24, rng_seed: RngSeed::Fixed(0x5eed_f5ba), failure_persistence: None, ..Config::default() }
+    fshape_mesh::test_support::strategies::config(24, 0x5eed_f5ba)
 }
 
 fn geometry_only(s: &FShape) -> FShape {
