@@ -125,6 +125,17 @@ impl<'a> KernelSums<'a> {
         self
     }
 
+    /// The spatial index the per-pair engine has built so far: `None`
+    /// until a sum has needed one (a truncated kernel on the per-pair
+    /// engine), and always `None` on the vectorised block path, which
+    /// needs none. Tells which path a sum took.
+    pub fn spatial_index_built(&self) -> Option<SpatialIndex> {
+        match self.tree.get()?.as_ref().ok()? {
+            Tree::Bvh { .. } => Some(SpatialIndex::Obvhs),
+            Tree::D2(_) | Tree::D3(_) => Some(SpatialIndex::Kiddo),
+        }
+    }
+
     /// Parallel (default) or serial evaluation; the results are identical.
     pub fn with_parallel(mut self, parallel: bool) -> Self {
         self.parallel = parallel;

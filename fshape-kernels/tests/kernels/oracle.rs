@@ -157,33 +157,63 @@ fn bad_points_are_refused() {
 fn both_spatial_indexes_match_the_oracle() {
     use fshape_kernels::{Profile, SpatialIndex};
     let mut rng = SplitMix64(31);
-    // Kernels that go through the per-pair engine when truncated (the
-    // single Gaussian's conv has its own block path; its gradient does not).
-    let k = Kernel::try_new(&Profile::Gaussians { sigmas: vec![0.05, 0.1], weights: vec![1.0, 1.0] })
-        .unwrap()
-        .truncated(1e-6)
-        .unwrap();
-    let g = Kernel::gaussian(0.08).unwrap().truncated(1e-6).unwrap();
+    // Kernels the vectorised block path does not take, so that the
+    // per-pair engine and its spatial index serve them: a Cauchy kernel
+    // and a sum of five Gaussians (the block path takes up to four).
+    let five =
+        Profile::Gaussians { sigmas: vec![0.02, 0.03, 0.04, 0.05, 0.06], weights: vec![1.0, 0.5, 0.3, 0.2, 0.1] };
+    let kernels = [
+        ("Cauchy", Kernel::try_new(&Profile::Cauchy { sigma: 0.01 }).unwrap().truncated(1e-2).unwrap()),
+        ("five Gaussians", Kernel::try_new(&five).unwrap().truncated(1e-6).unwrap()),
+    ];
     for dim in [2, 3] {
         let (x, y) = (clustered(200, dim, &mut rng), uniform(300, dim, &mut rng));
         let b: Vec<f64> = (0..300).map(|_| rng.range(-1.0, 1.0)).collect();
         let a: Vec<f64> = (0..200).map(|_| rng.range(-1.0, 1.0)).collect();
-        let slow = brute(&k, &x, &y, dim, &b, 1);
-        for index in [SpatialIndex::Kiddo, SpatialIndex::Obvhs] {
-            let sums = KernelSums::try_new(&k, &y, dim).unwrap().with_index(index);
-            let fast = sums.conv(&x, &b, 1).unwrap();
+        for (name, k) in &kernels {
+            let radius = k.support_radius().unwrap();
+            assert!(radius < 0.5, "{name}: a support radius of {radius} would keep every pair");
+            let slow = brute(k, &x, &y, dim, &b, 1);
+            // Σ_j 2 k'(u)(a_i b_j)(x_i − y_j), from the profile's derivative.
+            let mut slow_grad = vec![0.0; 200 * dim];
             for i in 0..200 {
-                assert!((fast[i] - slow[i]).abs() <= 1e-14 * magnitude(&k, &b), "{index:?} dim {dim}");
+                for j in 0..300 {
+                    let d: Vec<f64> = (0..dim).map(|c| x[i * dim + c] - y[j * dim + c]).collect();
+                    let u: f64 = d.iter().map(|v| v * v).sum();
+                    for c in 0..dim {
+                        slow_grad[i * dim + c] += 2.0 * k.derivatives(u)[1] * a[i] * b[j] * d[c];
+                    }
+                }
+            }
+            let grad_scale = slow_grad.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for index in [SpatialIndex::Kiddo, SpatialIndex::Obvhs] {
+                let sums = KernelSums::try_new(k, &y, dim).unwrap().with_index(index);
+                assert_eq!(sums.spatial_index_built(), None, "built before any sum");
+                let fast = sums.conv(&x, &b, 1).unwrap();
+                // The path this test is for: fails if these sums move to
+                // another engine or index.
+                assert_eq!(sums.spatial_index_built(), Some(index), "{name}, dim {dim}: conv did not use {index:?}");
+                for i in 0..200 {
+                    assert!((fast[i] - slow[i]).abs() <= 1e-14 * magnitude(k, &b), "{name}, {index:?}, dim {dim}");
+                }
+                let sums = KernelSums::try_new(k, &y, dim).unwrap().with_index(index);
+                let grad = sums.grad_cross(&x, &a, &b, 1).unwrap();
+                assert_eq!(
+                    sums.spatial_index_built(),
+                    Some(index),
+                    "{name}, dim {dim}: grad_cross did not use {index:?}"
+                );
+                for (g, s) in grad.iter().zip(&slow_grad) {
+                    assert!((g - s).abs() <= 1e-13 * grad_scale, "{name}, {index:?}, dim {dim}: {g} vs {s}");
+                }
             }
         }
-        let gk = KernelSums::try_new(&g, &y, dim).unwrap().grad_cross(&x, &a, &b, 1).unwrap();
-        let gb = KernelSums::try_new(&g, &y, dim)
-            .unwrap()
-            .with_index(SpatialIndex::Obvhs)
-            .grad_cross(&x, &a, &b, 1)
-            .unwrap();
-        let scale = gk.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        assert!(gk.iter().zip(&gb).all(|(p, q)| (p - q).abs() <= 1e-13 * scale), "dim {dim}");
+        // The block path builds no index: a truncated Gaussian is summed by
+        // blocks whatever index is asked for.
+        let g = Kernel::gaussian(0.08).unwrap().truncated(1e-6).unwrap();
+        let sums = KernelSums::try_new(&g, &y, dim).unwrap().with_index(SpatialIndex::Kiddo);
+        sums.conv(&x, &b, 1).unwrap();
+        assert_eq!(sums.spatial_index_built(), None, "dim {dim}");
     }
 }
 
