@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs the workspace's property tests once per seed, each
 # property test drawing its cases from that seed instead of its fixed one
-# (fshape_mesh::test_support::strategies::config; README, "Testing"):
+# (fshape_mesh::test_support::strategies::config; README, "Development"):
 #   scripts/proptest-seeds.sh FIRST LAST [CASES]
 # e.g. `scripts/proptest-seeds.sh 1 50` or `scripts/proptest-seeds.sh 7 7 1000`.
 # Prints one line per seed and, for a failing seed, the failing tests with

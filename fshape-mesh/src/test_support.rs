@@ -145,7 +145,8 @@ pub mod strategies {
     /// on every run, unless the environment chooses others:
     /// `FSHAPE_PROPTEST_SEED` (a u64) replaces the seed and
     /// `FSHAPE_PROPTEST_CASES` the number of cases, for every property test
-    /// at once (README, "Testing"). A failure prints the minimal failing
+    /// at once (README, "Development"; `scripts/proptest-seeds.sh` runs
+    /// them over a range of seeds). A failure prints the minimal failing
     /// input; the same seed and cases reproduce it.
     ///
     /// # Panics
