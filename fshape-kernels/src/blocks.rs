@@ -7,8 +7,11 @@
 //! another crate's) and the others skipped; a source block entirely within
 //! the inner radius needs no taper. This keeps the exact path's SIMD speed
 //! on the surviving pairs, which a per-pair tree visit cannot (measured in
-//! the README). Each target's sum runs over source blocks in increasing
-//! order, so the results do not depend on the number of threads.
+//! the README). The source blocks within reach of each target block are
+//! found by an obvhs BVH over the source blocks' boxes when there are many
+//! ([`RunSearch`]), by testing every one when there are few; either way
+//! each target's sum runs over source blocks in increasing order, so the
+//! results depend neither on the search nor on the number of threads.
 
 use rayon::prelude::*;
 
@@ -256,9 +259,12 @@ impl BlockPairs {
         Ok(pairs)
     }
 
-    /// [`BlockPairs::try_new`] without validation, into this value's memory: no allocation
-    /// once it has held as many points (the shooting rebuilds the blocks at
-    /// every evaluation of its vector field, as the points move).
+    /// [`BlockPairs::try_new`] without validation, into this value's
+    /// memory: no allocation once it has held as many points, except the
+    /// BVH search's tree and per-group runs (a truncated kernel with 256
+    /// source blocks or more, where they are small against the sum). The
+    /// shooting rebuilds the blocks at every evaluation of its vector
+    /// field, as the points move.
     pub(crate) fn rebuild(&mut self, x: &[f64], y: &[f64], dim: usize, taper: Option<crate::Taper>) {
         // Exact sums visit every source: sorting would only cost time.
         self.rebuild_blocks(x, y, dim, taper, taper.is_some(), L);

@@ -389,7 +389,8 @@ impl<const D: usize, const BD: usize, const MODE: u8> Block<'_, D, BD, MODE> {
 /// Memory reused by the vectorised sums from call to call: the blocks, the
 /// sources and weights gathered into block order, and the rows of the
 /// targets in block order. After a first call on as many points, a call
-/// allocates nothing (the shooting calls these at every stage).
+/// allocates nothing (the shooting calls these at every stage) unless a
+/// truncated kernel's run search builds its BVH (256 source blocks or more).
 #[derive(Default)]
 pub(crate) struct FastWorkspace {
     pub(crate) pairs: BlockPairs,

@@ -325,8 +325,10 @@ impl<'a> KernelSums<'a> {
 
     /// [`KernelSums::conv_and_grad`] into `conv` (N × bdim) and `grad`
     /// (N × dim), with `ws`'s memory: for sums of up to four Gaussians,
-    /// no allocation once `ws` has served as many points (the other
-    /// kernels compute into temporaries and copy).
+    /// no allocation once `ws` has served as many points, but for the BVH
+    /// of a truncated kernel's run search from 256 source blocks on
+    /// ([`RunSearch`](crate::RunSearch)); the other kernels compute into
+    /// temporaries and copy.
     #[allow(clippy::too_many_arguments)]
     pub fn conv_and_grad_into(
         &self,
