@@ -300,12 +300,13 @@ impl BlockPairs {
         runs.clear();
         run_ptr.clear();
         run_ptr.push(0);
-        let bvh = match (taper, self.search) {
-            (None, _) | (_, RunSearch::AllBlocks) => false,
-            (Some(_), RunSearch::Bvh) => true,
-            (Some(_), RunSearch::Auto) => self.src.n_blocks() >= BVH_MIN_BLOCKS,
-        };
-        self.used_bvh = bvh && sort;
+        // The BVH needs the blocks' boxes, which only sorting computes.
+        self.used_bvh = sort
+            && match (taper, self.search) {
+                (None, _) | (_, RunSearch::AllBlocks) => false,
+                (Some(_), RunSearch::Bvh) => true,
+                (Some(_), RunSearch::Auto) => self.src.n_blocks() >= BVH_MIN_BLOCKS,
+            };
         match taper {
             Some(taper) if self.used_bvh => self.bvh_runs(taper, &mut runs, &mut run_ptr),
             _ => {
