@@ -54,13 +54,9 @@ use fshape_mesh::FShape;
 use fshape_shoot::{Energies, ModelKind, Problem, ShootError, Trajectory};
 use rayon::prelude::*;
 
-use crate::optimize::{Settings, State};
-use crate::session::{Fnv, checkpoint_error, save};
+use crate::session::{Fnv, Journal, StageStart, checkpoint_error, run_stage};
 use crate::unknowns::Unknowns;
-use crate::{
-    CHECKPOINT_FORMAT, Checkpoint, Config, Control, Current, Iteration, MatchError, Observer, Outcome, Plan,
-    StageRecord,
-};
+use crate::{CHECKPOINT_FORMAT, Checkpoint, Config, MatchError, Observer, Outcome, Plan, StageRecord};
 
 /// The template blocks' change of variables and initial Hessian.
 struct TemplateMetric {
@@ -211,9 +207,10 @@ impl AtlasObjective<'_> {
             Err(err.into())
         }
     }
+}
 
-    /// J's mean parts at the evaluated point whose J is `value` (as
-    /// [`crate::unknowns::MatchObjective::parts_of`]).
+impl crate::session::StageObjective for AtlasObjective<'_> {
+    /// J's mean parts (as [`crate::unknowns::MatchObjective::parts_of`]).
     fn parts_of(&mut self, value: f64) -> Option<Energies> {
         let found = self.recent.iter().rev().find(|e| e.value.to_bits() == value.to_bits()).copied();
         self.recent.clear();
@@ -935,66 +932,28 @@ impl Atlas {
         let stages = self.plan.stages.len();
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
-            let current = self.checkpoint.current.take();
-            let x0 = match (&current, self.checkpoint.warm.clone()) {
-                (Some(_), _) => Vec::new(),
-                (None, None) => self.initial_unknowns_at(k)?,
-                // On a finer template the solution is carried over.
-                (None, Some(w)) => self.prolongate_unknowns(k - 1, &w, k)?,
+            let begin = match self.checkpoint.current.take() {
+                Some(current) => StageStart::Resume(Box::new(current)),
+                None => StageStart::At(match self.checkpoint.warm.clone() {
+                    None => self.initial_unknowns_at(k)?,
+                    // On a finer template the solution is carried over.
+                    Some(w) => self.prolongate_unknowns(k - 1, &w, k)?,
+                }),
             };
             self.stage_target(k)?;
-            let spec = self.plan.stages[k].clone();
-            let settings = Settings {
-                max_iterations: spec.max_iterations,
-                decrease_tolerance: spec.decrease.0,
-                decrease_window: spec.decrease.1,
-                ..self.plan.settings
-            };
-            let file = self.checkpoint_file.clone();
-            let mut checkpoint = std::mem::replace(&mut self.checkpoint, Checkpoint::empty());
             let mut objective = self.level.objective(self.cluster.as_ref());
-            let mut current = match current {
-                Some(c) => c,
-                None => {
-                    let state = State::start(x0, &mut objective)?;
-                    let parts = objective.parts_of(state.value).expect("the starting point was evaluated");
-                    Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
-                }
+            let mut journal = Journal {
+                checkpoint: &mut self.checkpoint,
+                file: self.checkpoint_file.as_deref(),
+                clock: &clock,
+                stages,
             };
-            if observer.stage_started(k, stages, &spec, current.iterations.len()) == Control::Stop {
-                checkpoint.current = Some(current);
-                save(&mut checkpoint, file.as_deref(), clock())?;
-                self.checkpoint = checkpoint;
+            let spec = &self.plan.stages[k];
+            if run_stage(k, spec, &self.plan.settings, &mut objective, begin, &mut journal, observer)?
+                == Outcome::Interrupted
+            {
                 return Ok(Outcome::Interrupted);
             }
-            let stop = loop {
-                if let Some(stop) = current.state.iterate(&settings, &mut objective)? {
-                    break stop;
-                }
-                let parts = objective.parts_of(current.state.value).expect("an accepted step was evaluated");
-                let record = Iteration::of(&current.state, &parts);
-                current.iterations.push(record.clone());
-                let control = observer.iteration(k, &record);
-                checkpoint.current = Some(current);
-                save(&mut checkpoint, file.as_deref(), clock())?;
-                if control == Control::Stop {
-                    self.checkpoint = checkpoint;
-                    return Ok(Outcome::Interrupted);
-                }
-                current = checkpoint.current.take().expect("just set");
-            };
-            let record = StageRecord {
-                kernel_geom: spec.label.clone(),
-                stop,
-                reason: stop.describe().into(),
-                initial: current.initial,
-                iterations: current.iterations,
-            };
-            checkpoint.warm = Some(current.state.x);
-            observer.stage_finished(k, &record);
-            checkpoint.done.push(record);
-            save(&mut checkpoint, file.as_deref(), clock())?;
-            self.checkpoint = checkpoint;
         }
         Ok(Outcome::Finished)
     }

@@ -12,7 +12,7 @@ use fshape_mesh::FShape;
 use fshape_shoot::{Energies, Problem, Trajectory};
 use serde::{Deserialize, Serialize};
 
-use crate::optimize::{Settings, State, Stop};
+use crate::optimize::{Objective, Settings, State, Stop};
 use crate::unknowns::{MatchObjective, Unknowns};
 use crate::{Config, MatchError, Plan, StageSpec};
 
@@ -94,20 +94,6 @@ pub struct Checkpoint {
     pub warm: Option<Vec<f64>>,
     /// Wall seconds spent on this registration so far, over every run.
     pub seconds: f64,
-}
-
-impl Checkpoint {
-    /// A placeholder while a run holds the real one.
-    pub(crate) fn empty() -> Checkpoint {
-        Checkpoint {
-            format: CHECKPOINT_FORMAT,
-            fingerprint: String::new(),
-            done: Vec::new(),
-            current: None,
-            warm: None,
-            seconds: 0.0,
-        }
-    }
 }
 
 /// What an observer wants after an event.
@@ -254,6 +240,108 @@ pub(crate) fn save(checkpoint: &mut Checkpoint, file: Option<&Path>, seconds: f6
     let bytes = serde_json::to_vec_pretty(checkpoint).map_err(|e| checkpoint_error(e.to_string()))?;
     fshape_mesh::io::write_atomic(path, &bytes, false)
         .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })
+}
+
+/// An objective that remembers J's parts at its recent evaluations.
+pub(crate) trait StageObjective: Objective {
+    /// J's parts at the evaluated point whose J is `value`, bit for bit
+    /// (the accepted point of a line search, whose value the optimiser's
+    /// state holds), searched among the evaluations since the last call,
+    /// which are then forgotten.
+    fn parts_of(&mut self, value: f64) -> Option<Energies>;
+}
+
+/// Where a stage starts.
+pub(crate) enum StageStart {
+    /// Where an interrupted run left it.
+    Resume(Box<Current>),
+    /// At these unknowns, evaluated first.
+    At(Vec<f64>),
+}
+
+/// A run's checkpoint, where it is written, and the run's clock.
+pub(crate) struct Journal<'a> {
+    pub checkpoint: &'a mut Checkpoint,
+    pub file: Option<&'a Path>,
+    /// Wall seconds over every run of this registration.
+    pub clock: &'a dyn Fn() -> f64,
+    /// The schedule's number of stages.
+    pub stages: usize,
+}
+
+impl Journal<'_> {
+    fn save(&mut self) -> Result<(), MatchError> {
+        save(self.checkpoint, self.file, (self.clock)())
+    }
+}
+
+/// Runs stage `k` (whose rule is `spec`, the other settings `base`) from
+/// `start` until it stops by its rule, checkpointing after every accepted
+/// iteration; a finished stage goes to the journal's finished stages and
+/// its end becomes the warm start. [`Outcome::Interrupted`] when the
+/// observer stops it, with the stage under way in the checkpoint.
+/// [`Session::run`] and [`crate::Atlas::run`] share it.
+pub(crate) fn run_stage<O>(
+    k: usize,
+    spec: &StageSpec,
+    base: &Settings,
+    objective: &mut O,
+    start: StageStart,
+    journal: &mut Journal<'_>,
+    observer: &mut impl Observer,
+) -> Result<Outcome, MatchError>
+where
+    O: StageObjective,
+    MatchError: From<O::Error>,
+{
+    let settings = Settings {
+        max_iterations: spec.max_iterations,
+        decrease_tolerance: spec.decrease.0,
+        decrease_window: spec.decrease.1,
+        ..*base
+    };
+    let mut current = match start {
+        StageStart::Resume(current) => *current,
+        StageStart::At(x0) => {
+            let state = State::start(x0, objective)?;
+            let parts = objective.parts_of(state.value).expect("the starting point was evaluated");
+            Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
+        }
+    };
+    if observer.stage_started(k, journal.stages, spec, current.iterations.len()) == Control::Stop {
+        journal.checkpoint.current = Some(current);
+        journal.save()?;
+        return Ok(Outcome::Interrupted);
+    }
+    let stop = loop {
+        if let Some(stop) = current.state.iterate(&settings, objective)? {
+            break stop;
+        }
+        // The accepted point's parts: a line search may accept a point
+        // before its last evaluation.
+        let parts = objective.parts_of(current.state.value).expect("an accepted step was evaluated");
+        let record = Iteration::of(&current.state, &parts);
+        current.iterations.push(record.clone());
+        let control = observer.iteration(k, &record);
+        journal.checkpoint.current = Some(current);
+        journal.save()?;
+        if control == Control::Stop {
+            return Ok(Outcome::Interrupted);
+        }
+        current = journal.checkpoint.current.take().expect("just set");
+    };
+    let record = StageRecord {
+        kernel_geom: spec.label.clone(),
+        stop,
+        reason: stop.describe().into(),
+        initial: current.initial,
+        iterations: current.iterations,
+    };
+    journal.checkpoint.warm = Some(current.state.x);
+    observer.stage_finished(k, &record);
+    journal.checkpoint.done.push(record);
+    journal.save()?;
+    Ok(Outcome::Finished)
 }
 
 pub(crate) fn checkpoint_error(problem: impl Into<String>) -> MatchError {
@@ -473,74 +561,42 @@ impl Session {
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
             self.stage_target(k)?;
-            let spec = &self.plan.stages[k];
-            let settings = Settings {
-                max_iterations: spec.max_iterations,
-                decrease_tolerance: spec.decrease.0,
-                decrease_window: spec.decrease.1,
-                ..self.plan.settings
+            let begin = match self.checkpoint.current.take() {
+                Some(current) => StageStart::Resume(Box::new(current)),
+                None => StageStart::At(self.warm_start(k)?),
             };
             let mut objective = MatchObjective::new(&self.problem, self.unknowns.clone());
-            let mut current = match self.checkpoint.current.take() {
-                Some(c) => c,
-                None => {
-                    let x0 = match &self.checkpoint.warm {
-                        None => vec![0.0; self.unknowns.len()],
-                        Some(w) if k > 0 && self.template_of(k - 1).0 != self.template_of(k).0 => {
-                            // A finer template: carry the momenta over.
-                            let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
-                            let kind = self.plan.model.kind();
-                            let (p0, pf) = crate::resolution::prolongate(
-                                self.template_of(k - 1).1,
-                                self.template_of(k).1,
-                                &p0,
-                                &pf,
-                                kind,
-                            )?;
-                            self.unknowns.pack(&p0, &pf)
-                        }
-                        Some(w) => w.clone(),
-                    };
-                    let state = State::start(x0, &mut objective)?;
-                    let parts = objective.parts_of(state.value).expect("the starting point was evaluated");
-                    Current { initial: Iteration::of(&state, &parts), state, iterations: Vec::new() }
-                }
+            let mut journal = Journal {
+                checkpoint: &mut self.checkpoint,
+                file: self.checkpoint_file.as_deref(),
+                clock: &clock,
+                stages,
             };
-            if observer.stage_started(k, stages, spec, current.iterations.len()) == Control::Stop {
-                self.checkpoint.current = Some(current);
-                save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;
+            let spec = &self.plan.stages[k];
+            if run_stage(k, spec, &self.plan.settings, &mut objective, begin, &mut journal, observer)?
+                == Outcome::Interrupted
+            {
                 return Ok(Outcome::Interrupted);
             }
-            let stop = loop {
-                if let Some(stop) = current.state.iterate(&settings, &mut objective)? {
-                    break stop;
-                }
-                // The accepted point's parts: a line search may accept a
-                // point before its last evaluation.
-                let parts = objective.parts_of(current.state.value).expect("an accepted step was evaluated");
-                let record = Iteration::of(&current.state, &parts);
-                current.iterations.push(record.clone());
-                let control = observer.iteration(k, &record);
-                self.checkpoint.current = Some(current);
-                save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;
-                if control == Control::Stop {
-                    return Ok(Outcome::Interrupted);
-                }
-                current = self.checkpoint.current.take().expect("just set");
-            };
-            let record = StageRecord {
-                kernel_geom: spec.label.clone(),
-                stop,
-                reason: stop.describe().into(),
-                initial: current.initial,
-                iterations: current.iterations,
-            };
-            self.checkpoint.warm = Some(current.state.x);
-            observer.stage_finished(k, &record);
-            self.checkpoint.done.push(record);
-            save(&mut self.checkpoint, self.checkpoint_file.as_deref(), clock())?;
         }
         Ok(Outcome::Finished)
+    }
+
+    /// Where stage `k` starts: zero on the first, the last stage's end
+    /// after it, carried over to a finer template.
+    fn warm_start(&self, k: usize) -> Result<Vec<f64>, MatchError> {
+        Ok(match &self.checkpoint.warm {
+            None => vec![0.0; self.unknowns.len()],
+            Some(w) if k > 0 && self.template_of(k - 1).0 != self.template_of(k).0 => {
+                // A finer template: carry the momenta over.
+                let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
+                let kind = self.plan.model.kind();
+                let (p0, pf) =
+                    crate::resolution::prolongate(self.template_of(k - 1).1, self.template_of(k).1, &p0, &pf, kind)?;
+                self.unknowns.pack(&p0, &pf)
+            }
+            Some(w) => w.clone(),
+        })
     }
 
     /// The result of a finished run: the final momenta, shot once more with

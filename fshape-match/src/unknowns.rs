@@ -260,6 +260,12 @@ impl<'p> MatchObjective<'p> {
     }
 }
 
+impl crate::session::StageObjective for MatchObjective<'_> {
+    fn parts_of(&mut self, value: f64) -> Option<Energies> {
+        MatchObjective::parts_of(self, value)
+    }
+}
+
 impl crate::optimize::Objective for MatchObjective<'_> {
     type Error = ShootError;
 
