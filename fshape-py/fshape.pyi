@@ -208,10 +208,17 @@ def match(
     progress: Optional[Progress] = None,
     stage_templates: Optional[Sequence[FShape]] = None,
     times: Optional[Sequence[float]] = None,
+    checkpoint: Union[str, "PathLike[str]", None] = None,
 ) -> MatchResult:
     """Registers source onto target as `fshape match` does; the result has
     the momenta, the geodesic at `times` (default 0, 0.25, ..., 1), the
-    energies, the match quality, and the config with the weights used."""
+    energies, the match quality, and the config with the weights used.
+
+    With `checkpoint` (a path) the run writes its state there after every
+    accepted iteration and, when the file exists, resumes from it: calling
+    again with the same arguments continues a run stopped by the progress
+    callback, Ctrl-C or a kill, to the same result bit for bit. A
+    checkpoint written for other inputs or another config is refused."""
 
 def atlas(
     subjects: Sequence[FShape],
@@ -219,5 +226,7 @@ def atlas(
     template: Optional[FShape] = None,
     progress: Optional[Progress] = None,
     stage_templates: Optional[Sequence[FShape]] = None,
+    checkpoint: Union[str, "PathLike[str]", None] = None,
 ) -> AtlasResult:
-    """Estimates a metamorphosis atlas as `fshape atlas` does."""
+    """Estimates a metamorphosis atlas as `fshape atlas` does; `checkpoint`
+    as for `match`."""

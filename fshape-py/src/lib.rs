@@ -6,7 +6,7 @@
 //! computes, so other Python threads run meanwhile. The type stubs are in
 //! `fshape.pyi` beside this crate.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use fshape_match::{Config, Control, Iteration, MatchError, Observer, Outcome, StageRecord, StageSpec};
 use fshape_mesh::io::{self, Encoding, ReadOptions};
@@ -461,13 +461,17 @@ impl Progress {
     }
 
     /// The run's outcome as Python sees it: an error if the callback
-    /// raised or stopped it.
-    fn finish(self, outcome: Outcome) -> PyResult<()> {
+    /// raised or stopped it (naming the checkpoint that resumes it).
+    fn finish(self, outcome: Outcome, checkpoint: Option<&Path>) -> PyResult<()> {
         if let Some(e) = self.error {
             return Err(e);
         }
         if outcome == Outcome::Interrupted || self.stopped {
-            return Err(err("stopped by the progress callback (it returned True)"));
+            let resume = match checkpoint {
+                Some(path) => format!("; the same call with checkpoint={} resumes it", path.display()),
+                None => String::new(),
+            };
+            return Err(err(format!("stopped by the progress callback (it returned True){resume}")));
         }
         Ok(())
     }
@@ -520,6 +524,11 @@ fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<O
 /// given, is called with a dict per event (`event`: "stage", "iteration",
 /// "stage_finished"); returning True stops the run (FShapeError).
 /// `stage_templates` are coarser templates for the stages before the last.
+/// `checkpoint`, a path, is written after every accepted iteration; when
+/// the file exists the run resumes from it (to the bits of a run never
+/// stopped), so the same call continues a run stopped by the callback,
+/// Ctrl-C or a kill, and returns at once once it has finished. A
+/// checkpoint of other inputs or configuration is refused.
 ///
 /// Returns a dict: `p0` (n × d), `pf` (n), `energies`, `quality` and
 /// `initial_quality` (how close the matched shape and the template are to
@@ -528,7 +537,8 @@ fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<O
 /// `signals` T × n, `hamiltonian`), `matched` (the FShape at t = 1), and
 /// `config` (the configuration with the weights used, for `shoot`).
 #[pyfunction(name = "match")]
-#[pyo3(signature = (source, target, config, progress = None, stage_templates = None, times = None))]
+#[pyo3(signature = (source, target, config, progress = None, stage_templates = None, times = None, checkpoint = None))]
+#[expect(clippy::too_many_arguments, reason = "one per keyword argument of the Python call")]
 fn match_shapes<'py>(
     py: Python<'py>,
     source: &Bound<'py, PyAny>,
@@ -537,6 +547,7 @@ fn match_shapes<'py>(
     progress: Option<Py<PyAny>>,
     stage_templates: Option<Vec<Bound<'py, PyAny>>>,
     times: Option<Vec<f64>>,
+    checkpoint: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (x, y) = (shape_of(source)?, shape_of(target)?);
     let config = config_of(config)?;
@@ -551,6 +562,13 @@ fn match_shapes<'py>(
         if let Some(t) = templates {
             session = session.with_stage_templates(t)?;
         }
+        if let Some(path) = &checkpoint {
+            // The same call continues a stopped run.
+            if path.exists() {
+                session = session.resume_from_file(path)?;
+            }
+            session = session.with_checkpoint_file(path);
+        }
         let outcome = session.run(&mut observer)?;
         let result = if outcome == Outcome::Finished { Some(session.result()?) } else { None };
         let used = config.resolved(session.plan().scales);
@@ -558,7 +576,7 @@ fn match_shapes<'py>(
         Ok((outcome, result, used, template))
     });
     let (outcome, result, used, template) = run.map_err(err)?;
-    observer.finish(outcome)?;
+    observer.finish(outcome, checkpoint.as_deref())?;
     let r = result.expect("a finished run has a result");
     let d = PyDict::new(py);
     let dim = template.dim();
@@ -582,7 +600,7 @@ fn match_shapes<'py>(
 /// Estimates a metamorphosis atlas of `subjects` (FShapes) as `fshape
 /// atlas` does: `template` is the initial template (default: the first
 /// subject; without a signal it takes the subjects' mean), `config` a
-/// dict, TOML path or text, `progress` as for `match`.
+/// dict, TOML path or text, `progress` and `checkpoint` as for `match`.
 ///
 /// Returns a dict: `template` (the estimated FShape), `template_momenta`
 /// (hypertemplate model, else None), `subjects` (per subject: `p0`, `pf`,
@@ -590,7 +608,7 @@ fn match_shapes<'py>(
 /// `geodesic`), `energies` (means), `stages`, `iterations`, `evaluations`,
 /// `seconds`.
 #[pyfunction]
-#[pyo3(signature = (subjects, config, template = None, progress = None, stage_templates = None))]
+#[pyo3(signature = (subjects, config, template = None, progress = None, stage_templates = None, checkpoint = None))]
 fn atlas<'py>(
     py: Python<'py>,
     subjects: Vec<Bound<'py, PyAny>>,
@@ -598,6 +616,7 @@ fn atlas<'py>(
     template: Option<&Bound<'py, PyAny>>,
     progress: Option<Py<PyAny>>,
     stage_templates: Option<Vec<Bound<'py, PyAny>>>,
+    checkpoint: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let subjects: Vec<FShape> = subjects.iter().map(shape_of).collect::<PyResult<_>>()?;
     if subjects.is_empty() {
@@ -616,13 +635,20 @@ fn atlas<'py>(
         if let Some(t) = templates {
             atlas = atlas.with_stage_templates(t)?;
         }
+        if let Some(path) = &checkpoint {
+            // The same call continues a stopped run.
+            if path.exists() {
+                atlas = atlas.resume_from_file(path)?;
+            }
+            atlas = atlas.with_checkpoint_file(path);
+        }
         let outcome = atlas.run(&mut observer)?;
         let result = if outcome == Outcome::Finished { Some(atlas.result()?) } else { None };
         let steps = atlas.plan().model.steps();
         Ok((outcome, result, steps))
     });
     let (outcome, result, steps) = run.map_err(err)?;
-    observer.finish(outcome)?;
+    observer.finish(outcome, checkpoint.as_deref())?;
     let r = result.expect("a finished run has a result");
     let dim = r.template.dim();
     let d = PyDict::new(py);

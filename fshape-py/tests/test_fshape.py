@@ -193,6 +193,45 @@ def test_the_callback_stops_a_run_and_its_exceptions_propagate():
         fshape.match(src, tgt, CONFIG, progress=boom)
 
 
+def stop_at(n):
+    """A progress callback that stops the run at its n-th iteration."""
+    seen = []
+
+    def callback(event):
+        seen.append(event["event"] == "iteration")
+        return sum(seen) == n and seen[-1]
+
+    return callback
+
+
+def test_a_match_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(tmp_path):
+    src, tgt = sphere_pair()
+    whole = fshape.match(src, tgt, CONFIG)
+    assert whole["iterations"] > 4
+    path = tmp_path / "run.json"
+    with pytest.raises(fshape.FShapeError, match=r"checkpoint=.*run\.json resumes it"):
+        fshape.match(src, tgt, CONFIG, progress=stop_at(4), checkpoint=path)
+    assert path.exists()
+    events = []
+    resumed = fshape.match(src, tgt, CONFIG, progress=events.append, checkpoint=path)
+    # It went on from the fourth iteration, not from the start.
+    assert sum(e["event"] == "iteration" for e in events) == whole["iterations"] - 4
+    assert resumed["iterations"] == whole["iterations"]
+    assert np.array_equal(resumed["p0"], whole["p0"]) and np.array_equal(resumed["pf"], whole["pf"])
+    assert np.array_equal(resumed["matched"].points, whole["matched"].points)
+    # Once finished, the same call returns the result without iterating.
+    events.clear()
+    again = fshape.match(src, tgt, CONFIG, progress=events.append, checkpoint=path)
+    assert not any(e["event"] == "iteration" for e in events)
+    assert np.array_equal(again["p0"], whole["p0"])
+    # A checkpoint of other inputs, or a damaged one, is refused, naming the file.
+    with pytest.raises(fshape.FShapeError, match=r"run\.json: .*other inputs"):
+        fshape.match(src, src, CONFIG, checkpoint=path)
+    path.write_text("{not json")
+    with pytest.raises(fshape.FShapeError, match=r"run\.json: not a readable checkpoint"):
+        fshape.match(src, tgt, CONFIG, checkpoint=path)
+
+
 def test_the_gil_is_released_while_the_library_computes():
     # The cortex's attachment takes seconds. While a thread computes it,
     # this thread keeps running Python: it ticks every millisecond. Were
@@ -233,6 +272,20 @@ def test_an_atlas_of_three_subjects_brings_its_template_closer():
     after = sum(s["energies"]["attachment"] for s in r["subjects"])
     before = sum(s["initial_attachment"] for s in r["subjects"])
     assert 0 < after < 0.5 * before
+
+
+def test_an_atlas_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(tmp_path):
+    src, tgt = sphere_pair()
+    config = {**CONFIG, "optimizer": {"max_iterations": 4}}
+    whole = fshape.atlas([src, tgt], config)
+    path = tmp_path / "atlas.json"
+    with pytest.raises(fshape.FShapeError, match="resumes it"):
+        fshape.atlas([src, tgt], config, progress=stop_at(3), checkpoint=path)
+    resumed = fshape.atlas([src, tgt], config, checkpoint=path)
+    assert resumed["iterations"] == whole["iterations"] > 3
+    assert np.array_equal(resumed["template"].points, whole["template"].points)
+    assert np.array_equal(resumed["template"].signal, whole["template"].signal)
+    assert all(np.array_equal(a["p0"], b["p0"]) for a, b in zip(resumed["subjects"], whole["subjects"]))
 
 
 @pytest.mark.parametrize("encoding", ["ascii", "base64", "gzip-base64"])
