@@ -92,6 +92,8 @@ class Quality(TypedDict):
     target_within_1pct: float
     signal_rms: Optional[float]
     signal_p99: Optional[float]
+    signal_rms_within_1pct: Optional[float]
+    signal_rms_beyond_1pct: Optional[float]
     signal_roughness: Optional[float]
     signal_range: float
 

@@ -72,7 +72,8 @@ enum Command {
     /// registration: the mean symmetric closest-point distance, its 95th
     /// percentile and maximum, and the share of Y within 1 % of X, as
     /// fractions of Y's bounding-box diagonal; the signal error at closest
-    /// points (rms and 99th percentile, of Y's signal range) and the
+    /// points (rms and 99th percentile, of Y's signal range; the rms also
+    /// over the part of Y within 1 % of X and the part beyond) and the
     /// roughness of X's signal against Y's (the ratio of their Dirichlet
     /// seminorms: above 1 when X's signal oscillates).
     Quality {

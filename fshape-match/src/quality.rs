@@ -19,7 +19,11 @@
 //! interpolated at its closest point on X minus the target's signal there;
 //! its area-weighted root mean square as a fraction of the target signal's
 //! range (max − min over the vertices), and its 99th percentile (isolated
-//! spots of wrong value, which the rms dilutes).
+//! spots of wrong value, which the rms dilutes). The rms is also split
+//! between the target's area within 1 % of the diagonal of X (where the
+//! geometry matched: the error there is the signal's own) and the area
+//! beyond (where part of the error is the geometry's, and where the paper
+//! sees lumped-L² oscillations).
 //!
 //! And the signal's roughness: the Dirichlet seminorm of the matched
 //! signal on the matched shape, (∫_X |∇f|²)^½ of the P1 interpolant, over
@@ -59,6 +63,15 @@ pub struct Quality {
     /// the target signal's range (area-weighted); `None` as `signal_rms`.
     #[serde(default)]
     pub signal_p99: Option<f64>,
+    /// The same rms over the target's area within 1 % of the diagonal of
+    /// the shape (the share `target_within_1pct`); `None` as `signal_rms`
+    /// or when that area is empty.
+    #[serde(default)]
+    pub signal_rms_within_1pct: Option<f64>,
+    /// The same rms over the rest of the target's area; `None` as
+    /// `signal_rms` or when the whole target is within 1 %.
+    #[serde(default)]
+    pub signal_rms_beyond_1pct: Option<f64>,
     /// Dirichlet seminorm of the shape's signal over the target's
     /// (module docs); `None` when either has no signal or the target's
     /// signal is constant.
@@ -79,7 +92,13 @@ impl Quality {
             100.0 * self.target_within_1pct
         );
         if let Some(e) = self.signal_rms {
-            s.push_str(&format!(", signal error {:.2}% of its range (rms)", 100.0 * e));
+            s.push_str(&format!(", signal error {:.2}% of its range (rms", 100.0 * e));
+            let part = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
+            s.push_str(&format!(
+                "; {} within 1%, {} beyond)",
+                part(self.signal_rms_within_1pct),
+                part(self.signal_rms_beyond_1pct)
+            ));
             if let Some(p) = self.signal_p99 {
                 s.push_str(&format!(", {:.2}% (99th percentile)", 100.0 * p));
             }
@@ -365,12 +384,15 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         .collect();
     let max_distance = pooled.iter().map(|p| p.0).fold(0.0, f64::max) / diagonal;
     let p95_distance = quantile(pooled, 0.95) / diagonal;
-    let within: f64 = dy.iter().zip(&ys.weights).filter(|(c, _)| c.distance <= 0.01 * diagonal).map(|(_, w)| w).sum();
+
     let range = target.signal().map_or(0.0, |f| {
         let (lo, hi) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
         if hi >= lo { hi - lo } else { 0.0 }
     });
-    let (signal_rms, signal_p99) = if range > 0.0 && shape.signal().is_some() {
+    let near = |c: &Closest| c.distance <= 0.01 * diagonal;
+    let (mut signal_rms, mut signal_p99, mut signal_rms_within_1pct, mut signal_rms_beyond_1pct) =
+        (None, None, None, None);
+    if range > 0.0 && shape.signal().is_some() {
         let errors: Vec<(f64, f64)> = dy
             .iter()
             .enumerate()
@@ -380,15 +402,25 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
                 ((fs - ft).abs(), ys.weights[i])
             })
             .collect();
-        let sum: f64 = errors.iter().map(|(e, w)| w * e * e).sum();
-        (Some((sum / wy).sqrt() / range), Some(quantile(errors, 0.99) / range))
-    } else {
-        (None, None)
-    };
+        // The rms over the samples `keep` selects, None if they have no area.
+        let rms = |keep: &dyn Fn(&Closest) -> bool| {
+            let (sum, area) = errors
+                .iter()
+                .zip(&dy)
+                .filter(|(_, c)| keep(c))
+                .fold((0.0, 0.0), |(s, a), ((e, w), _)| (s + w * e * e, a + w));
+            (area > 0.0).then(|| (sum / area).sqrt() / range)
+        };
+        signal_rms = rms(&|_| true);
+        signal_rms_within_1pct = rms(&|c| near(c));
+        signal_rms_beyond_1pct = rms(&|c| !near(c));
+        signal_p99 = Some(quantile(errors, 0.99) / range);
+    }
     let signal_roughness = match (dirichlet_seminorm(shape), dirichlet_seminorm(target)) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
     };
+    let within: f64 = dy.iter().zip(&ys.weights).filter(|(c, _)| near(c)).map(|(_, w)| w).sum();
     Ok(Quality {
         diagonal,
         mean_distance,
@@ -397,6 +429,8 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         target_within_1pct: within / wy,
         signal_rms,
         signal_p99,
+        signal_rms_within_1pct,
+        signal_rms_beyond_1pct,
         signal_roughness,
         signal_range: range,
     })

@@ -30,9 +30,46 @@ fn parallel_squares_are_at_their_offset_and_a_shifted_signal_at_its_shift() {
         assert!((q.signal_rms.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{:?}", q.signal_rms);
         // The error is |c| everywhere: so is its 99th percentile.
         assert!((q.signal_p99.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{:?}", q.signal_p99);
+        // All of the target is on one side of 1 %: that part is the whole rms.
+        let (within, beyond) = (q.signal_rms_within_1pct, q.signal_rms_beyond_1pct);
+        if h <= 0.01 * diag {
+            assert_eq!((within, beyond), (q.signal_rms, None));
+        } else {
+            assert_eq!((within, beyond), (None, q.signal_rms));
+        }
         // The same gradient on the same square.
         assert!((q.signal_roughness.unwrap() - 1.0).abs() < 1e-12, "{:?}", q.signal_roughness);
     }
+}
+
+#[test]
+fn the_signal_error_splits_at_one_percent_into_parts_that_make_the_whole() {
+    // The half x > 0 of the target's square lifted by 0.05 (1.8 % of the
+    // diagonal) and given the signal x + 0.3; the half x < 0 left in place
+    // with x + 0.1. Far from the fold, the part within 1 % sees the
+    // error 0.1 and the part beyond 0.3 (of the range 2).
+    let target = square_at(0.0, 0.0);
+    let (pts, f): (Vec<f64>, Vec<f64>) = {
+        let mut pts = target.points().to_vec();
+        let mut f = Vec::new();
+        for p in pts.chunks_exact_mut(3) {
+            let right = p[0] > 0.0;
+            p[2] = if right { 0.05 } else { 0.0 };
+            f.push(p[0] + if right { 0.3 } else { 0.1 });
+        }
+        (pts, f)
+    };
+    let shape = target.clone().with_points(pts).unwrap().with_signal(Some(f)).unwrap();
+    let q = quality(&shape, &target).unwrap();
+    let (rms, a) = (q.signal_rms.unwrap(), q.target_within_1pct);
+    let (within, beyond) = (q.signal_rms_within_1pct.unwrap(), q.signal_rms_beyond_1pct.unwrap());
+    // Area-weighted means of squares: the parts recombine to the whole.
+    let whole = (a * within * within + (1.0 - a) * beyond * beyond).sqrt();
+    assert!((whole - rms).abs() < 1e-12 * rms, "{whole} against {rms}");
+    // About half the area on each side, each with its own error (the
+    // triangles across x = 0 blur the two a little).
+    assert!((a - 0.5).abs() < 0.1, "{q:?}");
+    assert!((within - 0.05).abs() < 0.01 && (beyond - 0.15).abs() < 0.01, "{q:?}");
 }
 
 #[test]
