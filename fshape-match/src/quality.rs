@@ -384,7 +384,6 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         .collect();
     let max_distance = pooled.iter().map(|p| p.0).fold(0.0, f64::max) / diagonal;
     let p95_distance = quantile(pooled, 0.95) / diagonal;
-
     let range = target.signal().map_or(0.0, |f| {
         let (lo, hi) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
         if hi >= lo { hi - lo } else { 0.0 }
