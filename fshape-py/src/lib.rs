@@ -527,8 +527,8 @@ fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<O
 /// `checkpoint`, a path, is written after every accepted iteration; when
 /// the file exists the run resumes from it (to the bits of a run never
 /// stopped), so the same call continues a run stopped by the callback,
-/// Ctrl-C or a kill, and returns at once once it has finished. A
-/// checkpoint of other inputs or configuration is refused.
+/// Ctrl-C or a kill; on a finished run it returns the result without
+/// iterating. A checkpoint of other inputs or configuration is refused.
 ///
 /// Returns a dict: `p0` (n × d), `pf` (n), `energies`, `quality` and
 /// `initial_quality` (how close the matched shape and the template are to
