@@ -923,8 +923,8 @@ impl Atlas {
     }
 
     /// Runs the remaining stages until each stops by its rule, or until
-    /// `observer` says [`Control::Stop`]. J and its parts in the records
-    /// are means over the subjects.
+    /// `observer` says [`Control::Stop`](crate::Control::Stop). J and its
+    /// parts in the records are means over the subjects.
     pub fn run(&mut self, observer: &mut impl Observer) -> Result<Outcome, MatchError> {
         let start = Instant::now();
         let earlier = self.checkpoint.seconds;
