@@ -212,9 +212,7 @@ impl AtlasObjective<'_> {
 impl crate::session::StageObjective for AtlasObjective<'_> {
     /// J's mean parts (as [`crate::unknowns::MatchObjective::parts_of`]).
     fn parts_of(&mut self, value: f64) -> Option<Energies> {
-        let found = self.recent.iter().rev().find(|e| e.value.to_bits() == value.to_bits()).copied();
-        self.recent.clear();
-        found
+        crate::session::take_parts(&mut self.recent, value)
     }
 }
 

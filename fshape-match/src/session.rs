@@ -251,6 +251,15 @@ pub(crate) trait StageObjective: Objective {
     fn parts_of(&mut self, value: f64) -> Option<Energies>;
 }
 
+/// The parts of the evaluation in `recent` whose J is `value` (the last
+/// such, bit for bit); `recent` is then cleared. The body of every
+/// [`StageObjective::parts_of`].
+pub(crate) fn take_parts(recent: &mut Vec<Energies>, value: f64) -> Option<Energies> {
+    let found = recent.iter().rev().find(|e| e.value.to_bits() == value.to_bits()).copied();
+    recent.clear();
+    found
+}
+
 /// Where a stage starts.
 pub(crate) enum StageStart {
     /// Where an interrupted run left it.

@@ -249,9 +249,7 @@ impl<'p> MatchObjective<'p> {
     /// state holds), searched among the evaluations since the last call,
     /// which are then forgotten.
     pub fn parts_of(&mut self, value: f64) -> Option<Energies> {
-        let found = self.recent.iter().rev().find(|e| e.value.to_bits() == value.to_bits()).copied();
-        self.recent.clear();
-        found
+        crate::session::take_parts(&mut self.recent, value)
     }
 
     /// The packing.
