@@ -17,9 +17,12 @@
 //! ([`SignalNorm::grad`]), its directional derivative (a Hessian–vector
 //! product, [`SignalNorm::hvp`]) and (∂_x D_s · δx) h
 //! ([`SignalNorm::dmatvec`]). The gradient is analytic per cell; the
-//! second derivatives come from the generic local formula evaluated with
-//! forward-mode dual numbers (num-dual). All are exact and checked against
-//! central finite differences in the tests.
+//! second derivatives are forward-mode dual numbers (num-dual, x + ε δx)
+//! through the generic per-cell formulas: the local matrix for `dmatvec`,
+//! the analytic gradient for `hvp` (nested duals through the local matrix
+//! are its test oracle: with them the FEM part of one H¹ evaluation of the
+//! bunny's objective at 10242 vertices took 2.0 s instead of 1.1). All are exact and checked against central finite differences
+//! in the tests.
 //!
 //! Local work runs cell by cell (in parallel with rayon unless
 //! [`SignalNorm::with_parallel`] turns it off) and is gathered per output

@@ -170,7 +170,10 @@ pub(crate) fn volume(kind: CellKind, n: usize, x: &[f64]) -> f64 {
 
 /// ∂/∂x of q = aᵀ D_τ(x) b for one cell, analytically, written into
 /// `out[..corners·n]` (the same value num-dual gives, at a fraction of the
-/// cost; the tests check both against finite differences).
+/// cost; the tests check both against finite differences). Generic over
+/// the number type like [`local_matrix`]: with f64 it is the gradient, with
+/// [`num_dual::Dual64`] coordinates x + ε dx its ε part is the Hessian of q
+/// applied to dx ([`crate::SignalNorm::hvp`]).
 ///
 /// Triangle (u = x₁ − x₀, v = x₂ − x₀, A² = (|u|²|v|² − (u·v)²)/4):
 /// q = A·m(a, b) + ℓ² (E_a·E_b)/(4A), with m(a, b) = (a·b + Σa Σb)/12 for
@@ -179,39 +182,61 @@ pub(crate) fn volume(kind: CellKind, n: usize, x: &[f64]) -> f64 {
 /// ∂q/∂x_k = m ∂A/∂x_k + ℓ² [(c_k(a) E_b + c_k(b) E_a)/(4A) − (E_a·E_b)/(4A²) ∂A/∂x_k].
 /// Segment (length L, t = (x₁ − x₀)/L): q = L·m(a, b) + ℓ² (a₁ − a₀)(b₁ − b₀)/L,
 /// ∂q/∂x₁ = −∂q/∂x₀ = [m − ℓ² (a₁ − a₀)(b₁ − b₀)/L²] t.
-pub(crate) fn local_grad(kind: CellKind, n: usize, x: &[f64], a: &[f64], b: &[f64], norm: Norm, out: &mut [f64]) {
+#[expect(clippy::needless_range_loop, reason = "index notation follows the formulas (x_c, e_k)")]
+pub(crate) fn local_grad<D: DualNum<Primitive = f64> + Copy>(
+    kind: CellKind,
+    n: usize,
+    x: &[D],
+    a: &[f64],
+    b: &[f64],
+    norm: Norm,
+    out: &mut [D],
+) {
     let lumped = norm == Norm::L2Lumped;
     let l2 = if let Norm::H1 { length } = norm { length * length } else { 0.0 };
     let p = |c: usize, k: usize| x[c * n + k];
+    // Σ_k s_k t_k from the first term on: the bits of f64's `sum` (which
+    // starts from −0.0) for every input.
+    let dot = |s: &[D; 3], t: &[D; 3]| {
+        let mut acc = s[0] * t[0];
+        for k in 1..n {
+            acc += s[k] * t[k];
+        }
+        acc
+    };
+    let zero = D::from(0.0);
     match kind {
         CellKind::Segment => {
-            let len = (0..n).map(|k| (p(1, k) - p(0, k)).powi(2)).sum::<f64>().sqrt();
+            let mut d = [zero; 3];
+            for k in 0..n {
+                d[k] = p(1, k) - p(0, k);
+            }
+            let len = dot(&d, &d).sqrt();
             let m = if lumped {
                 0.5 * (a[0] * b[0] + a[1] * b[1])
             } else {
                 (2.0 * a[0] * b[0] + a[0] * b[1] + a[1] * b[0] + 2.0 * a[1] * b[1]) / 6.0
             };
-            let coef = m - l2 * (a[1] - a[0]) * (b[1] - b[0]) / (len * len);
+            let coef = D::from(m) - D::from(l2 * (a[1] - a[0]) * (b[1] - b[0])) / (len * len);
             for k in 0..n {
-                let t = (p(1, k) - p(0, k)) / len;
-                out[k] = -coef * t;
+                let t = d[k] / len;
+                out[k] = -(coef * t);
                 out[n + k] = coef * t;
             }
         }
         CellKind::Triangle => {
-            let (mut u, mut v) = ([0.0; 3], [0.0; 3]);
+            let (mut u, mut v) = ([zero; 3], [zero; 3]);
             for k in 0..n {
                 u[k] = p(1, k) - p(0, k);
                 v[k] = p(2, k) - p(0, k);
             }
-            let dot = |s: &[f64; 3], t: &[f64; 3]| (0..n).map(|k| s[k] * t[k]).sum::<f64>();
             let (uu, vv, uv) = (dot(&u, &u), dot(&v, &v), dot(&u, &v));
-            let area = 0.5 * (uu * vv - uv * uv).sqrt();
+            let area = (uu * vv - uv * uv).sqrt() * 0.5;
             // ∂A/∂u = (u|v|² − (u·v)v)/(4A), ∂A/∂v = (v|u|² − (u·v)u)/(4A).
-            let mut da = [[0.0; 3]; 3];
+            let mut da = [[zero; 3]; 3];
             for k in 0..n {
-                da[1][k] = (u[k] * vv - uv * v[k]) / (4.0 * area);
-                da[2][k] = (v[k] * uu - uv * u[k]) / (4.0 * area);
+                da[1][k] = (u[k] * vv - uv * v[k]) / (area * 4.0);
+                da[2][k] = (v[k] * uu - uv * u[k]) / (area * 4.0);
                 da[0][k] = -da[1][k] - da[2][k];
             }
             let m = if lumped {
@@ -221,18 +246,18 @@ pub(crate) fn local_grad(kind: CellKind, n: usize, x: &[f64], a: &[f64], b: &[f6
             };
             let ca = [a[1] - a[2], a[2] - a[0], a[0] - a[1]];
             let cb = [b[1] - b[2], b[2] - b[0], b[0] - b[1]];
-            let (mut ea, mut eb) = ([0.0; 3], [0.0; 3]);
+            let (mut ea, mut eb) = ([zero; 3], [zero; 3]);
             for c in 0..3 {
                 for k in 0..n {
-                    ea[k] += ca[c] * p(c, k);
-                    eb[k] += cb[c] * p(c, k);
+                    ea[k] += p(c, k) * ca[c];
+                    eb[k] += p(c, k) * cb[c];
                 }
             }
             let eab = dot(&ea, &eb);
             for c in 0..3 {
                 for k in 0..n {
-                    let stiff = (ca[c] * eb[k] + cb[c] * ea[k]) / (4.0 * area) - eab / (4.0 * area * area) * da[c][k];
-                    out[c * n + k] = m * da[c][k] + l2 * stiff;
+                    let stiff = (eb[k] * ca[c] + ea[k] * cb[c]) / (area * 4.0) - eab / (area * 4.0 * area) * da[c][k];
+                    out[c * n + k] = da[c][k] * m + stiff * l2;
                 }
             }
         }
@@ -243,9 +268,42 @@ pub(crate) fn local_grad(kind: CellKind, n: usize, x: &[f64], a: &[f64], b: &[f6
 mod tests {
     use proptest::prelude::*;
 
-    use super::{local_matrix, local_matrix_f64};
+    use num_dual::{Dual, Dual64, DualSVec64};
+
+    use super::{MAX_LOCAL, local_grad, local_matrix, local_matrix_f64};
     use crate::Norm;
     use fshape_mesh::CellKind;
+
+    /// The cell's gradient and Hessian–vector product of q = aᵀ D_τ(x) b by
+    /// nested forward mode through [`local_matrix`] (the x-derivatives of
+    /// the local matrix itself, nothing written by hand): the oracle of
+    /// [`local_grad`] in f64 and in dual numbers.
+    fn nested_dual(
+        kind: CellKind,
+        n: usize,
+        x: &[f64],
+        dx: &[f64],
+        a: &[f64],
+        b: &[f64],
+        norm: Norm,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let corners = x.len() / n;
+        let zero = Dual::new(DualSVec64::<MAX_LOCAL>::from(0.0), DualSVec64::from(0.0));
+        let mut xd = vec![zero; x.len()];
+        for r in 0..x.len() {
+            xd[r] = Dual::new(DualSVec64::from_re(x[r]).derivative(r), DualSVec64::from(dx[r]));
+        }
+        let (m, _) = local_matrix(kind, n, &xd, norm);
+        let mut q = zero;
+        for i in 0..corners {
+            for j in 0..corners {
+                q += m[i][j] * (a[i] * b[j]);
+            }
+        }
+        let grad = q.re.eps.0.map_or(vec![0.0; x.len()], |g| g.as_slice()[..x.len()].to_vec());
+        let hvp = q.eps.eps.0.map_or(vec![0.0; x.len()], |g| g.as_slice()[..x.len()].to_vec());
+        (grad, hvp)
+    }
 
     proptest! {
         #![proptest_config(fshape_mesh::test_support::strategies::config(256, 0x10ca1))]
@@ -267,6 +325,44 @@ mod tests {
                     for j in 0..3 {
                         prop_assert_eq!(fast[i][j].to_bits(), slow[i][j].to_bits(), "{:?} entry ({}, {})", norm, i, j);
                     }
+                }
+            }
+        }
+
+        /// The analytic per-cell gradient equals nested forward-mode
+        /// differentiation of the local matrix, and so does its forward
+        /// mode in x + ε dx (the Hessian–vector product of
+        /// `SignalNorm::hvp`), for segments and triangles in the plane and
+        /// in space and every norm. Cells with a side below 0.05 of the
+        /// box are left out (the derivatives blow up as the volume → 0).
+        #[test]
+        fn the_analytic_gradient_and_its_forward_mode_equal_nested_duals(
+            x in proptest::collection::vec(-1.0f64..1.0, 9),
+            dx in proptest::collection::vec(-1.0f64..1.0, 9),
+            a in proptest::collection::vec(-1.0f64..1.0, 3),
+            b in proptest::collection::vec(-1.0f64..1.0, 3),
+            planar in any::<bool>(),
+            segment in any::<bool>(),
+            length in 0.1f64..3.0,
+        ) {
+            let n = if planar { 2 } else { 3 };
+            let (kind, corners) = if segment { (CellKind::Segment, 2) } else { (CellKind::Triangle, 3) };
+            let m = corners * n;
+            let (x, dx) = (&x[..m], &dx[..m]);
+            let vol = super::volume(kind, n, x);
+            prop_assume!(vol > if segment { 0.05 } else { 0.01 });
+            for norm in [Norm::L2Lumped, Norm::L2, Norm::H1 { length }] {
+                let (grad, hvp) = nested_dual(kind, n, x, dx, &a, &b, norm);
+                let mut g = [0.0; MAX_LOCAL];
+                local_grad(kind, n, x, &a, &b, norm, &mut g[..m]);
+                let xd: Vec<Dual64> = x.iter().zip(dx).map(|(&v, &d)| Dual64::new(v, d)).collect();
+                let mut h = [Dual64::from(0.0); MAX_LOCAL];
+                local_grad(kind, n, &xd, &a, &b, norm, &mut h[..m]);
+                let scale = grad.iter().chain(&hvp).fold(1.0f64, |s, v| s.max(v.abs()));
+                for r in 0..m {
+                    prop_assert!((g[r] - grad[r]).abs() <= 1e-12 * scale, "{:?} gradient {}: {} against {}", norm, r, g[r], grad[r]);
+                    prop_assert!((h[r].re - g[r]).abs() <= 1e-12 * scale, "{:?} value part {}", norm, r);
+                    prop_assert!((h[r].eps - hvp[r]).abs() <= 1e-12 * scale, "{:?} hvp {}: {} against {}", norm, r, h[r].eps, hvp[r]);
                 }
             }
         }

@@ -9,7 +9,7 @@ use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use fshape_mesh::{CellKind, FShape, ZERO_VOLUME_REL};
-use num_dual::{Dual, Dual64, DualNum, DualSVec64};
+use num_dual::{Dual64, DualNum};
 use rayon::prelude::*;
 
 use crate::local::{Local, MAX_LOCAL, local_grad, local_matrix, local_matrix_f64, local_parts, volume};
@@ -451,8 +451,8 @@ impl SignalNorm {
     }
 
     /// The directional derivative of [`SignalNorm::grad`] in the direction
-    /// `dx`: (∂²_x (aᵀ D_s(x) b)) dx, a Hessian–vector product (forward mode
-    /// over forward mode).
+    /// `dx`: (∂²_x (aᵀ D_s(x) b)) dx, a Hessian–vector product: forward
+    /// mode (x + ε dx) through the analytic per-cell gradient.
     pub fn hvp(&self, x: &[f64], a: &[f64], b: &[f64], dx: &[f64]) -> Result<Vec<f64>, FemError> {
         let mut out = vec![0.0; x.len()];
         self.hvp_into(x, a, b, dx, &mut Workspace::default(), &mut out)?;
@@ -480,21 +480,18 @@ impl SignalNorm {
         let n = self.dim;
         self.fill_cells(&mut ws.per_cell, |_, c| {
             let m = c.len() * n;
-            let zero = Dual::new(DualSVec64::<MAX_LOCAL>::from(0.0), DualSVec64::from(0.0));
-            let mut xd = [zero; MAX_LOCAL];
+            let mut xd = [Dual64::from(0.0); MAX_LOCAL];
+            let (mut al, mut bl) = ([0.0; 3], [0.0; 3]);
             for (i, &v) in c.iter().enumerate() {
                 for k in 0..n {
-                    let re = DualSVec64::from_re(x[v * n + k]).derivative(i * n + k);
-                    xd[i * n + k] = Dual::new(re, DualSVec64::from(dx[v * n + k]));
+                    xd[i * n + k] = Dual64::new(x[v * n + k], dx[v * n + k]);
                 }
+                al[i] = a[v];
+                bl[i] = b[v];
             }
-            let (mat, _) = local_matrix(self.kind, n, &xd[..m], self.norm);
-            let q = bilinear(&mat, c, a, b);
-            let mut out = [0.0; MAX_LOCAL];
-            if let Some(g) = q.eps.eps.0 {
-                out[..m].copy_from_slice(&g.as_slice()[..m]);
-            }
-            out
+            let mut g = [Dual64::from(0.0); MAX_LOCAL];
+            local_grad(self.kind, n, &xd[..m], &al, &bl, self.norm, &mut g[..m]);
+            std::array::from_fn(|r| g[r].eps)
         });
         self.gather_vertices(&ws.per_cell, n, out);
         Ok(())
