@@ -77,7 +77,9 @@ pub(crate) struct Dynamics<'a> {
 pub struct Timings {
     /// Kernel sums (deformation).
     pub kernels: f64,
-    /// FEM assembly, factorisation, solves and x-derivatives.
+    /// FEM assembly, factorisation, solves and x-derivatives. In parallel
+    /// runs of the metamorphosis model they run while the kernel sums do,
+    /// so the two times overlap (their sum exceeds the wall time).
     pub fem: f64,
     /// The data attachment and its gradient.
     pub attachment: f64,
@@ -96,41 +98,55 @@ pub(crate) fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
 /// intermediate vectors. Sized on first use; after that the time-stepping
 /// loops allocate nothing (tested with a counting allocator).
 pub(crate) struct Scratch<'s> {
+    kern: KernelScratch,
+    pub(crate) fem: FemScratch<'s>,
+    /// The state length: 𝕁v and dF(𝕁v).
+    jv: Vec<f64>,
+    jw: Vec<f64>,
+}
+
+/// The kernel sums' part of [`Scratch`] (apart from the FEM's, so that the
+/// two parts of the field can run at the same time).
+struct KernelScratch {
     sums: SumWorkspace,
-    fem: Workspace,
-    pub(crate) solver: Option<Solver<'s>>,
-    /// P·n: K p and ∂_x(pᵀKp) (or their JVPs), the FEM x-derivatives.
+    /// P·n: K p and ∂_x(pᵀKp) (or their JVPs).
     kp: Vec<f64>,
     gk: Vec<f64>,
+}
+
+/// The FEM's part of [`Scratch`].
+pub(crate) struct FemScratch<'s> {
+    ws: Workspace,
+    pub(crate) solver: Option<Solver<'s>>,
+    /// P·n: the FEM x-derivatives.
     gd: Vec<f64>,
     hv: Vec<f64>,
     /// P: (∂D·δx)h, then δh.
     dd: Vec<f64>,
-    /// The state length: 𝕁v and dF(𝕁v).
-    jv: Vec<f64>,
-    jw: Vec<f64>,
 }
 
 impl<'s> Scratch<'s> {
     pub(crate) fn new(layout: Layout, fem: Option<&'s SignalNorm>) -> Result<Self, ShootError> {
         let (pn, p, len) = (layout.pn, layout.p, layout.len());
         Ok(Scratch {
-            sums: SumWorkspace::default(),
-            fem: Workspace::default(),
-            solver: match fem {
-                Some(fem) => Some(fem.solver()?),
-                None => None,
+            kern: KernelScratch { sums: SumWorkspace::default(), kp: vec![0.0; pn], gk: vec![0.0; pn] },
+            fem: FemScratch {
+                ws: Workspace::default(),
+                solver: match fem {
+                    Some(fem) => Some(fem.solver()?),
+                    None => None,
+                },
+                gd: vec![0.0; pn],
+                hv: vec![0.0; pn],
+                dd: vec![0.0; p],
             },
-            kp: vec![0.0; pn],
-            gk: vec![0.0; pn],
-            gd: vec![0.0; pn],
-            hv: vec![0.0; pn],
-            dd: vec![0.0; p],
             jv: vec![0.0; len],
             jw: vec![0.0; len],
         })
     }
+}
 
+impl FemScratch<'_> {
     /// Refactors D at `x` and solves D h = pf into `h`.
     pub(crate) fn solve_at(&mut self, x: &[f64], pf: &[f64], h: &mut [f64]) -> Result<(), ShootError> {
         if let Some(solver) = self.solver.as_mut() {
@@ -140,6 +156,16 @@ impl<'s> Scratch<'s> {
         }
         Ok(())
     }
+}
+
+/// Runs the kernel part and the FEM part of one field evaluation, at the
+/// same time when `together` (the FEM's factorisation and solves are
+/// serial: on two threads the kernel sums' chunks fill the other one).
+/// Each part writes only its own scratch, so the results are the same bits
+/// either way. The timings are each part's wall time, so with `together`
+/// they overlap.
+fn both<A: Send, B: Send>(together: bool, a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+    if together { rayon::join(a, b) } else { (a(), b()) }
 }
 
 impl Dynamics<'_> {
@@ -155,45 +181,58 @@ impl Dynamics<'_> {
     ) -> Result<(), ShootError> {
         let l = self.layout;
         let (x, p) = (&z[l.x()], &z[l.mom()]);
-        timed(&mut t.kernels, || -> Result<_, ShootError> {
-            let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
-            // Each pair once where the kernel allows it (sums of Gaussians).
-            Ok(sums.self_conv_and_grad_into(&mut s.sums, p, l.dim, &mut s.kp, &mut s.gk)?)
-        })?;
-        for (o, v) in out[l.x()].iter_mut().zip(&s.kp) {
+        let (kern, fs) = (&mut s.kern, &mut s.fem);
+        let (t_kernels, t_fem) = (&mut t.kernels, &mut t.fem);
+        let signal = self.fem.filter(|_| fs.solver.is_some());
+        let (kernels, fem) = both(
+            self.parallel && signal.is_some(),
+            || {
+                timed(t_kernels, || -> Result<(), ShootError> {
+                    let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
+                    // Each pair once where the kernel allows it (sums of Gaussians).
+                    Ok(sums.self_conv_and_grad_into(&mut kern.sums, p, l.dim, &mut kern.kp, &mut kern.gk)?)
+                })
+            },
+            || match signal {
+                Some(fem) => timed(t_fem, || -> Result<(), ShootError> {
+                    fs.solve_at(x, &z[l.pf()], h)?;
+                    Ok(fem.grad_into(x, h, h, &mut fs.ws, &mut fs.gd)?)
+                }),
+                None => Ok(()),
+            },
+        );
+        kernels?;
+        fem?;
+        for (o, v) in out[l.x()].iter_mut().zip(&kern.kp) {
             *o = v / self.gamma_v;
         }
         // ∂_x(pᵀKp) = 2·grad_cross (the self term counts each pair twice).
-        for (o, v) in out[l.mom()].iter_mut().zip(&s.gk) {
+        for (o, v) in out[l.mom()].iter_mut().zip(&kern.gk) {
             *o = -v / self.gamma_v;
         }
         out[l.pf()].fill(0.0);
-        match self.fem {
-            Some(fem) if s.solver.is_some() => {
-                timed(&mut t.fem, || -> Result<(), ShootError> {
-                    s.solve_at(x, &z[l.pf()], h)?;
-                    fem.grad_into(x, h, h, &mut s.fem, &mut s.gd)?;
-                    for (o, v) in out[l.mom()].iter_mut().zip(&s.gd) {
-                        *o += v / (2.0 * self.gamma_f);
-                    }
-                    Ok(())
-                })?;
-                for (o, v) in out[l.f()].iter_mut().zip(h.iter()) {
-                    *o = v / self.gamma_f;
-                }
+        if signal.is_some() {
+            for (o, v) in out[l.mom()].iter_mut().zip(&fs.gd) {
+                *o += v / (2.0 * self.gamma_f);
             }
-            _ => out[l.f()].fill(0.0),
+            for (o, v) in out[l.f()].iter_mut().zip(h.iter()) {
+                *o = v / self.gamma_f;
+            }
+        } else {
+            out[l.f()].fill(0.0);
         }
         Ok(())
     }
 
-    /// out = dF(z)·w, exact. The solver in `s` must be factored at z's x
-    /// and `h` be D⁻¹p^f there (both as left by [`Dynamics::field`] or
-    /// [`Scratch::solve_at`]).
+    /// out = dF(z)·w, exact. With `refactor`, the solver in `s` is first
+    /// refactored at z's x and h set to D⁻¹p^f there ([`FemScratch::solve_at`]);
+    /// without, both must already be so (as [`Dynamics::field`] leaves them).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn jvp(
         &self,
         z: &[f64],
-        h: &[f64],
+        h: &mut [f64],
+        refactor: bool,
         w: &[f64],
         out: &mut [f64],
         s: &mut Scratch<'_>,
@@ -202,48 +241,73 @@ impl Dynamics<'_> {
         let l = self.layout;
         let (x, p) = (&z[l.x()], &z[l.mom()]);
         let (dx, dp) = (&w[l.x()], &w[l.mom()]);
-        timed(&mut t.kernels, || -> Result<_, ShootError> {
-            let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
-            Ok(sums.self_conv_and_grad_jvp_into(&mut s.sums, dx, p, dp, l.dim, &mut s.kp, &mut s.gk)?)
-        })?;
-        for (o, v) in out[l.x()].iter_mut().zip(&s.kp) {
+        let (kern, fs) = (&mut s.kern, &mut s.fem);
+        let (t_kernels, t_fem) = (&mut t.kernels, &mut t.fem);
+        let signal = self.fem.filter(|_| fs.solver.is_some());
+        let (kernels, fem) = both(
+            self.parallel && signal.is_some(),
+            || {
+                timed(t_kernels, || -> Result<(), ShootError> {
+                    let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
+                    Ok(sums.self_conv_and_grad_jvp_into(
+                        &mut kern.sums,
+                        dx,
+                        p,
+                        dp,
+                        l.dim,
+                        &mut kern.kp,
+                        &mut kern.gk,
+                    )?)
+                })
+            },
+            || match signal {
+                Some(fem) => timed(t_fem, || -> Result<(), ShootError> {
+                    if refactor {
+                        fs.solve_at(x, &z[l.pf()], h)?;
+                    }
+                    let Some(solver) = fs.solver.as_mut() else { return Ok(()) };
+                    // δh = D⁻¹(δp^f − (∂D·δx) h).
+                    fem.dmatvec_into(x, dx, h, &mut fs.ws, &mut fs.dd)?;
+                    for (d, a) in fs.dd.iter_mut().zip(&w[l.pf()]) {
+                        *d = a - *d;
+                    }
+                    solver.solve_in_place(&mut fs.dd)?;
+                    // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
+                    fem.hvp_into(x, h, h, dx, &mut fs.ws, &mut fs.hv)?;
+                    Ok(fem.grad_into(x, &fs.dd, h, &mut fs.ws, &mut fs.gd)?)
+                }),
+                None => Ok(()),
+            },
+        );
+        kernels?;
+        fem?;
+        for (o, v) in out[l.x()].iter_mut().zip(&kern.kp) {
             *o = v / self.gamma_v;
         }
-        for (o, v) in out[l.mom()].iter_mut().zip(&s.gk) {
+        for (o, v) in out[l.mom()].iter_mut().zip(&kern.gk) {
             *o = -v / self.gamma_v;
         }
         out[l.pf()].fill(0.0);
-        match (self.fem, s.solver.as_mut()) {
-            (Some(fem), Some(solver)) => {
-                timed(&mut t.fem, || -> Result<(), ShootError> {
-                    // δh = D⁻¹(δp^f − (∂D·δx) h).
-                    fem.dmatvec_into(x, dx, h, &mut s.fem, &mut s.dd)?;
-                    for (d, a) in s.dd.iter_mut().zip(&w[l.pf()]) {
-                        *d = a - *d;
-                    }
-                    solver.solve_in_place(&mut s.dd)?;
-                    // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
-                    fem.hvp_into(x, h, h, dx, &mut s.fem, &mut s.hv)?;
-                    fem.grad_into(x, &s.dd, h, &mut s.fem, &mut s.gd)?;
-                    for ((o, a), b) in out[l.mom()].iter_mut().zip(&s.hv).zip(&s.gd) {
-                        *o += (a + 2.0 * b) / (2.0 * self.gamma_f);
-                    }
-                    Ok(())
-                })?;
-                for (o, v) in out[l.f()].iter_mut().zip(&s.dd) {
-                    *o = v / self.gamma_f;
-                }
+        if signal.is_some() {
+            for ((o, a), b) in out[l.mom()].iter_mut().zip(&fs.hv).zip(&fs.gd) {
+                *o += (a + 2.0 * b) / (2.0 * self.gamma_f);
             }
-            _ => out[l.f()].fill(0.0),
+            for (o, v) in out[l.f()].iter_mut().zip(&fs.dd) {
+                *o = v / self.gamma_f;
+            }
+        } else {
+            out[l.f()].fill(0.0);
         }
         Ok(())
     }
 
-    /// out = dF(z)ᵀ·v = 𝕁 dF(z)(𝕁 v).
+    /// out = dF(z)ᵀ·v = 𝕁 dF(z)(𝕁 v) (`h`, `refactor`: as for [`Dynamics::jvp`]).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn vjp(
         &self,
         z: &[f64],
-        h: &[f64],
+        h: &mut [f64],
+        refactor: bool,
         v: &[f64],
         out: &mut [f64],
         s: &mut Scratch<'_>,
@@ -253,7 +317,7 @@ impl Dynamics<'_> {
         // Moved out of `s` for the call (no allocation) and back.
         let (mut jv, mut jw) = (std::mem::take(&mut s.jv), std::mem::take(&mut s.jw));
         l.symplectic(v, &mut jv);
-        let r = self.jvp(z, h, &jv, &mut jw, s, t);
+        let r = self.jvp(z, h, refactor, &jv, &mut jw, s, t);
         l.symplectic(&jw, out);
         (s.jv, s.jw) = (jv, jw);
         r

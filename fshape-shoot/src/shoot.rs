@@ -556,10 +556,9 @@ impl Problem {
                     gzi.fill(0.0);
                     continue;
                 }
-                // Refactor at Z_i and recover h there.
+                // Refactored at Z_i, h recovered there.
                 let zi = traj.stage(step, i);
-                timed(&mut t.fem, || scratch.solve_at(&zi[l.x()], &zi[l.pf()], &mut h))?;
-                dynamics.vjp(zi, &h, &gk, gzi, &mut scratch, t)?;
+                dynamics.vjp(zi, &mut h, true, &gk, gzi, &mut scratch, t)?;
             }
             for g in gz.chunks_exact(len) {
                 axpy(&mut lam, 1.0, g);
