@@ -147,23 +147,28 @@ impl<const D: usize, const BD: usize, const JVP: bool> Chunk<'_, D, BD, JVP> {
         let (k0, k1, k2) = gauss_lanes(self.terms, &u, true, JVP);
         let mut m = [0.0; 6];
         // The lanes' terms are those of `fast.rs` (CONV_GRAD, BOTH_JVP) with
-        // a = b, da = db, written the same way.
+        // a = b, da = db, grouped for fused multiply-adds (so equal to the
+        // general path's to rounding, not bit for bit).
         if !JVP {
             for c in 0..BD {
                 for l in 0..L {
-                    acc[c][l] += k0[l] * bj[c];
+                    acc[c][l] = k0[l].mul_add(bj[c], acc[c][l]);
                 }
             }
             let mut ab = [0.0; L];
             for c in 0..BD {
                 for l in 0..L {
-                    ab[l] += t.b[c][l] * bj[c];
+                    ab[l] = t.b[c][l].mul_add(bj[c], ab[l]);
                 }
+            }
+            let mut kab = [0.0; L];
+            for l in 0..L {
+                kab[l] = 2.0 * k1[l] * ab[l];
             }
             let mut g = [[0.0; L]; D];
             for k in 0..D {
                 for l in 0..L {
-                    g[k][l] = 2.0 * k1[l] * ab[l] * (t.y[k][l] - yj[k]);
+                    g[k][l] = kab[l] * (t.y[k][l] - yj[k]);
                     acc[BD + k][l] += g[k][l];
                 }
             }
@@ -185,32 +190,37 @@ impl<const D: usize, const BD: usize, const JVP: bool> Chunk<'_, D, BD, JVP> {
             let mut du = [0.0; L];
             for k in 0..D {
                 for l in 0..L {
-                    du[l] += 2.0 * (t.y[k][l] - yj[k]) * (t.dy[k][l] - dyj[k]);
+                    du[l] = (2.0 * (t.y[k][l] - yj[k])).mul_add(t.dy[k][l] - dyj[k], du[l]);
                 }
             }
             for c in 0..BD {
                 for l in 0..L {
-                    acc[c][l] += k1[l] * du[l] * bj[c] + k0[l] * dbj[c];
+                    acc[c][l] = (k1[l] * du[l]).mul_add(bj[c], k0[l].mul_add(dbj[c], acc[c][l]));
                 }
             }
             let (mut ab, mut dab) = ([0.0; L], [0.0; L]);
             for c in 0..BD {
                 for l in 0..L {
-                    ab[l] += t.b[c][l] * bj[c];
+                    ab[l] = t.b[c][l].mul_add(bj[c], ab[l]);
                 }
             }
             for c in 0..BD {
                 for l in 0..L {
-                    dab[l] += t.db[c][l] * bj[c] + t.b[c][l] * dbj[c];
+                    dab[l] = t.db[c][l].mul_add(bj[c], t.b[c][l].mul_add(dbj[c], dab[l]));
                 }
+            }
+            // g = A·diff + B·ddiff, A = 2k''·du·ab + 2k'·dab, B = 2k'·ab.
+            let (mut ca, mut cb) = ([0.0; L], [0.0; L]);
+            for l in 0..L {
+                ca[l] = (2.0 * k1[l]).mul_add(dab[l], 2.0 * k2[l] * du[l] * ab[l]);
+                cb[l] = 2.0 * k1[l] * ab[l];
             }
             let mut g = [[0.0; L]; D];
             for k in 0..D {
                 for l in 0..L {
                     let diff = t.y[k][l] - yj[k];
                     let ddiff = t.dy[k][l] - dyj[k];
-                    g[k][l] =
-                        2.0 * k2[l] * du[l] * ab[l] * diff + 2.0 * k1[l] * dab[l] * diff + 2.0 * k1[l] * ab[l] * ddiff;
+                    g[k][l] = ca[l].mul_add(diff, cb[l] * ddiff);
                     acc[BD + k][l] += g[k][l];
                 }
             }
@@ -218,7 +228,7 @@ impl<const D: usize, const BD: usize, const JVP: bool> Chunk<'_, D, BD, JVP> {
                 for c in 0..BD {
                     let mut v = [0.0; L];
                     for l in 0..L {
-                        v[l] = k1[l] * du[l] * t.b[c][l] + k0[l] * t.db[c][l];
+                        v[l] = (k1[l] * du[l]).mul_add(t.b[c][l], k0[l] * t.db[c][l]);
                     }
                     m[c] = hsum(&v);
                 }
