@@ -169,6 +169,53 @@ fn both<A: Send, B: Send>(together: bool, a: impl FnOnce() -> A + Send, b: impl 
 }
 
 impl Dynamics<'_> {
+    /// Runs `kernel` (the kernel sums at x, into the kernel scratch) and
+    /// `signal` (the FEM part, when the signal evolves), at the same time in
+    /// parallel runs (see [`both`]). Returns whether the FEM part ran.
+    fn run_parts<'s>(
+        &self,
+        x: &[f64],
+        s: &mut Scratch<'s>,
+        t: &mut Timings,
+        kernel: impl FnOnce(&KernelSums<'_>, &mut KernelScratch) -> Result<(), ShootError> + Send,
+        signal: impl FnOnce(&SignalNorm, &mut FemScratch<'s>) -> Result<(), ShootError> + Send,
+    ) -> Result<bool, ShootError> {
+        let (kern, fs) = (&mut s.kern, &mut s.fem);
+        let (t_kernels, t_fem) = (&mut t.kernels, &mut t.fem);
+        let norm = self.fem.filter(|_| fs.solver.is_some());
+        let (kernels, fem) = both(
+            self.parallel && norm.is_some(),
+            || {
+                timed(t_kernels, || -> Result<(), ShootError> {
+                    let sums = KernelSums::try_new(self.kernel, x, self.layout.dim)?.with_parallel(self.parallel);
+                    kernel(&sums, kern)
+                })
+            },
+            || match norm {
+                Some(fem) => timed(t_fem, || signal(fem, fs)),
+                None => Ok(()),
+            },
+        );
+        kernels?;
+        fem?;
+        Ok(norm.is_some())
+    }
+
+    /// The kernel's rates from its sums in `k` (K p and ∂_x(pᵀKp), or their
+    /// directional derivatives): ẋ = K p / γ_V, ṗ = −∂_x(pᵀKp)/(2γ_V) (the
+    /// self sum counts each pair twice, so it is 2·grad_cross), and
+    /// ṗ^f = 0, into `out`.
+    fn kernel_rates(&self, k: &KernelScratch, out: &mut [f64]) {
+        let l = self.layout;
+        for (o, v) in out[l.x()].iter_mut().zip(&k.kp) {
+            *o = v / self.gamma_v;
+        }
+        for (o, v) in out[l.mom()].iter_mut().zip(&k.gk) {
+            *o = -v / self.gamma_v;
+        }
+        out[l.pf()].fill(0.0);
+    }
+
     /// out = F(z), and h = D⁻¹p^f (untouched without signal dynamics). The
     /// solver in `s` is refactored at z's x.
     pub(crate) fn field(
@@ -180,39 +227,21 @@ impl Dynamics<'_> {
         t: &mut Timings,
     ) -> Result<(), ShootError> {
         let l = self.layout;
-        let (x, p) = (&z[l.x()], &z[l.mom()]);
-        let (kern, fs) = (&mut s.kern, &mut s.fem);
-        let (t_kernels, t_fem) = (&mut t.kernels, &mut t.fem);
-        let signal = self.fem.filter(|_| fs.solver.is_some());
-        let (kernels, fem) = both(
-            self.parallel && signal.is_some(),
-            || {
-                timed(t_kernels, || -> Result<(), ShootError> {
-                    let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
-                    // Each pair once where the kernel allows it (sums of Gaussians).
-                    Ok(sums.self_conv_and_grad_into(&mut kern.sums, p, l.dim, &mut kern.kp, &mut kern.gk)?)
-                })
+        let (x, p, pf) = (&z[l.x()], &z[l.mom()], &z[l.pf()]);
+        let signal = self.run_parts(
+            x,
+            s,
+            t,
+            // Each pair once where the kernel allows it (sums of Gaussians).
+            |sums, k| Ok(sums.self_conv_and_grad_into(&mut k.sums, p, l.dim, &mut k.kp, &mut k.gk)?),
+            |fem, fs| {
+                fs.solve_at(x, pf, h)?;
+                Ok(fem.grad_into(x, h, h, &mut fs.ws, &mut fs.gd)?)
             },
-            || match signal {
-                Some(fem) => timed(t_fem, || -> Result<(), ShootError> {
-                    fs.solve_at(x, &z[l.pf()], h)?;
-                    Ok(fem.grad_into(x, h, h, &mut fs.ws, &mut fs.gd)?)
-                }),
-                None => Ok(()),
-            },
-        );
-        kernels?;
-        fem?;
-        for (o, v) in out[l.x()].iter_mut().zip(&kern.kp) {
-            *o = v / self.gamma_v;
-        }
-        // ∂_x(pᵀKp) = 2·grad_cross (the self term counts each pair twice).
-        for (o, v) in out[l.mom()].iter_mut().zip(&kern.gk) {
-            *o = -v / self.gamma_v;
-        }
-        out[l.pf()].fill(0.0);
-        if signal.is_some() {
-            for (o, v) in out[l.mom()].iter_mut().zip(&fs.gd) {
+        )?;
+        self.kernel_rates(&s.kern, out);
+        if signal {
+            for (o, v) in out[l.mom()].iter_mut().zip(&s.fem.gd) {
                 *o += v / (2.0 * self.gamma_f);
             }
             for (o, v) in out[l.f()].iter_mut().zip(h.iter()) {
@@ -239,60 +268,35 @@ impl Dynamics<'_> {
         t: &mut Timings,
     ) -> Result<(), ShootError> {
         let l = self.layout;
-        let (x, p) = (&z[l.x()], &z[l.mom()]);
+        let (x, p, pf) = (&z[l.x()], &z[l.mom()], &z[l.pf()]);
         let (dx, dp) = (&w[l.x()], &w[l.mom()]);
-        let (kern, fs) = (&mut s.kern, &mut s.fem);
-        let (t_kernels, t_fem) = (&mut t.kernels, &mut t.fem);
-        let signal = self.fem.filter(|_| fs.solver.is_some());
-        let (kernels, fem) = both(
-            self.parallel && signal.is_some(),
-            || {
-                timed(t_kernels, || -> Result<(), ShootError> {
-                    let sums = KernelSums::try_new(self.kernel, x, l.dim)?.with_parallel(self.parallel);
-                    Ok(sums.self_conv_and_grad_jvp_into(
-                        &mut kern.sums,
-                        dx,
-                        p,
-                        dp,
-                        l.dim,
-                        &mut kern.kp,
-                        &mut kern.gk,
-                    )?)
-                })
+        let signal = self.run_parts(
+            x,
+            s,
+            t,
+            |sums, k| Ok(sums.self_conv_and_grad_jvp_into(&mut k.sums, dx, p, dp, l.dim, &mut k.kp, &mut k.gk)?),
+            |fem, fs| {
+                if refactor {
+                    fs.solve_at(x, pf, h)?;
+                }
+                let Some(solver) = fs.solver.as_mut() else { return Ok(()) };
+                // δh = D⁻¹(δp^f − (∂D·δx) h).
+                fem.dmatvec_into(x, dx, h, &mut fs.ws, &mut fs.dd)?;
+                for (d, a) in fs.dd.iter_mut().zip(&w[l.pf()]) {
+                    *d = a - *d;
+                }
+                solver.solve_in_place(&mut fs.dd)?;
+                // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
+                fem.hvp_into(x, h, h, dx, &mut fs.ws, &mut fs.hv)?;
+                Ok(fem.grad_into(x, &fs.dd, h, &mut fs.ws, &mut fs.gd)?)
             },
-            || match signal {
-                Some(fem) => timed(t_fem, || -> Result<(), ShootError> {
-                    if refactor {
-                        fs.solve_at(x, &z[l.pf()], h)?;
-                    }
-                    let Some(solver) = fs.solver.as_mut() else { return Ok(()) };
-                    // δh = D⁻¹(δp^f − (∂D·δx) h).
-                    fem.dmatvec_into(x, dx, h, &mut fs.ws, &mut fs.dd)?;
-                    for (d, a) in fs.dd.iter_mut().zip(&w[l.pf()]) {
-                        *d = a - *d;
-                    }
-                    solver.solve_in_place(&mut fs.dd)?;
-                    // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
-                    fem.hvp_into(x, h, h, dx, &mut fs.ws, &mut fs.hv)?;
-                    Ok(fem.grad_into(x, &fs.dd, h, &mut fs.ws, &mut fs.gd)?)
-                }),
-                None => Ok(()),
-            },
-        );
-        kernels?;
-        fem?;
-        for (o, v) in out[l.x()].iter_mut().zip(&kern.kp) {
-            *o = v / self.gamma_v;
-        }
-        for (o, v) in out[l.mom()].iter_mut().zip(&kern.gk) {
-            *o = -v / self.gamma_v;
-        }
-        out[l.pf()].fill(0.0);
-        if signal.is_some() {
-            for ((o, a), b) in out[l.mom()].iter_mut().zip(&fs.hv).zip(&fs.gd) {
+        )?;
+        self.kernel_rates(&s.kern, out);
+        if signal {
+            for ((o, a), b) in out[l.mom()].iter_mut().zip(&s.fem.hv).zip(&s.fem.gd) {
                 *o += (a + 2.0 * b) / (2.0 * self.gamma_f);
             }
-            for (o, v) in out[l.f()].iter_mut().zip(&fs.dd) {
+            for (o, v) in out[l.f()].iter_mut().zip(&s.fem.dd) {
                 *o = v / self.gamma_f;
             }
         } else {
