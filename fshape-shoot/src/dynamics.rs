@@ -99,7 +99,7 @@ pub(crate) fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
 /// loops allocate nothing (tested with a counting allocator).
 pub(crate) struct Scratch<'s> {
     kern: KernelScratch,
-    pub(crate) fem: FemScratch<'s>,
+    fem: FemScratch<'s>,
     /// The state length: 𝕁v and dF(𝕁v).
     jv: Vec<f64>,
     jw: Vec<f64>,
@@ -115,9 +115,9 @@ struct KernelScratch {
 }
 
 /// The FEM's part of [`Scratch`].
-pub(crate) struct FemScratch<'s> {
+struct FemScratch<'s> {
     ws: Workspace,
-    pub(crate) solver: Option<Solver<'s>>,
+    solver: Option<Solver<'s>>,
     /// P·n: the FEM x-derivatives.
     gd: Vec<f64>,
     hv: Vec<f64>,
@@ -148,7 +148,7 @@ impl<'s> Scratch<'s> {
 
 impl FemScratch<'_> {
     /// Refactors D at `x` and solves D h = pf into `h`.
-    pub(crate) fn solve_at(&mut self, x: &[f64], pf: &[f64], h: &mut [f64]) -> Result<(), ShootError> {
+    fn solve_at(&mut self, x: &[f64], pf: &[f64], h: &mut [f64]) -> Result<(), ShootError> {
         if let Some(solver) = self.solver.as_mut() {
             solver.factor(x)?;
             h.copy_from_slice(pf);
@@ -253,15 +253,13 @@ impl Dynamics<'_> {
         Ok(())
     }
 
-    /// out = dF(z)·w, exact. With `refactor`, the solver in `s` is first
-    /// refactored at z's x and h set to D⁻¹p^f there ([`FemScratch::solve_at`]);
-    /// without, both must already be so (as [`Dynamics::field`] leaves them).
-    #[allow(clippy::too_many_arguments)]
+    /// out = dF(z)·w, exact. The solver in `s` is refactored at z's x and
+    /// h set to D⁻¹p^f there ([`FemScratch::solve_at`]), as the adjoint
+    /// visits the stages in reverse.
     pub(crate) fn jvp(
         &self,
         z: &[f64],
         h: &mut [f64],
-        refactor: bool,
         w: &[f64],
         out: &mut [f64],
         s: &mut Scratch<'_>,
@@ -276,9 +274,7 @@ impl Dynamics<'_> {
             t,
             |sums, k| Ok(sums.self_conv_and_grad_jvp_into(&mut k.sums, dx, p, dp, l.dim, &mut k.kp, &mut k.gk)?),
             |fem, fs| {
-                if refactor {
-                    fs.solve_at(x, pf, h)?;
-                }
+                fs.solve_at(x, pf, h)?;
                 let Some(solver) = fs.solver.as_mut() else { return Ok(()) };
                 // δh = D⁻¹(δp^f − (∂D·δx) h).
                 fem.dmatvec_into(x, dx, h, &mut fs.ws, &mut fs.dd)?;
@@ -305,13 +301,11 @@ impl Dynamics<'_> {
         Ok(())
     }
 
-    /// out = dF(z)ᵀ·v = 𝕁 dF(z)(𝕁 v) (`h`, `refactor`: as for [`Dynamics::jvp`]).
-    #[allow(clippy::too_many_arguments)]
+    /// out = dF(z)ᵀ·v = 𝕁 dF(z)(𝕁 v) (`h`: as for [`Dynamics::jvp`]).
     pub(crate) fn vjp(
         &self,
         z: &[f64],
         h: &mut [f64],
-        refactor: bool,
         v: &[f64],
         out: &mut [f64],
         s: &mut Scratch<'_>,
@@ -321,7 +315,7 @@ impl Dynamics<'_> {
         // Moved out of `s` for the call (no allocation) and back.
         let (mut jv, mut jw) = (std::mem::take(&mut s.jv), std::mem::take(&mut s.jw));
         l.symplectic(v, &mut jv);
-        let r = self.jvp(z, h, refactor, &jv, &mut jw, s, t);
+        let r = self.jvp(z, h, &jv, &mut jw, s, t);
         l.symplectic(&jw, out);
         (s.jv, s.jw) = (jv, jw);
         r

@@ -558,7 +558,7 @@ impl Problem {
                 }
                 // Refactored at Z_i, h recovered there.
                 let zi = traj.stage(step, i);
-                dynamics.vjp(zi, &mut h, true, &gk, gzi, &mut scratch, t)?;
+                dynamics.vjp(zi, &mut h, &gk, gzi, &mut scratch, t)?;
             }
             for g in gz.chunks_exact(len) {
                 axpy(&mut lam, 1.0, g);
