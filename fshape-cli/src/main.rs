@@ -307,8 +307,9 @@ enum Command {
         /// normalise lengths and signals).
         #[arg(long, default_value_t = 1e3)]
         gamma_w: f64,
-        /// Bunny: the 642-vertex sphere as template and three stages on it
-        /// (about a minute per norm) instead of the paper's 10242 vertices.
+        /// Bunny: the 642-vertex sphere as template and the first three
+        /// stages on it (about a minute per norm) instead of the paper's
+        /// 10242 vertices.
         #[arg(long)]
         quick: bool,
         /// atlas-digits: only the first N subjects (0: all 64).

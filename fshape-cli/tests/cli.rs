@@ -731,14 +731,23 @@ fn demo_bunny_quick_runs_three_stages_on_the_coarse_sphere_with_their_convergenc
             serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
         let stages = summary["stages"].as_array().unwrap();
         assert_eq!(stages.len(), 3, "{norm}");
-        // Four iterations at most per stage (4 × --max-iterations), each
+        // At most 4, 4 and 6 iterations (times --max-iterations), each
         // stage stopped by a rule the summary names.
-        for s in stages {
-            assert!(s["iterations"].as_array().unwrap().len() <= 4, "{norm}: {s}");
+        for (s, limit) in stages.iter().zip([4, 4, 6]) {
+            assert!(s["iterations"].as_array().unwrap().len() <= limit, "{norm}: {s}");
             assert!(["Decrease", "Iterations", "Gradient"].contains(&s["stop"].as_str().unwrap()), "{norm}: {s}");
         }
+        // The full demo's first three stages: the third is the deep one.
         let config = std::fs::read_to_string(dir.join("config.toml")).unwrap();
-        assert!(config.contains("decrease_window = [5, 5, 5]") && config.contains("momentum_metric = \"energy\""));
+        for line in [
+            "decrease_window = [5, 5, 10]",
+            "decrease_tolerance = [0.005, 0.005, 0.002]",
+            "max_iterations = [4, 4, 6]",
+            "memory = 30",
+            "momentum_metric = \"energy\"",
+        ] {
+            assert!(config.contains(line), "{norm}: no {line:?} in\n{config}");
+        }
         let template = fshape_mesh::io::read_mesh(&out.join("bunny-quick/source.ply"), &Default::default()).unwrap();
         assert_eq!(template.n_vertices(), 642);
     }
