@@ -21,29 +21,13 @@ range, with lumped-area weights at the target's vertices:
   few edges, about 5 % of the bunny's diagonal);
 - oscillating part: e minus its smooth part.
 """
-import re
 import sys
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-
-def read_ply(path):
-    b = open(path, "rb").read()
-    end = b.index(b"end_header\n") + len(b"end_header\n")
-    hdr = b[:end].decode()
-    nv = int(re.search(r"element vertex (\d+)", hdr).group(1))
-    nf = int(re.search(r"element face (\d+)", hdr).group(1))
-    props = re.findall(r"property double (\w+)", hdr)
-    if props[:4] != ["x", "y", "z", "signal"] or "binary_little_endian" not in hdr:
-        sys.exit(f"{path}: expected a binary little-endian PLY with double x, y, z, signal")
-    v = np.frombuffer(b, dtype="<f8", count=nv * len(props), offset=end).reshape(nv, len(props))
-    off = end + nv * len(props) * 8
-    faces = np.frombuffer(b, dtype=np.dtype([("n", "u1"), ("i", "<i4", (3,))]), count=nf, offset=off)
-    if np.any(faces["n"] != 3):
-        sys.exit(f"{path}: only triangles are read")
-    return v[:, :3].copy(), v[:, 3].copy(), faces["i"].astype(np.int64)
+from plyio import lumped_areas, read_ply
 
 
 def dense(x, s, f, n=8):
@@ -55,14 +39,6 @@ def dense(x, s, f, n=8):
             pts.append(a * x[f[:, 0]] + b * x[f[:, 1]] + c * x[f[:, 2]])
             sig.append(a * s[f[:, 0]] + b * s[f[:, 1]] + c * s[f[:, 2]])
     return np.vstack(pts), np.concatenate(sig)
-
-
-def lumped_areas(y, t):
-    a = 0.5 * np.linalg.norm(np.cross(y[t[:, 1]] - y[t[:, 0]], y[t[:, 2]] - y[t[:, 0]]), axis=1)
-    m = np.zeros(len(y))
-    for k in range(3):
-        np.add.at(m, t[:, k], a / 3)
-    return m / m.sum()
 
 
 def smooth(v, t, steps=20):
@@ -80,11 +56,16 @@ def main():
     if len(sys.argv) < 3:
         sys.exit(__doc__)
     y, g, t = read_ply(sys.argv[1])
+    if g is None:
+        sys.exit(f"{sys.argv[1]}: no signal")
     m = lumped_areas(y, t)
+    m = m / m.sum()
     r = g.max() - g.min()
     rms = lambda e: 100 * np.sqrt((m * e * e).sum()) / r
     for path in sys.argv[2:]:
         x, s, f = read_ply(path)
+        if s is None:
+            sys.exit(f"{path}: no signal")
         pts, sig = dense(x, s, f)
         fx = sig[cKDTree(pts).query(y)[1]]
         e = fx - g

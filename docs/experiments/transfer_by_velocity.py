@@ -23,36 +23,12 @@ velocity field at the fine vertices. Shoot them with `fshape shoot FINE
 compare with `fshape distance` / `fshape quality`.
 """
 import os
-import re
 import sys
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-
-def read_ply(path):
-    b = open(path, "rb").read()
-    end = b.index(b"end_header\n") + len(b"end_header\n")
-    hdr = b[:end].decode()
-    nv = int(re.search(r"element vertex (\d+)", hdr).group(1))
-    nf = int(re.search(r"element face (\d+)", hdr).group(1))
-    props = re.findall(r"property double (\w+)", hdr)
-    if props[:3] != ["x", "y", "z"] or "binary_little_endian" not in hdr:
-        sys.exit(f"{path}: expected a binary little-endian PLY with double x, y, z")
-    v = np.frombuffer(b, dtype="<f8", count=nv * len(props), offset=end).reshape(nv, len(props))
-    off = end + nv * len(props) * 8
-    faces = np.frombuffer(b, dtype=np.dtype([("n", "u1"), ("i", "<i4", (3,))]), count=nf, offset=off)
-    if np.any(faces["n"] != 3):
-        sys.exit(f"{path}: only triangles are read")
-    return v[:, :3].copy(), faces["i"].astype(np.int64)
-
-
-def lumped_areas(x, f):
-    a = 0.5 * np.linalg.norm(np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]]), axis=1)
-    m = np.zeros(len(x))
-    for k in range(3):
-        np.add.at(m, f[:, k], a / 3)
-    return m
+from plyio import lumped_areas, read_ply
 
 
 def main():
@@ -60,8 +36,8 @@ def main():
         sys.exit(__doc__)
     coarse, fine, p0_path, pf_path, out = sys.argv[1:6]
     widths = [float(w) for w in sys.argv[6:]]
-    xc, fc = read_ply(coarse)
-    xf, ff = read_ply(fine)
+    xc, _, fc = read_ply(coarse)
+    xf, _, ff = read_ply(fine)
     p0 = np.loadtxt(p0_path, delimiter=",", skiprows=1)
     pf = np.loadtxt(pf_path, skiprows=1)
     mc, mf = lumped_areas(xc, fc), lumped_areas(xf, ff)
