@@ -446,21 +446,21 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
     let shipped = Config::read(&a.data.join("configs/bunny.toml"))?;
     let n = a.max_iterations as f64;
     let budget = |f: f64| ((f * n).round() as usize).max(1);
-    // Each stage ends on its decrease test; the limits are a safety net.
-    // The quick run is the first three stages.
-    let (c, deep, last) = (BUNNY_COARSE_DECREASE, BUNNY_DEEP_DECREASE, BUNNY_DECREASE);
+    // Each stage ends on its decrease test (tolerance, window); the limits
+    // are a safety net. The quick run is the first three stages.
+    let coarse_test = (BUNNY_COARSE_DECREASE, BUNNY_DECREASE.1);
     let stages = [
-        (0.2, c, BUNNY_DECREASE.1, 4.0),
-        (0.1, c, BUNNY_DECREASE.1, 4.0),
-        (0.05, deep.0, deep.1, 6.0),
-        (0.05, c, BUNNY_DECREASE.1, 1.5),
-        (0.05, last.0, last.1, 0.4),
+        (0.2, coarse_test, 4.0),
+        (0.1, coarse_test, 4.0),
+        (0.05, BUNNY_DEEP_DECREASE, 6.0),
+        (0.05, coarse_test, 1.5),
+        (0.05, BUNNY_DECREASE, 0.4),
     ];
     let stages = if a.quick { &stages[..3] } else { &stages[..] };
     let widths: Vec<f64> = stages.iter().map(|s| s.0).collect();
     let mut plan =
-        schedule(&widths, stages.iter().map(|s| s.1).collect(), stages.iter().map(|s| budget(s.3)).collect())?;
-    plan.decrease_window = Some(stages.iter().map(|s| s.2).collect());
+        schedule(&widths, stages.iter().map(|s| s.1.0).collect(), stages.iter().map(|s| budget(s.2)).collect())?;
+    plan.decrease_window = Some(stages.iter().map(|s| s.1.1).collect());
     for norm in [NormKind::H1, NormKind::L2Lumped] {
         let name = if norm == NormKind::H1 { "h1" } else { "l2-lumped" };
         let run = dir.join(name);
@@ -485,11 +485,15 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
              (the k_p 0.05 stage on the level-3 sphere: {} over {}{}).",
             a.gamma_w,
             BUNNY_LBFGS_MEMORY,
-            BUNNY_COARSE_DECREASE,
-            BUNNY_DECREASE.1,
-            deep.0,
-            deep.1,
-            if a.quick { String::new() } else { format!("; the last stage: {} over {}", last.0, last.1) }
+            coarse_test.0,
+            coarse_test.1,
+            BUNNY_DEEP_DECREASE.0,
+            BUNNY_DEEP_DECREASE.1,
+            if a.quick {
+                String::new()
+            } else {
+                format!("; the last stage: {} over {}", BUNNY_DECREASE.0, BUNNY_DECREASE.1)
+            }
         );
         eprintln!("bunny: {name} -> {}", run.display());
         run_match(&sp, &tp, &header, &config, &run, (0.0, 90.0), &stage_templates)
