@@ -94,15 +94,23 @@ impl KernelFactor {
     /// kernel that is not positive definite); an error where the lumped
     /// mass is not defined (a degenerate cell).
     pub fn new(template: &FShape, kernel: &Kernel) -> Result<Option<KernelFactor>, ShootError> {
-        use faer::dyn_stack::{MemBuffer, MemStack};
-        use faer::linalg::cholesky::llt::factor;
         let (n, dim) = (template.n_vertices(), template.dim());
         if n > MAX_VERTICES {
             return Ok(None);
         }
         let masses = SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(template.points())?;
         let lambda = KernelFactor::ridge(kernel, template.kind().dim());
-        let points = template.points();
+        let ridge: Vec<f64> = masses.iter().map(|m| lambda / m).collect();
+        Ok(KernelFactor::factor(template.points(), dim, kernel, &ridge))
+    }
+
+    /// The Cholesky factor of K + diag(`ridge`) on the points `points`
+    /// (`dim` coordinates each); `None` where a pivot is not positive.
+    pub(crate) fn factor(points: &[f64], dim: usize, kernel: &Kernel, ridge: &[f64]) -> Option<KernelFactor> {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::linalg::cholesky::llt::factor;
+        let n = ridge.len();
+        debug_assert_eq!(points.len(), n * dim);
         // The lower triangle, column by column (faer is column-major).
         let mut l = faer::Mat::<f64>::zeros(n, n);
         for j in 0..n {
@@ -113,16 +121,13 @@ impl KernelFactor {
                 let u: f64 = xi.iter().zip(xj).map(|(a, b)| (a - b) * (a - b)).sum();
                 *v = kernel.value(u);
             }
-            col[j] += lambda / masses[j];
+            col[j] += ridge[j];
         }
         let par = faer::Par::Seq;
         let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f64>(n, par, Default::default()));
         let done =
             factor::cholesky_in_place(l.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default());
-        if done.is_err() {
-            return Ok(None);
-        }
-        Ok(Some(KernelFactor { dim, l }))
+        done.ok().map(|_| KernelFactor { dim, l })
     }
 
     /// The ridge λ of a kernel on cells of dimension `cell_dim`, without

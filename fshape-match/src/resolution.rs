@@ -9,12 +9,83 @@
 //! signal velocity D_s⁻¹ p^f/γ_f are two quadratures of the same
 //! integrals, and the prolongated solution shoots to nearly the same end
 //! (tested).
+//!
+//! The velocity field is only kept to the accuracy of that quadrature,
+//! and a fine mesh sees what the coarse quadrature gets wrong: on the
+//! bunny, a level-3 sphere's converged solution carried to level 4 so
+//! shoots to an attachment ten times the coarse end's (docs/experiments.md,
+//! tenth session). [`prolongate_fitted`] instead takes the fine p_0 whose
+//! velocity at the fine vertices *is* the coarse solution's there, a
+//! regularised least-squares fit; the stages of a [`crate::Session`] use it.
 
+use fshape_kernels::Kernel;
 use fshape_mesh::FShape;
 use fshape_shoot::ModelKind;
 
 use crate::MatchError;
+use crate::precondition::{KernelFactor, MAX_VERTICES};
 use crate::quality::ClosestPoints;
+
+/// The fit's ridge ([`prolongate_fitted`]), relative to k(0) at a vertex
+/// of the fine mesh's mean area.
+pub const FIT_RIDGE: f64 = 1e-6;
+
+/// The momenta of `coarse` carried to `fine` so that the deformation's
+/// velocity field at the fine vertices is kept: p^f as in [`prolongate`]
+/// (the signal's velocity is local), and the fine p_0 = q solving
+///
+/// (K_ff + ε·k(0)·m̄·D_f⁻¹) q = K_fc p_0,
+///
+/// with K_ff = k(x_i^f, x_j^f), K_fc = k(x_i^f, x_j^c) the deformation
+/// kernel `kernel`'s matrices, D_f the fine lumped areas, m̄ their mean and
+/// ε = [`FIT_RIDGE`]. Without the ridge, K_ff q = K_fc p_0 is the
+/// velocity's interpolation at the fine vertices; K_ff is numerically
+/// singular for a Gaussian wider than the mesh spacing, and the ridge (the
+/// fit minimises ½qᵀK_ff q − qᵀK_fc p_0 + ½ε k(0) m̄ Σ q_i²/m_i, a penalty
+/// on the density q_i/m_i) picks among the momenta of nearly equal
+/// velocity the one of smallest density. Both terms scale alike with the
+/// data, so the transfer is the same for a copy scaled in length.
+///
+/// The solve is dense (a Cholesky factor, n²/2 values and n³/3
+/// operations, about 10 s for 10242 vertices on the machine of
+/// docs/experiments.md); beyond [`MAX_VERTICES`] fine vertices, or where
+/// the factor fails, p_0 is carried as a density ([`prolongate`]).
+pub fn prolongate_fitted(
+    coarse: &FShape,
+    fine: &FShape,
+    p0: &[f64],
+    pf: &[f64],
+    kind: ModelKind,
+    kernel: &Kernel,
+) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
+    let (q0, qf) = prolongate(coarse, fine, p0, pf, kind)?;
+    let (nf, dim) = (fine.n_vertices(), fine.dim());
+    if nf > MAX_VERTICES {
+        return Ok((q0, qf));
+    }
+    let mf = fine.vertex_volumes();
+    if let Some(v) = mf.iter().position(|m| m.is_nan() || *m <= 0.0) {
+        return Err(MatchError::Shapes(format!("prolongation: fine vertex {v} has no area (unused or degenerate)")));
+    }
+    let mean = mf.iter().sum::<f64>() / nf as f64;
+    let scale = FIT_RIDGE * kernel.value(0.0) * mean;
+    let ridge: Vec<f64> = mf.iter().map(|m| scale / m).collect();
+    let Some(factor) = KernelFactor::factor(fine.points(), dim, kernel, &ridge) else {
+        return Ok((q0, qf));
+    };
+    // K_fc p_0: the coarse velocity at the fine vertices, a plain sum.
+    let (xf, xc) = (fine.points(), coarse.points());
+    let mut v = vec![0.0; nf * dim];
+    for (x, out) in xf.chunks_exact(dim).zip(v.chunks_exact_mut(dim)) {
+        for (y, p) in xc.chunks_exact(dim).zip(p0.chunks_exact(dim)) {
+            let u: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
+            let k = kernel.value(u);
+            out.iter_mut().zip(p).for_each(|(o, p)| *o += k * p);
+        }
+    }
+    factor.apply(&mut v);
+    Ok((v, qf))
+}
 
 /// The momenta (p_0: P_c × n, p^f: P_c) of `coarse` carried to `fine`
 /// (the same surface at another resolution): fine areas times the coarse

@@ -418,8 +418,8 @@ impl Session {
     /// Runs stage k on a coarser template `templates[k]` (the same surface
     /// at a lower resolution, with its signal), or on the source where it
     /// is `None`; the last stage is always the source. Between stages on
-    /// different templates the momenta are carried over as densities
-    /// ([`crate::resolution::prolongate`]). The templates enter the
+    /// different templates the momenta are carried over keeping their
+    /// velocity field ([`crate::resolution::prolongate_fitted`]). The templates enter the
     /// checkpoint's fingerprint: call this before [`Session::resume`].
     pub fn with_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Session, MatchError> {
         let n = self.plan.stages.len();
@@ -600,8 +600,9 @@ impl Session {
                 // A finer template: carry the momenta over.
                 let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
                 let kind = self.plan.model.kind();
-                let (p0, pf) =
-                    crate::resolution::prolongate(self.template_of(k - 1).1, self.template_of(k).1, &p0, &pf, kind)?;
+                let (coarse, fine) = (self.template_of(k - 1).1, self.template_of(k).1);
+                let kernel = self.plan.model.kernel();
+                let (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, kernel)?;
                 self.unknowns.pack(&p0, &pf)
             }
             Some(w) => w.clone(),

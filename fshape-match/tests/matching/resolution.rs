@@ -88,3 +88,64 @@ fn prolongated_momenta_keep_the_velocity_field_and_shoot_to_the_same_end() {
     );
     assert!(q.signal_rms.unwrap() < 0.01, "signal error {:?}", q.signal_rms);
 }
+
+/// The end of shooting `p0`, `pf` from `s` with `kernel`.
+fn shoot_end(s: &FShape, kernel: &Kernel, p0: &[f64], pf: &[f64]) -> FShape {
+    let traj = Problem::new(s, Model::new(kernel.clone())).unwrap().shoot(p0, pf).unwrap();
+    let n = traj.steps();
+    s.clone().with_points(traj.points(n).to_vec()).unwrap().with_signal(Some(traj.signal(n).to_vec())).unwrap()
+}
+
+/// Momenta that are not a smooth density, as a coarse optimum's are: the
+/// density transfer loses part of their velocity field, the fit keeps it,
+/// and the fitted momenta shoot closer to the coarse end.
+#[test]
+fn fitted_momenta_keep_the_velocity_of_rough_momenta() {
+    use fshape_match::resolution::prolongate_fitted;
+    use fshape_mesh::test_support::random_vector_field;
+    let with_signal = |s: FShape| {
+        let n = s.n_vertices();
+        s.with_signal(Some(vec![0.0; n])).unwrap()
+    };
+    let (coarse, fine) = (with_signal(icosphere(2, 1.0)), with_signal(icosphere(4, 1.0)));
+    let kernel = Kernel::gaussian(0.3).unwrap();
+    // Independent momenta at each coarse vertex, of a density about 3:
+    // displacements of a third of the radius.
+    let mc = coarse.vertex_volumes();
+    let p0c: Vec<f64> =
+        random_vector_field(coarse.n_vertices(), 3, 3.0, 7).iter().enumerate().map(|(i, p)| p * mc[i / 3]).collect();
+    let pfc = vec![0.0; coarse.n_vertices()];
+    let kind = fshape_shoot::ModelKind::Metamorphosis;
+    let (p0d, pfd) = prolongate(&coarse, &fine, &p0c, &pfc, kind).unwrap();
+    let (p0f, pff) = prolongate_fitted(&coarse, &fine, &p0c, &pfc, kind, &kernel).unwrap();
+    assert_eq!(pff, pfd, "the signal momentum is carried as a density either way");
+    let velocity = |at: &FShape, p: &[f64]| {
+        KernelSums::try_new(&kernel, at.points(), 3).unwrap().conv(fine.points(), p, 3).unwrap()
+    };
+    let vc = velocity(&coarse, &p0c);
+    let (err_d, err_f) = (relative(&velocity(&fine, &p0d), &vc), relative(&velocity(&fine, &p0f), &vc));
+    let (end_c, end_d, end_f) = (
+        shoot_end(&coarse, &kernel, &p0c, &pfc),
+        shoot_end(&fine, &kernel, &p0d, &pfd),
+        shoot_end(&fine, &kernel, &p0f, &pff),
+    );
+    // Surface distances to the coarse end (whose flat faces set a floor).
+    let (qd, qf) = (quality(&end_d, &end_c).unwrap(), quality(&end_f, &end_c).unwrap());
+    let moved: f64 = end_f.points().iter().zip(fine.points()).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt()
+        / (fine.n_vertices() as f64).sqrt();
+    eprintln!(
+        "velocity error: density {err_d:.2e}, fit {err_f:.2e}; end distance density {:.2e}, fit {:.2e}, displacement {moved:.3}",
+        qd.mean_distance * qd.diagonal,
+        qf.mean_distance * qf.diagonal
+    );
+    // The fit solves for the velocity at the fine vertices; its ridge
+    // (1e-6 of the diagonal) leaves an error far below the quadrature's.
+    assert!(err_f < 1e-3 && err_f < err_d / 10.0, "velocity error: density {err_d}, fit {err_f}");
+    assert!(qf.mean_distance < 0.9 * qd.mean_distance, "{qf:?} {qd:?}");
+    // Scaled in length with the kernel, the transfer is the same, up to
+    // rounding amplified by the solve's conditioning (about 1/ε = 10⁶).
+    let scaled = |s: &FShape| s.clone().with_points(s.points().iter().map(|x| 10.0 * x).collect()).unwrap();
+    let (p0s, _) =
+        prolongate_fitted(&scaled(&coarse), &scaled(&fine), &p0c, &pfc, kind, &Kernel::gaussian(3.0).unwrap()).unwrap();
+    assert!(relative(&p0s, &p0f) < 1e-6, "scaled: {}", relative(&p0s, &p0f));
+}
