@@ -43,7 +43,8 @@
 //! Stages may run on coarser versions of the initial template
 //! ([`Atlas::with_stage_templates`]), each with its own unknowns; between
 //! them the template's displacement and signal change are interpolated as
-//! functions and the momenta carried as densities, as in matching.
+//! functions and the momenta carried keeping their velocity field, as in
+//! matching.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -638,8 +639,9 @@ impl Atlas {
     /// template without a signal takes the initial template's, read at its
     /// vertices. Between stages on different templates the solution is
     /// carried over: the template's displacement and signal change as
-    /// functions (interpolated at the finer vertices), the momenta as
-    /// densities ([`crate::resolution::prolongate`]). The templates enter
+    /// functions (interpolated at the finer vertices), the momenta keeping
+    /// their velocity field ([`crate::resolution::prolongate_fitted`], one
+    /// factor for all subjects). The templates enter
     /// the checkpoint's fingerprint: call this before [`Atlas::resume`].
     pub fn with_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Atlas, MatchError> {
         let n = self.plan.stages.len();
@@ -829,7 +831,7 @@ impl Atlas {
 
     /// A solution carried to stage k's (finer) template, as its unknowns.
     fn prolongate(&mut self, k: usize, coarse: &Solution) -> Result<Vec<f64>, MatchError> {
-        use crate::resolution::{prolongate, sample};
+        use crate::resolution::{VelocityFit, prolongate_fitted, sample};
         self.ensure_level(k)?;
         let level = &self.level;
         let fine0 = &level.template;
@@ -854,7 +856,7 @@ impl Atlas {
         let (mut x, points) = match (&level.hyper, &coarse.hyper_p0) {
             (Some(h), Some(p0)) => {
                 let zero = vec![0.0; was.n_vertices()];
-                let (q0, _) = prolongate(was, fine0, p0, &zero, ModelKind::Lddmm)?;
+                let (q0, _) = prolongate_fitted(was, fine0, p0, &zero, ModelKind::Lddmm, h.problem.model().kernel())?;
                 let block = h.unknowns.pack(&q0, &[]);
                 let (points, _) = positions(Some(h), &level.metric, &block)?;
                 (block, points)
@@ -871,8 +873,10 @@ impl Atlas {
         };
         x.extend(signal.iter().map(|v| v / level.metric.signal));
         let fine = fine0.clone().with_points(points)?;
+        // One factor on the (moved) fine template for every subject.
+        let fit = VelocityFit::new(&fine, self.plan.model.kernel())?;
         for (p0, pf) in &coarse.momenta {
-            let (q0, qf) = prolongate(&coarse.template, &fine, p0, pf, kind)?;
+            let (q0, qf) = fit.carry(&coarse.template, p0, pf, kind)?;
             x.extend(level.unknowns.pack(&q0, &qf));
         }
         debug_assert_eq!(x.len(), n * (dim + 1) + self.subjects.len() * level.unknowns.len());

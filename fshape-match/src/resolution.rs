@@ -58,33 +58,79 @@ pub fn prolongate_fitted(
     kind: ModelKind,
     kernel: &Kernel,
 ) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
-    let (q0, qf) = prolongate(coarse, fine, p0, pf, kind)?;
-    let (nf, dim) = (fine.n_vertices(), fine.dim());
-    if nf > MAX_VERTICES {
-        return Ok((q0, qf));
+    VelocityFit::new(fine, kernel)?.carry(coarse, p0, pf, kind)
+}
+
+/// [`prolongate_fitted`] onto one fine template, its factor computed
+/// once for any number of coarse solutions (an atlas's subjects).
+pub struct VelocityFit {
+    fine: FShape,
+    kernel: Kernel,
+    /// The factor of K_ff + ε·k(0)·m̄·D_f⁻¹; `None` beyond
+    /// [`MAX_VERTICES`] or where it failed (densities then).
+    factor: Option<KernelFactor>,
+}
+
+impl std::fmt::Debug for VelocityFit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VelocityFit")
+            .field("n", &self.fine.n_vertices())
+            .field("factor", &self.factor.is_some())
+            .finish_non_exhaustive()
     }
-    let mf = fine.vertex_volumes();
-    if let Some(v) = mf.iter().position(|m| m.is_nan() || *m <= 0.0) {
-        return Err(MatchError::Shapes(format!("prolongation: fine vertex {v} has no area (unused or degenerate)")));
-    }
-    let mean = mf.iter().sum::<f64>() / nf as f64;
-    let scale = FIT_RIDGE * kernel.value(0.0) * mean;
-    let ridge: Vec<f64> = mf.iter().map(|m| scale / m).collect();
-    let Some(factor) = KernelFactor::factor(fine.points(), dim, kernel, &ridge) else {
-        return Ok((q0, qf));
-    };
-    // K_fc p_0: the coarse velocity at the fine vertices, a plain sum.
-    let (xf, xc) = (fine.points(), coarse.points());
-    let mut v = vec![0.0; nf * dim];
-    for (x, out) in xf.chunks_exact(dim).zip(v.chunks_exact_mut(dim)) {
-        for (y, p) in xc.chunks_exact(dim).zip(p0.chunks_exact(dim)) {
-            let u: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
-            let k = kernel.value(u);
-            out.iter_mut().zip(p).for_each(|(o, p)| *o += k * p);
+}
+
+impl VelocityFit {
+    /// Factors the fit's matrix on `fine` with the deformation kernel
+    /// `kernel`. Fails where a fine vertex has no area (an unused vertex
+    /// or a degenerate cell).
+    pub fn new(fine: &FShape, kernel: &Kernel) -> Result<VelocityFit, MatchError> {
+        let (nf, dim) = (fine.n_vertices(), fine.dim());
+        let mf = fine.vertex_volumes();
+        if let Some(v) = mf.iter().position(|m| m.is_nan() || *m <= 0.0) {
+            return Err(MatchError::Shapes(format!(
+                "prolongation: fine vertex {v} has no area (unused or degenerate)"
+            )));
         }
+        let factor = if nf > MAX_VERTICES {
+            None
+        } else {
+            let mean = mf.iter().sum::<f64>() / nf as f64;
+            let scale = FIT_RIDGE * kernel.value(0.0) * mean;
+            let ridge: Vec<f64> = mf.iter().map(|m| scale / m).collect();
+            KernelFactor::factor(fine.points(), dim, kernel, &ridge)
+        };
+        Ok(VelocityFit { fine: fine.clone(), kernel: kernel.clone(), factor })
     }
-    factor.apply(&mut v);
-    Ok((v, qf))
+
+    /// Whether p_0 is fitted (false: carried as a density).
+    pub fn fits(&self) -> bool {
+        self.factor.is_some()
+    }
+
+    /// The momenta `p0`, `pf` of `coarse` carried to the fine template.
+    pub fn carry(
+        &self,
+        coarse: &FShape,
+        p0: &[f64],
+        pf: &[f64],
+        kind: ModelKind,
+    ) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
+        let (q0, qf) = prolongate(coarse, &self.fine, p0, pf, kind)?;
+        let Some(factor) = &self.factor else { return Ok((q0, qf)) };
+        // K_fc p_0: the coarse velocity at the fine vertices, a plain sum.
+        let dim = self.fine.dim();
+        let mut v = vec![0.0; q0.len()];
+        for (x, out) in self.fine.points().chunks_exact(dim).zip(v.chunks_exact_mut(dim)) {
+            for (y, p) in coarse.points().chunks_exact(dim).zip(p0.chunks_exact(dim)) {
+                let u: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
+                let k = self.kernel.value(u);
+                out.iter_mut().zip(p).for_each(|(o, p)| *o += k * p);
+            }
+        }
+        factor.apply(&mut v);
+        Ok((v, qf))
+    }
 }
 
 /// The momenta (p_0: P_c × n, p^f: P_c) of `coarse` carried to `fine`

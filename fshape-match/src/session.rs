@@ -569,10 +569,16 @@ impl Session {
         let stages = self.plan.stages.len();
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
+            // Carried over before stage k's metric is built, so that the
+            // transfer's dense factor and the metric's are not held at once.
+            let carried = if self.checkpoint.current.is_none() { self.carried(k)? } else { None };
             self.stage_target(k)?;
             let begin = match self.checkpoint.current.take() {
                 Some(current) => StageStart::Resume(Box::new(current)),
-                None => StageStart::At(self.warm_start(k)?),
+                None => StageStart::At(match carried {
+                    Some(x) => x,
+                    None => self.checkpoint.warm.clone().unwrap_or_else(|| vec![0.0; self.unknowns.len()]),
+                }),
             };
             let mut objective = MatchObjective::new(&self.problem, self.unknowns.clone());
             let mut journal = Journal {
@@ -591,22 +597,20 @@ impl Session {
         Ok(Outcome::Finished)
     }
 
-    /// Where stage `k` starts: zero on the first, the last stage's end
-    /// after it, carried over to a finer template.
-    fn warm_start(&self, k: usize) -> Result<Vec<f64>, MatchError> {
-        Ok(match &self.checkpoint.warm {
-            None => vec![0.0; self.unknowns.len()],
-            Some(w) if k > 0 && self.template_of(k - 1).0 != self.template_of(k).0 => {
-                // A finer template: carry the momenta over.
-                let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
-                let kind = self.plan.model.kind();
-                let (coarse, fine) = (self.template_of(k - 1).1, self.template_of(k).1);
-                let kernel = self.plan.model.kernel();
-                let (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, kernel)?;
-                self.unknowns.pack(&p0, &pf)
-            }
-            Some(w) => w.clone(),
-        })
+    /// The unknowns stage `k` starts from where it runs on another
+    /// template than stage k − 1: the last stage's end carried over
+    /// ([`crate::resolution::prolongate_fitted`]). `None` where stage k
+    /// starts from zero (the first) or from the last stage's end as it is.
+    fn carried(&self, k: usize) -> Result<Option<Vec<f64>>, MatchError> {
+        let Some(w) = &self.checkpoint.warm else { return Ok(None) };
+        if k == 0 || self.template_of(k - 1).0 == self.template_of(k).0 {
+            return Ok(None);
+        }
+        let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
+        let (coarse, fine) = (self.template_of(k - 1).1, self.template_of(k).1);
+        let kind = self.plan.model.kind();
+        let (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, self.plan.model.kernel())?;
+        Ok(Some(self.unknowns_of(k)?.pack(&p0, &pf)))
     }
 
     /// The result of a finished run: the final momenta, shot once more with
