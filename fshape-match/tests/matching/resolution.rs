@@ -26,13 +26,19 @@ fn relative(a: &[f64], b: &[f64]) -> f64 {
     (num / b.iter().map(|v| v * v).sum::<f64>()).sqrt()
 }
 
-#[test]
-fn prolongated_momenta_keep_the_velocity_field_and_shoot_to_the_same_end() {
+/// The unit icospheres of levels 2 (162 vertices) and 4 (2562), with a
+/// zero signal.
+fn spheres() -> (FShape, FShape) {
     let with_signal = |s: FShape| {
         let n = s.n_vertices();
         s.with_signal(Some(vec![0.0; n])).unwrap()
     };
-    let (coarse, fine) = (with_signal(icosphere(2, 1.0)), with_signal(icosphere(4, 1.0)));
+    (with_signal(icosphere(2, 1.0)), with_signal(icosphere(4, 1.0)))
+}
+
+#[test]
+fn prolongated_momenta_keep_the_velocity_field_and_shoot_to_the_same_end() {
+    let (coarse, fine) = spheres();
     let (p0c, pfc) = momenta(&coarse);
     let (p0f, pff) = prolongate(&coarse, &fine, &p0c, &pfc, fshape_shoot::ModelKind::Metamorphosis).unwrap();
     // The same density sampled on the fine mesh directly.
@@ -59,13 +65,7 @@ fn prolongated_momenta_keep_the_velocity_field_and_shoot_to_the_same_end() {
     };
     assert!(relative(&velocity(&fine, &copied), &vc) > 5.0);
     // Shooting: the fine end is on the coarse end's surface, with its signal.
-    let model = Model::new(kernel.clone());
-    let shoot = |s: &FShape, p0: &[f64], pf: &[f64]| {
-        let traj = Problem::new(s, model.clone()).unwrap().shoot(p0, pf).unwrap();
-        let n = traj.steps();
-        s.clone().with_points(traj.points(n).to_vec()).unwrap().with_signal(Some(traj.signal(n).to_vec())).unwrap()
-    };
-    let (end_c, end_f) = (shoot(&coarse, &p0c, &pfc), shoot(&fine, &p0f, &pff));
+    let (end_c, end_f) = (shoot_end(&coarse, &kernel, &p0c, &pfc), shoot_end(&fine, &kernel, &p0f, &pff));
     let moved: f64 = end_f.points().iter().zip(fine.points()).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt()
         / (fine.n_vertices() as f64).sqrt();
     let q = quality(&end_f, &end_c).unwrap();
@@ -103,11 +103,7 @@ fn shoot_end(s: &FShape, kernel: &Kernel, p0: &[f64], pf: &[f64]) -> FShape {
 fn fitted_momenta_keep_the_velocity_of_rough_momenta() {
     use fshape_match::resolution::prolongate_fitted;
     use fshape_mesh::test_support::random_vector_field;
-    let with_signal = |s: FShape| {
-        let n = s.n_vertices();
-        s.with_signal(Some(vec![0.0; n])).unwrap()
-    };
-    let (coarse, fine) = (with_signal(icosphere(2, 1.0)), with_signal(icosphere(4, 1.0)));
+    let (coarse, fine) = spheres();
     let kernel = Kernel::gaussian(0.3).unwrap();
     // Independent momenta at each coarse vertex, of a density about 3:
     // displacements of a third of the radius.
