@@ -95,6 +95,13 @@ class Quality(TypedDict):
     signal_rms_within_1pct: Optional[float]
     signal_rms_beyond_1pct: Optional[float]
     signal_roughness: Optional[float]
+    signal_rms_on_shape: Optional[float]
+    signal_rms_on_shape_beyond_1pct: Optional[float]
+    shape_beyond_1pct: float
+    signal_roughness_beyond_1pct: Optional[float]
+    shape_past_boundary: float
+    signal_rms_past_boundary: Optional[float]
+    signal_roughness_past_boundary: Optional[float]
     signal_range: float
 
 class Energies(TypedDict):

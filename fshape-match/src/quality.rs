@@ -34,6 +34,8 @@
 //! the ratio compares shapes of different sizes; for curves it scales as
 //! the inverse length ratio, near 1 once the shapes are close.
 
+use std::collections::HashSet;
+
 use fshape_mesh::{CellKind, FShape};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -77,6 +79,45 @@ pub struct Quality {
     /// signal is constant.
     #[serde(default)]
     pub signal_roughness: Option<f64>,
+    /// RMS of the signal error seen from the shape's side: at each sample
+    /// of the shape, its signal minus the target's at the closest point of
+    /// the target, over the target signal's range. Unlike `signal_rms` it
+    /// sees the parts of the shape that no part of the target is close to
+    /// (e.g. where the shape closes the target's holes, compared with
+    /// their rims); `None` as `signal_rms`.
+    #[serde(default)]
+    pub signal_rms_on_shape: Option<f64>,
+    /// The same over the shape's area farther than 1 % of the diagonal from
+    /// the target (the share `shape_beyond_1pct`); `None` as `signal_rms`
+    /// or when that area is empty.
+    #[serde(default)]
+    pub signal_rms_on_shape_beyond_1pct: Option<f64>,
+    /// Share of the shape's area (or length) farther than 1 % of the
+    /// diagonal from the target.
+    #[serde(default)]
+    pub shape_beyond_1pct: f64,
+    /// The shape signal's roughness on that area: the root of its mean
+    /// Dirichlet energy per unit area there over the target's per unit
+    /// area (each cell of the shape counted in proportion to its samples
+    /// beyond 1 %). Where the target gives the signal nothing to match, a
+    /// regular metamorphosis fills in a smooth signal (near or below 1)
+    /// and an L² one may oscillate (the paper's figure of the bunny seen
+    /// from below). `None` without that area or without signals.
+    #[serde(default)]
+    pub signal_roughness_beyond_1pct: Option<f64>,
+    /// Share of the shape's area (or length) past the target's boundary:
+    /// off the target, with its closest point of the target on a boundary
+    /// edge (or the end of a curve). For the bunny, the caps the sphere
+    /// puts over the target's holes underneath; 0 for a closed target.
+    #[serde(default)]
+    pub shape_past_boundary: f64,
+    /// `signal_rms_on_shape` over that area (the error against the values
+    /// on the rim); `None` as `signal_rms` or without that area.
+    #[serde(default)]
+    pub signal_rms_past_boundary: Option<f64>,
+    /// `signal_roughness_beyond_1pct` over that area.
+    #[serde(default)]
+    pub signal_roughness_past_boundary: Option<f64>,
     /// The target signal's range (max − min), in its units (0 without one).
     pub signal_range: f64,
 }
@@ -103,8 +144,35 @@ impl Quality {
                 s.push_str(&format!(", {:.2}% (99th percentile)", 100.0 * p));
             }
         }
+        if let Some(e) = self.signal_rms_on_shape {
+            s.push_str(&format!(", {:.2}% from the shape's side", 100.0 * e));
+            let mut parts = Vec::new();
+            if let Some(b) = self.signal_rms_on_shape_beyond_1pct {
+                parts.push(format!("{:.2}% on its {:.1}% beyond 1%", 100.0 * b, 100.0 * self.shape_beyond_1pct));
+            }
+            if let Some(b) = self.signal_rms_past_boundary {
+                parts.push(format!(
+                    "{:.2}% on its {:.1}% past the target's boundary",
+                    100.0 * b,
+                    100.0 * self.shape_past_boundary
+                ));
+            }
+            if !parts.is_empty() {
+                s.push_str(&format!(" ({})", parts.join("; ")));
+            }
+        }
         if let Some(r) = self.signal_roughness {
             s.push_str(&format!(", signal roughness {r:.2} of the target's"));
+            let parts: Vec<String> = [
+                (self.signal_roughness_beyond_1pct, "beyond 1%"),
+                (self.signal_roughness_past_boundary, "past the boundary"),
+            ]
+            .into_iter()
+            .filter_map(|(v, at)| v.map(|v| format!("{v:.2} {at}")))
+            .collect();
+            if !parts.is_empty() {
+                s.push_str(&format!(" ({})", parts.join(", ")));
+            }
         }
         s
     }
@@ -318,28 +386,48 @@ fn signal_at(shape: &FShape, cell: usize, bary: [f64; 3]) -> Option<f64> {
 /// Cells of zero volume carry no gradient and are skipped. `None` without
 /// a signal.
 pub fn dirichlet_seminorm(shape: &FShape) -> Option<f64> {
+    Some(dirichlet_energies(shape)?.iter().sum::<f64>().sqrt())
+}
+
+/// ∫_c |∇f|² on each cell c (see [`dirichlet_seminorm`]).
+fn dirichlet_energies(shape: &FShape) -> Option<Vec<f64>> {
     let f = shape.signal()?;
     let k = shape.kind().n_corners();
-    let mut sum = 0.0;
-    for (c, ids) in shape.cells().chunks_exact(k).enumerate() {
+    let energy = |(c, ids): (usize, &[usize])| {
         let p = corners(shape, c);
         let (e1, d1) = (sub(p[1], p[0]), f[ids[1]] - f[ids[0]]);
         if k == 2 {
             let len = dot(e1, e1).sqrt();
-            if len > 0.0 {
-                sum += d1 * d1 / len;
-            }
-            continue;
+            return if len > 0.0 { d1 * d1 / len } else { 0.0 };
         }
         let (e2, d2) = (sub(p[2], p[0]), f[ids[2]] - f[ids[0]]);
         let (g11, g12, g22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
         let det = g11 * g22 - g12 * g12;
-        if det > 0.0 {
-            // dfᵀ G⁻¹ df × area, area = ½√det.
-            sum += (g22 * d1 * d1 - 2.0 * g12 * d1 * d2 + g11 * d2 * d2) / det * 0.5 * det.sqrt();
-        }
+        // dfᵀ G⁻¹ df × area, area = ½√det.
+        if det > 0.0 { (g22 * d1 * d1 - 2.0 * g12 * d1 * d2 + g11 * d2 * d2) / det * 0.5 * det.sqrt() } else { 0.0 }
+    };
+    Some(shape.cells().chunks_exact(k).enumerate().map(energy).collect())
+}
+
+/// Whether a closest point of `target` lies on its boundary (an edge of a
+/// surface used by one triangle, or one of its vertices; an end of a
+/// curve) and off the query point: the query lies past the target's edge,
+/// e.g. over one of its holes.
+fn past_boundary(target: &FShape) -> impl Fn(&Closest) -> bool + '_ {
+    let facets = target.topology().boundary_facets;
+    let vertices: HashSet<usize> = facets.iter().flatten().copied().collect();
+    let edges: HashSet<[usize; 2]> = facets.iter().map(|&[a, b]| [a.min(b), a.max(b)]).collect();
+    let k = target.kind().n_corners();
+    move |c: &Closest| {
+        let ids = &target.cells()[c.cell * k..(c.cell + 1) * k];
+        let mut on = (0..k).filter(|&j| c.bary[j] > 0.0).map(|j| ids[j]);
+        c.distance > 0.0
+            && match (on.next(), on.next(), on.next()) {
+                (Some(v), None, _) => vertices.contains(&v),
+                (Some(a), Some(b), None) if k == 3 => edges.contains(&[a.min(b), a.max(b)]),
+                _ => false,
+            }
     }
-    Some(sum.sqrt())
 }
 
 /// The weighted `q`-quantile of values with weights.
@@ -415,10 +503,49 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         signal_rms_beyond_1pct = rms(&|c| !near(c));
         signal_p99 = Some(quantile(errors, 0.99) / range);
     }
-    let signal_roughness = match (dirichlet_seminorm(shape), dirichlet_seminorm(target)) {
-        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+    let (energies, target_energies) = (dirichlet_energies(shape), dirichlet_energies(target));
+    let signal_roughness = match (&energies, &target_energies) {
+        (Some(a), Some(b)) if b.iter().sum::<f64>() > 0.0 => {
+            Some((a.iter().sum::<f64>() / b.iter().sum::<f64>()).sqrt())
+        }
         _ => None,
     };
+    // The shape's side: its samples' errors against the target's closest
+    // points, over the whole shape and over two regions of it.
+    let shape_errors: Option<Vec<f64>> = (range > 0.0)
+        .then(|| {
+            dx.iter()
+                .enumerate()
+                .map(|(i, c)| Some(signal_at(shape, xs.cells[i], xs.bary[i])? - signal_at(target, c.cell, c.bary)?))
+                .collect()
+        })
+        .flatten();
+    let samples_per_cell = xs.points.len() / shape.n_cells();
+    let target_density = target_energies.as_ref().map(|b| b.iter().sum::<f64>() / wy).filter(|d| *d > 0.0);
+    // (share of the shape's area, signal rms, roughness) over the samples
+    // `keep` selects (each sample weighs its share of its cell's area);
+    // each cell's energy counts in proportion to its samples there.
+    let region = |keep: &dyn Fn(&Closest) -> bool| {
+        let kept: Vec<bool> = dx.iter().map(keep).collect();
+        let area: f64 = kept.iter().zip(&xs.weights).filter(|(k, _)| **k).map(|(_, w)| w).sum();
+        let rms = shape_errors.as_ref().filter(|_| area > 0.0).map(|e| {
+            let sum: f64 = e.iter().zip(&xs.weights).zip(&kept).filter(|(_, k)| **k).map(|((e, w), _)| w * e * e).sum();
+            (sum / area).sqrt() / range
+        });
+        let roughness = match (&energies, target_density) {
+            (Some(energies), Some(density)) if area > 0.0 => {
+                let share = kept.chunks_exact(samples_per_cell).map(|k| k.iter().filter(|k| **k).count() as f64);
+                let energy: f64 = energies.iter().zip(share).map(|(e, n)| e * n / samples_per_cell as f64).sum();
+                Some((energy / area / density).sqrt())
+            }
+            _ => None,
+        };
+        (area / wx, rms, roughness)
+    };
+    let (_, signal_rms_on_shape, _) = region(&|_| true);
+    let (shape_beyond_1pct, signal_rms_on_shape_beyond_1pct, signal_roughness_beyond_1pct) = region(&|c| !near(c));
+    let past = past_boundary(target);
+    let (shape_past_boundary, signal_rms_past_boundary, signal_roughness_past_boundary) = region(&|c| past(c));
     let within: f64 = dy.iter().zip(&ys.weights).filter(|(c, _)| near(c)).map(|(_, w)| w).sum();
     Ok(Quality {
         diagonal,
@@ -431,6 +558,13 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         signal_rms_within_1pct,
         signal_rms_beyond_1pct,
         signal_roughness,
+        signal_rms_on_shape,
+        signal_rms_on_shape_beyond_1pct,
+        shape_beyond_1pct,
+        signal_roughness_beyond_1pct,
+        shape_past_boundary,
+        signal_rms_past_boundary,
+        signal_roughness_past_boundary,
         signal_range: range,
     })
 }

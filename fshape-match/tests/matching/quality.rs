@@ -39,6 +39,127 @@ fn parallel_squares_are_at_their_offset_and_a_shifted_signal_at_its_shift() {
         }
         // The same gradient on the same square.
         assert!((q.signal_roughness.unwrap() - 1.0).abs() < 1e-12, "{:?}", q.signal_roughness);
+        // From the shape's side: the same error, and the whole shape on the
+        // same side of 1 % as the whole target.
+        assert!((q.signal_rms_on_shape.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{q:?}");
+        if h <= 0.01 * diag {
+            assert_eq!((q.shape_beyond_1pct, q.signal_rms_on_shape_beyond_1pct), (0.0, None));
+            assert_eq!(q.signal_roughness_beyond_1pct, None);
+        } else {
+            assert_eq!((q.shape_beyond_1pct, q.signal_rms_on_shape_beyond_1pct), (1.0, q.signal_rms_on_shape));
+            assert!((q.signal_roughness_beyond_1pct.unwrap() - 1.0).abs() < 1e-12, "{q:?}");
+        }
+    }
+}
+
+/// `square`'s triangles whose centre is farther than `r` from the origin,
+/// with the vertices they use: a square with a round hole.
+fn with_hole(square: &FShape, r: f64) -> FShape {
+    let mut keep = Vec::new();
+    for c in square.cells().chunks_exact(3) {
+        let centre: Vec<f64> = (0..2).map(|k| c.iter().map(|&v| square.point(v)[k]).sum::<f64>() / 3.0).collect();
+        if centre[0].hypot(centre[1]) > r {
+            keep.extend_from_slice(c);
+        }
+    }
+    let mut new_id = vec![usize::MAX; square.n_vertices()];
+    let (mut pts, mut f) = (Vec::new(), Vec::new());
+    for &v in &keep {
+        if new_id[v] == usize::MAX {
+            new_id[v] = f.len();
+            pts.extend_from_slice(square.point(v));
+            f.push(square.signal().unwrap()[v]);
+        }
+    }
+    let cells = keep.iter().map(|&v| new_id[v]).collect();
+    FShape::try_new(3, CellKind::Triangle, pts, cells, Some(f)).unwrap()
+}
+
+#[test]
+fn the_signal_over_the_targets_holes_is_seen_from_the_shapes_side_only() {
+    // The target has a hole of radius 0.5 (18 % of the diagonal); the
+    // shape is the whole square, on the target where the target is, with
+    // the target's signal x there. Inside the hole, away from its rim, the
+    // shape's signal either continues x (smooth) or alternates ±0.5
+    // around it (the paper's L² artefact, where nothing constrains it).
+    let square = square_at(0.0, 0.0);
+    let target = with_hole(&square, 0.5);
+    let (smooth, rough) = {
+        let signal = |e: f64| -> Vec<f64> {
+            let wiggle = |v: usize| if v.is_multiple_of(2) { e } else { -e };
+            let inside = |p: &[f64]| p[0].hypot(p[1]) < 0.35;
+            square
+                .points()
+                .chunks_exact(3)
+                .enumerate()
+                .map(|(v, p)| p[0] + if inside(p) { wiggle(v) } else { 0.0 })
+                .collect()
+        };
+        (square.clone().with_signal(Some(signal(0.0))).unwrap(), square.clone().with_signal(Some(signal(0.5))).unwrap())
+    };
+    let (qs, qr) = (quality(&smooth, &target).unwrap(), quality(&rough, &target).unwrap());
+    // The target's side sees no difference: each of its samples is on the
+    // shape, where the two signals agree and equal the target's.
+    for q in [&qs, &qr] {
+        assert!(q.signal_rms.unwrap() < 1e-15 && q.target_within_1pct == 1.0, "{q:?}");
+    }
+    // The shape's side sees the hole: the area beyond 1 % is the disc of
+    // radius 0.5 − 0.028 (up to the jagged rim of triangles), a sixth of
+    // the square's 4.
+    let disc = std::f64::consts::PI * (0.5 - 0.01 * 8f64.sqrt()).powi(2) / 4.0;
+    assert_eq!(qs.shape_beyond_1pct, qr.shape_beyond_1pct);
+    assert!((qs.shape_beyond_1pct - disc).abs() < 0.3 * disc, "{qs:?}");
+    // Past the target's boundary: exactly the triangles cut out, every
+    // sample there having its closest point on the rim, every other one
+    // lying on the target.
+    let area = |s: &FShape| s.cell_volumes().iter().sum::<f64>();
+    let cut = 1.0 - area(&target) / area(&square);
+    assert!(cut > 0.1);
+    for q in [&qs, &qr] {
+        assert!((q.shape_past_boundary - cut).abs() < 1e-12, "{} against {cut}", q.shape_past_boundary);
+    }
+    // x continued over the hole: the gradient per area of the target's.
+    assert!((qs.signal_roughness_beyond_1pct.unwrap() - 1.0).abs() < 1e-12, "{qs:?}");
+    assert!((qs.signal_roughness_past_boundary.unwrap() - 1.0).abs() < 1e-12, "{qs:?}");
+    // x against the rim's values: at most the hole's radius, 0.25 of the range.
+    assert!(qs.signal_rms_on_shape_beyond_1pct.unwrap() < 0.25, "{qs:?}");
+    // The oscillation: a larger error and a much rougher signal there.
+    let (es, er) = (qs.signal_rms_on_shape_beyond_1pct.unwrap(), qr.signal_rms_on_shape_beyond_1pct.unwrap());
+    assert!(er > es + 0.03, "{er} against {es}");
+    assert!(qr.signal_rms_past_boundary.unwrap() > qs.signal_rms_past_boundary.unwrap() + 0.03, "{qr:?}");
+    assert!(qr.signal_roughness_beyond_1pct.unwrap() > 3.0, "{qr:?}");
+    assert!(qr.signal_roughness_past_boundary.unwrap() > 3.0, "{qr:?}");
+    // A closed target has no boundary to be past.
+    let sphere = perturbed_icosphere(2, 0.1, 5);
+    let f: Vec<f64> = sphere.points().chunks_exact(3).map(|p| p[0]).collect();
+    let sphere = sphere.with_signal(Some(f)).unwrap();
+    let q = quality(&sphere.clone().with_points(sphere.points().iter().map(|x| 1.2 * x).collect()).unwrap(), &sphere)
+        .unwrap();
+    assert_eq!((q.shape_past_boundary, q.signal_rms_past_boundary), (0.0, None), "{q:?}");
+}
+
+#[test]
+fn the_error_from_the_shapes_side_is_the_targets_error_with_the_roles_swapped() {
+    // Another path to the same numbers: the error at the shape's samples
+    // against the target's closest points is what `quality(target, shape)`
+    // computes as its target-side error, in the other range.
+    let mut rng = fshape_mesh::generate::SplitMix64(41);
+    let range = |f: &[f64]| {
+        f.iter().copied().fold(f64::NEG_INFINITY, f64::max) - f.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    for (a, b) in [
+        (perturbed_icosphere(2, 0.2, 3), perturbed_icosphere(2, 0.2, 4)),
+        (random_curve(2, 40, 5), random_curve(2, 30, 6)),
+    ] {
+        let mut signal = |s: FShape| {
+            let f: Vec<f64> = (0..s.n_vertices()).map(|_| rng.range(-1.0, 1.0)).collect();
+            s.with_signal(Some(f)).unwrap()
+        };
+        let (a, b) = (signal(a), signal(b));
+        let (ab, ba) = (quality(&a, &b).unwrap(), quality(&b, &a).unwrap());
+        let (ra, rb) = (range(a.signal().unwrap()), range(b.signal().unwrap()));
+        let (ours, theirs) = (ab.signal_rms_on_shape.unwrap() * rb, ba.signal_rms.unwrap() * ra);
+        assert!((ours - theirs).abs() < 1e-12 * theirs, "{ours} against {theirs}");
     }
 }
 
