@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use fshape_fem::{Norm, SignalNorm};
 use fshape_mesh::io::{self, Encoding, ReadOptions};
@@ -75,7 +75,10 @@ enum Command {
     /// points (rms and 99th percentile, of Y's signal range; the rms also
     /// over the part of Y within 1 % of X and the part beyond) and the
     /// roughness of X's signal against Y's (the ratio of their Dirichlet
-    /// seminorms: above 1 when X's signal oscillates).
+    /// seminorms: above 1 when X's signal oscillates). The signal error and
+    /// roughness again from X's side: over all of X, over its part beyond
+    /// 1 % of Y and over its part past Y's boundary (e.g. over Y's holes),
+    /// which Y's samples cannot see.
     Quality {
         /// The shape X (e.g. a registration's state at t = 1).
         source: PathBuf,
@@ -316,6 +319,29 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         subjects: usize,
     },
+    /// PNG pictures of meshes coloured by their signal, all from one
+    /// camera, framed together and with one colour range, so that they
+    /// compare: e.g. two registrations' end states and their target seen
+    /// from below.
+    Render {
+        /// The meshes.
+        #[arg(required = true)]
+        meshes: Vec<PathBuf>,
+        /// One PNG per mesh, in the same order.
+        #[arg(long, value_delimiter = ',', required = true)]
+        out: Vec<PathBuf>,
+        /// Camera: azimuth,elevation in degrees (the azimuth turns about z,
+        /// from the −y side; elevation 90 looks down z).
+        #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, default_values_t = [30.0, 20.0])]
+        view: Vec<f64>,
+        /// Signal values at the ends of the colour map: lo,hi (default: the
+        /// range of all the meshes' signals).
+        #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
+        range: Vec<f64>,
+        /// Vertex property to read as the signal (default `signal`).
+        #[arg(long)]
+        signal_name: Option<String>,
+    },
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, .gii,
     /// each optionally .gz, or a FreeSurfer surface name such as lh.pial),
     /// optionally attaching a signal from a signal file.
@@ -366,6 +392,10 @@ fn main() -> ExitCode {
         }),
         Command::Quality { source, target, signal_name, source_signal, target_signal, json } => {
             quality(&source, &target, signal_name, (source_signal.as_deref(), target_signal.as_deref()), json)
+        }
+        Command::Render { meshes, out, view, range, signal_name } => {
+            let Some(camera) = camera(&view) else { return ExitCode::from(2) };
+            render_meshes(&meshes, &out, camera, &range, signal_name)
         }
         Command::Shoot { source, momentum, signal_momentum, config, out, times, signal_name } => shoot(&ShootArgs {
             source: &source,
@@ -809,6 +839,49 @@ fn quality(
         println!("{}", serde_json::to_string_pretty(&q)?);
     } else {
         println!("{} against {}: {}", source.display(), target.display(), q.describe());
+    }
+    Ok(())
+}
+
+/// `fshape render`: every mesh read before any picture is written, then
+/// one PNG per mesh (each written whole or not at all).
+fn render_meshes(
+    meshes: &[PathBuf],
+    out: &[PathBuf],
+    (azimuth, elevation): (f64, f64),
+    range: &[f64],
+    signal_name: Option<String>,
+) -> Result<()> {
+    if out.len() != meshes.len() {
+        bail!("--out: {} picture(s) for {} mesh(es); give one PNG path per mesh", out.len(), meshes.len());
+    }
+    if let Some(p) = out.iter().find(|p| !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"))) {
+        bail!("--out: {} is not a .png path", p.display());
+    }
+    let range = match range {
+        [] => None,
+        [lo, hi] if lo.is_finite() && hi.is_finite() && lo < hi => Some((*lo, *hi)),
+        _ => bail!("--range: expected lo,hi (two finite values, lo < hi), got {range:?}"),
+    };
+    let shapes = meshes.iter().map(|p| load(p, signal_name.clone(), None)).collect::<Result<Vec<_>>>()?;
+    if let Some(i) = shapes.iter().position(|s| s.dim() != shapes[0].dim()) {
+        bail!(
+            "{} is {}-D and {} is {}-D: one picture frames meshes of one dimension",
+            meshes[i].display(),
+            shapes[i].dim(),
+            meshes[0].display(),
+            shapes[0].dim()
+        );
+    }
+    let all: Vec<&FShape> = shapes.iter().collect();
+    let mut view = render::View::fit(&all, azimuth, elevation);
+    if let Some((lo, hi)) = range {
+        view = view.with_range(lo, hi);
+    }
+    for (shape, path) in shapes.iter().zip(out) {
+        let png = render::png(&render::rasterise(shape, &view))?;
+        io::write_atomic(path, &png, false).with_context(|| format!("writing {}", path.display()))?;
+        println!("{}", path.display());
     }
     Ok(())
 }

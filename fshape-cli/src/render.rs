@@ -71,6 +71,12 @@ impl View {
         self
     }
 
+    /// The same view with the colour map spanning `lo..hi`.
+    pub fn with_range(mut self, lo: f64, hi: f64) -> View {
+        self.range = (lo, hi);
+        self
+    }
+
     /// Pixel coordinates (column, row, depth) of a point.
     fn pixel(&self, p: &[f64]) -> [f64; 3] {
         let c = camera(&self.rot, p);

@@ -487,6 +487,13 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
         "signal_rms_within_1pct",
         "signal_rms_beyond_1pct",
         "signal_roughness",
+        "signal_rms_on_shape",
+        "signal_rms_on_shape_beyond_1pct",
+        "shape_beyond_1pct",
+        "signal_roughness_beyond_1pct",
+        "shape_past_boundary",
+        "signal_rms_past_boundary",
+        "signal_roughness_past_boundary",
     ] {
         // A part of the signal error with no area is null on both sides.
         if q[k].is_null() {
@@ -1323,4 +1330,90 @@ fn match_registers_a_flat_square_with_an_image_like_signal() {
     assert!(num(q, "signal_rms") < 0.1 * num(q0, "signal_rms"), "{q0} -> {q}");
     // The square stays a square: its boundary within 2 % of the diagonal.
     assert!(num(q, "max_distance") < 0.02, "{q}");
+}
+
+/// A one-triangle ASCII PLY at x offset `dx` carrying the signal `f`.
+fn signal_triangle(name: &str, dx: f64, f: [f64; 3]) -> String {
+    let p = tmp(name);
+    let text = format!(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+         property float signal\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+         {dx} 0 0 {}\n{} 0 0 {}\n{dx} 1 0 {}\n3 0 1 2\n",
+        f[0],
+        dx + 1.0,
+        f[1],
+        f[2]
+    );
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+/// The RGB pixels of a PNG that `fshape render` wrote: (columns of the
+/// non-white ones, their distinct colours).
+fn painted(path: &std::path::Path) -> (Vec<usize>, std::collections::BTreeSet<[u8; 3]>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height, info.color_type), (512, 512, png::ColorType::Rgb));
+    let (mut columns, mut colours) = (Vec::new(), std::collections::BTreeSet::new());
+    for (i, px) in buf[..info.buffer_size()].chunks_exact(3).enumerate() {
+        if px != [255, 255, 255] {
+            columns.push(i % 512);
+            colours.insert([px[0], px[1], px[2]]);
+        }
+    }
+    (columns, colours)
+}
+
+#[test]
+fn render_draws_meshes_from_one_camera_in_one_colour_range_and_refuses_bad_requests() {
+    // Two unit triangles side by side in the plane z = 0, one with the
+    // signal 0, 1, 2 at its corners, one constant at 2; seen from above.
+    let a = signal_triangle("render_a.ply", 0.0, [0.0, 1.0, 2.0]);
+    let (b, b4) = (signal_triangle("render_b.ply", 2.0, [2.0; 3]), signal_triangle("render_b4.ply", 2.0, [4.0; 3]));
+    let (pa, pb) = (tmp("render_a.png"), tmp("render_b.png"));
+    let outs = format!("{},{}", pa.display(), pb.display());
+    let render = |meshes: &[&str], extra: &[&str]| {
+        let mut args = vec!["render"];
+        args.extend_from_slice(meshes);
+        args.extend_from_slice(&["--out", &outs, "--view", "0,90"]);
+        args.extend_from_slice(extra);
+        let r = fshape(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        (painted(&pa), painted(&pb))
+    };
+    let ((ca, colours_a), (cb, colours_b)) = render(&[&a, &b], &[]);
+    // Framed together: the first triangle in the left part of its picture,
+    // the second in the right part of its own.
+    assert!(!ca.is_empty() && !cb.is_empty());
+    assert!(ca.iter().max() < cb.iter().min(), "columns {:?} and {:?}", ca.iter().max(), cb.iter().min());
+    assert!(colours_a.len() > 20 && colours_b.len() == 1, "{} {colours_b:?}", colours_a.len());
+    // One colour range for both: with the constant raised to 4 it is still
+    // the top of the map, and the first triangle's colours move down.
+    let ((_, colours_a4), (_, colours_b4)) = render(&[&a, &b4], &[]);
+    assert_eq!(colours_b4, colours_b);
+    assert_ne!(colours_a4, colours_a);
+    // A range far above both signals paints both in the map's bottom colour.
+    let ((_, low_a), (_, low_b)) = render(&[&a, &b], &["--range", "10,20"]);
+    assert!(low_a.len() == 1 && low_a == low_b && low_b != colours_b, "{low_a:?} {low_b:?}");
+
+    // Refusals, each naming its argument, with nothing written.
+    let fresh = tmp("render_fresh.png");
+    let fresh_s = fresh.display().to_string();
+    let other = tmp("render_other.png").display().to_string();
+    let pair = format!("{fresh_s},{other}");
+    for (args, says) in [
+        (vec!["render", &a, &b, "--out", &fresh_s], "--out"),
+        (vec!["render", &a, "--out", "picture.jpg"], "png"),
+        (vec!["render", &a, &b, "--out", &pair, "--range", "2,1"], "--range"),
+        (vec!["render", &a, &b, "--out", &pair, "--range", "nan,1"], "--range"),
+        (vec!["render", &a, "no/such/mesh.ply", "--out", &pair], "no/such/mesh.ply"),
+        (vec!["render", &a, &b, "--out", &pair, "--view", "30"], "view"),
+    ] {
+        let r = fshape(&args);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success() && err.contains(says), "{args:?}: {err}");
+        assert!(!fresh.exists(), "{args:?} wrote {fresh_s}");
+    }
 }
