@@ -499,6 +499,22 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
         run_match(&sp, &tp, &header, &config, &run, (0.0, 90.0), &stage_templates)
             .with_context(|| format!("bunny, {name}"))?;
     }
+    render_from_below(&dir, &template, &target)
+}
+
+/// The paper's comparison of the norms (its figure of the bunny from
+/// below): both runs' end states and the target seen from −y, where the
+/// target has its holes, in one frame and the colour range of template
+/// and target: DIR/below_h1.png, below_l2-lumped.png, below_target.png.
+fn render_from_below(dir: &Path, template: &fshape_mesh::FShape, target: &fshape_mesh::FShape) -> Result<()> {
+    let end = |name: &str| io::read_mesh(&dir.join(name).join("state_005.ply"), &io::ReadOptions::default());
+    let (h1, l2) = (end("h1")?, end("l2-lumped")?);
+    let view = crate::render::View::fit(&[&h1, &l2, target], 0.0, 0.0).with_range_of(&[template, target]);
+    for (shape, name) in [(&h1, "h1"), (&l2, "l2-lumped"), (target, "target")] {
+        let path = dir.join(format!("below_{name}.png"));
+        io::write_atomic(&path, &crate::render::png(&crate::render::rasterise(shape, &view))?, false)?;
+    }
+    eprintln!("bunny: both norms and the target seen from below -> {}", dir.join("below_*.png").display());
     Ok(())
 }
 

@@ -758,6 +758,12 @@ fn demo_bunny_quick_runs_three_stages_on_the_coarse_sphere_with_their_convergenc
         let template = fshape_mesh::io::read_mesh(&out.join("bunny-quick/source.ply"), &Default::default()).unwrap();
         assert_eq!(template.n_vertices(), 642);
     }
+    // Both end states and the target from below (the paper's view of the
+    // holes), each a picture of a few thousand pixels.
+    for name in ["h1", "l2-lumped", "target"] {
+        let (pixels, _) = painted(&out.join("bunny-quick").join(format!("below_{name}.png")));
+        assert!(pixels.len() > 1000, "{name}: {} pixels", pixels.len());
+    }
     let o = fshape(&["demo", "cortex", "--quick", "--out", &out.display().to_string()]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--quick"), "{err}");
