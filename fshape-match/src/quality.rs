@@ -25,6 +25,16 @@
 //! beyond (where part of the error is the geometry's, and where the paper
 //! sees lumped-L² oscillations).
 //!
+//! The target's samples cannot see parts of the shape that no part of the
+//! target is near (a sphere's caps over the holes of an open target), so
+//! the signal error is measured again from the shape's side: at each
+//! sample of the shape, its signal minus the target's at its closest
+//! point, over the whole shape, over its area beyond 1 % of the diagonal
+//! from the target, and over its area past the target's boundary (whose
+//! closest point of the target lies on a boundary edge, or the end of a
+//! curve), with the share of the shape's area each region covers and the
+//! roughness there.
+//!
 //! And the signal's roughness: the Dirichlet seminorm of the matched
 //! signal on the matched shape, (∫_X |∇f|²)^½ of the P1 interpolant, over
 //! the target signal's on the target. A faithful match gives about 1; a
