@@ -371,7 +371,16 @@ fn draw_energy<DB: plotters::prelude::DrawingBackend>(
             .label(name)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)));
     }
-    chart.configure_series_labels().background_style(WHITE).border_style(BLACK).draw().map_err(err)?;
+    // Upper right: the curves start high on the left and fall (the y
+    // range reaches twice their largest value), so the legend's default
+    // middle-right place is where they run at the end.
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE)
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
 }
