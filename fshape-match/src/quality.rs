@@ -537,7 +537,8 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     // each cell's energy counts in proportion to its samples there.
     let region = |keep: &dyn Fn(&Closest) -> bool| {
         let kept: Vec<bool> = dx.iter().map(keep).collect();
-        let area: f64 = kept.iter().zip(&xs.weights).filter(|(k, _)| **k).map(|(_, w)| w).sum();
+        // Folded from +0: an empty f64 sum is −0, which JSON would show.
+        let area = kept.iter().zip(&xs.weights).filter(|(k, _)| **k).fold(0.0, |a, (_, w)| a + w);
         let rms = shape_errors.as_ref().filter(|_| area > 0.0).map(|e| {
             let sum: f64 = e.iter().zip(&xs.weights).zip(&kept).filter(|(_, k)| **k).map(|((e, w), _)| w * e * e).sum();
             (sum / area).sqrt() / range
@@ -556,7 +557,7 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     let (shape_beyond_1pct, signal_rms_on_shape_beyond_1pct, signal_roughness_beyond_1pct) = region(&|c| !near(c));
     let past = past_boundary(target);
     let (shape_past_boundary, signal_rms_past_boundary, signal_roughness_past_boundary) = region(&|c| past(c));
-    let within: f64 = dy.iter().zip(&ys.weights).filter(|(c, _)| near(c)).map(|(_, w)| w).sum();
+    let within = dy.iter().zip(&ys.weights).filter(|(c, _)| near(c)).fold(0.0, |a, (_, w)| a + w);
     Ok(Quality {
         diagonal,
         mean_distance,

@@ -25,6 +25,7 @@ fn parallel_squares_are_at_their_offset_and_a_shifted_signal_at_its_shift() {
             assert!((v - h / diag).abs() < 1e-12, "{v} against {}", h / diag);
         }
         assert_eq!(q.target_within_1pct, if h <= 0.01 * diag { 1.0 } else { 0.0 });
+        assert!(q.target_within_1pct.is_sign_positive() && q.shape_beyond_1pct.is_sign_positive());
         // The signal x + c against x on a square whose x spans [-1, 1].
         assert!((q.signal_range - 2.0).abs() < 1e-12);
         assert!((q.signal_rms.unwrap() - c.abs() / 2.0).abs() < 1e-12, "{:?}", q.signal_rms);
@@ -136,6 +137,8 @@ fn the_signal_over_the_targets_holes_is_seen_from_the_shapes_side_only() {
     let q = quality(&sphere.clone().with_points(sphere.points().iter().map(|x| 1.2 * x).collect()).unwrap(), &sphere)
         .unwrap();
     assert_eq!((q.shape_past_boundary, q.signal_rms_past_boundary), (0.0, None), "{q:?}");
+    // +0, not the −0 of an empty float sum (which the JSON would print).
+    assert!(q.shape_past_boundary.is_sign_positive() && q.shape_beyond_1pct.is_sign_positive(), "{q:?}");
 }
 
 #[test]
