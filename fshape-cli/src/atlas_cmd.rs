@@ -257,8 +257,8 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
     all.push(&result.template);
     all.push(atlas.initial_template());
     let view = View::fit(&all, a.view.0, a.view.1);
-    push("template.png".into(), render::png(&render::rasterise(&result.template, &view))?);
-    push("template_start.png".into(), render::png(&render::rasterise(atlas.initial_template(), &view))?);
+    push("template.png".into(), render::picture(&result.template, &view)?);
+    push("template_start.png".into(), render::picture(atlas.initial_template(), &view)?);
     let pairs: Vec<(&FShape, &FShape)> = subjects.iter().zip(&matched).take(GRID_ROWS * GRID_PAIRS).collect();
     let (grid, width, height) = grid(&pairs, &view);
     push("subjects.png".into(), render::png_sized(&grid, width, height)?);

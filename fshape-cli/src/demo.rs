@@ -364,7 +364,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
     io::write_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&report)?.as_bytes(), false)?;
     let view = crate::render::View::fit(&[&truth, &estimate, &sphere], 30.0, 20.0);
     for (name, shape) in [("truth.png", &truth), ("estimate.png", &estimate)] {
-        io::write_atomic(&dir.join(name), &crate::render::png(&crate::render::rasterise(shape, &view))?, false)?;
+        io::write_atomic(&dir.join(name), &crate::render::picture(shape, &view)?, false)?;
     }
     println!(
         "  the template against the truth: mean distance {:.3}% of the diagonal (start {:.3}%; bound {:.3}% = mean displacement {:.3}% + residual {:.3}%)",
@@ -512,7 +512,7 @@ fn render_from_below(dir: &Path, template: &fshape_mesh::FShape, target: &fshape
     let view = crate::render::View::fit(&[&h1, &l2, target], 0.0, 0.0).with_range_of(&[template, target]);
     for (shape, name) in [(&h1, "h1"), (&l2, "l2-lumped"), (target, "target")] {
         let path = dir.join(format!("below_{name}.png"));
-        io::write_atomic(&path, &crate::render::png(&crate::render::rasterise(shape, &view))?, false)?;
+        io::write_atomic(&path, &crate::render::picture(shape, &view)?, false)?;
     }
     eprintln!("bunny: both norms and the target seen from below -> {}", dir.join("below_*.png").display());
     Ok(())

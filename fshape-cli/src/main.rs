@@ -879,7 +879,7 @@ fn render_meshes(
         view = view.with_range(lo, hi);
     }
     for (shape, path) in shapes.iter().zip(out) {
-        let png = render::png(&render::rasterise(shape, &view))?;
+        let png = render::picture(shape, &view)?;
         io::write_atomic(path, &png, false).with_context(|| format!("writing {}", path.display()))?;
         println!("{}", path.display());
     }

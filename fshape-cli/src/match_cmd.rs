@@ -235,10 +235,10 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let view = crate::render::View::fit(&all, a.view.0, a.view.1).with_range_of(&[&frames[0], &target]);
     for (k, frame) in frames.iter().enumerate() {
         let name = format!("render_{k:03}.png");
-        outputs.push((a.out.join(&name), crate::render::png(&crate::render::rasterise(frame, &view))?));
+        outputs.push((a.out.join(&name), crate::render::picture(frame, &view)?));
         files.push(name);
     }
-    outputs.push((a.out.join("target.png"), crate::render::png(&crate::render::rasterise(&target, &view))?));
+    outputs.push((a.out.join("target.png"), crate::render::picture(&target, &view)?));
     files.push("target.png".into());
     let (svg, png) = energy_plot(&result.stages, model.gamma_w(), "matching: objective by iteration")?;
     outputs.push((a.out.join("energy.svg"), svg.into_bytes()));

@@ -110,6 +110,11 @@ pub fn viridis(t: f64) -> [f64; 3] {
     std::array::from_fn(|c| C[k][c] * (1.0 - u) + C[k + 1][c] * u)
 }
 
+/// The PNG file of `shape` seen by `view`.
+pub fn picture(shape: &FShape, view: &View) -> anyhow::Result<Vec<u8>> {
+    png(&rasterise(shape, view))
+}
+
 /// RGB pixels of `shape` seen by `view` on a white background.
 pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
     let mut rgb = vec![255u8; SIZE * SIZE * 3];

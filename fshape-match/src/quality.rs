@@ -513,11 +513,11 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         signal_rms_beyond_1pct = rms(&|c| !near(c));
         signal_p99 = Some(quantile(errors, 0.99) / range);
     }
-    let (energies, target_energies) = (dirichlet_energies(shape), dirichlet_energies(target));
-    let signal_roughness = match (&energies, &target_energies) {
-        (Some(a), Some(b)) if b.iter().sum::<f64>() > 0.0 => {
-            Some((a.iter().sum::<f64>() / b.iter().sum::<f64>()).sqrt())
-        }
+    let energies = dirichlet_energies(shape);
+    // ∫|∇f|² over the whole target, None without a signal or if constant.
+    let target_energy = dirichlet_energies(target).map(|e| e.iter().sum::<f64>()).filter(|e| *e > 0.0);
+    let signal_roughness = match (&energies, target_energy) {
+        (Some(a), Some(b)) => Some((a.iter().sum::<f64>() / b).sqrt()),
         _ => None,
     };
     // The shape's side: its samples' errors against the target's closest
@@ -531,7 +531,7 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         })
         .flatten();
     let samples_per_cell = xs.points.len() / shape.n_cells();
-    let target_density = target_energies.as_ref().map(|b| b.iter().sum::<f64>() / wy).filter(|d| *d > 0.0);
+    let target_density = target_energy.map(|e| e / wy);
     // (share of the shape's area, signal rms, roughness) over the samples
     // `keep` selects (each sample weighs its share of its cell's area);
     // each cell's energy counts in proportion to its samples there.
