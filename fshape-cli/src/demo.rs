@@ -399,6 +399,18 @@ pub const BUNNY_COARSE_DECREASE: f64 = 5e-3;
 /// tenth session).
 pub const BUNNY_DEEP_DECREASE: (f64, usize) = (2e-3, 10);
 
+/// γ_f of the bunny runs, below the default 0.1 (issue 16 lets a demo
+/// leave the defaults if it says why). The paper's comparison of the
+/// norms is about a signal that is matched closely: it says the lumped-L²
+/// oscillations shrink as γ_f grows, at the price of the signal's
+/// accuracy. Measured at the paper's resolution with this demo's stages
+/// (docs/experiments.md, thirteenth session), H¹ matches the bunny better
+/// on every measure as γ_f falls from 0.1 (3.17 % signal error, fitted
+/// with 94 % of the target's amplitude) to 0.01 (1.86 %, 98 %), in 285 s
+/// instead of 207, while lumped L²'s oscillations grow (its error
+/// 4.22 % → 5.47 %, all of the increase oscillation).
+pub const BUNNY_GAMMA_F: f64 = 0.01;
+
 /// L-BFGS's memory in the bunny runs (the default is 10): on the quick
 /// setting's long last stage, 30 pairs reach after 400 iterations the J
 /// that 10 pairs reach after 550 to 600, at the same cost per iteration
@@ -418,7 +430,7 @@ pub struct RunArgs<'a> {
 /// The bunny (paper section 5.1): the level-5 sphere with signal 0 onto the
 /// textured 2581-vertex Stanford bunny, H¹ against lumped L², the shipped
 /// `data/configs/bunny.toml` with scale-free weights (γ_W = `gamma_w`,
-/// γ_f = 0.1), p_0 in the energy metric, L-BFGS with
+/// γ_f = [`BUNNY_GAMMA_F`]), p_0 in the energy metric, L-BFGS with
 /// [`BUNNY_LBFGS_MEMORY`] pairs, and five stages: k_p 0.2, 0.1 and 0.05
 /// on the level-3 sphere (642 vertices), 0.05 on the level-4 sphere
 /// (2562), then 0.05 on the template, each ending on its decrease test
@@ -467,7 +479,7 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
         let mut config = shipped.clone();
         config.model.norm = norm;
         config.model.normalize = true;
-        config.model.gamma_f = 0.1;
+        config.model.gamma_f = BUNNY_GAMMA_F;
         config.model.gamma_w = a.gamma_w;
         config.optimizer.momentum_metric = fshape_match::Metric::Energy;
         config.optimizer.memory = BUNNY_LBFGS_MEMORY;
@@ -480,10 +492,11 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
         };
         let header = format!(
             "fshape demo bunny: data/configs/bunny.toml with norm {name}, scale-free weights\n\
-             (gamma_w {}, gamma_f 0.1), p_0 in the energy metric, L-BFGS memory {}, and\n\
+             (gamma_w {}, gamma_f {}), p_0 in the energy metric, L-BFGS memory {}, and\n\
              {stages_text},\neach ending when J fell by less than {} over {} iterations\n\
              (the k_p 0.05 stage on the level-3 sphere: {} over {}{}).",
             a.gamma_w,
+            BUNNY_GAMMA_F,
             BUNNY_LBFGS_MEMORY,
             coarse_test.0,
             coarse_test.1,

@@ -752,6 +752,8 @@ fn demo_bunny_quick_runs_three_stages_on_the_coarse_sphere_with_their_convergenc
             "max_iterations = [4, 4, 6]",
             "memory = 30",
             "momentum_metric = \"energy\"",
+            // The demo's own γ_f, not the default (demo::BUNNY_GAMMA_F).
+            "gamma_f = 0.01\n",
         ] {
             assert!(config.contains(line), "{norm}: no {line:?} in\n{config}");
         }
