@@ -72,7 +72,10 @@
 //! choose them as fractions of the shapes' size. What each weight does:
 //! γ_W/γ_V sets how closely the geometry is fitted (larger: closer, at a
 //! larger deformation); γ_W/γ_f how closely the signal is (larger: a
-//! closer signal, changed more along the path); γ_V/γ_f how the match
+//! closer signal, changed more along the path; with an L² norm, also a
+//! signal that oscillates where the target does not pin it, as over the
+//! bunny's holes: the paper's observation, measured in docs/experiments.md,
+//! and why `fshape demo bunny` uses γ_f = 0.01); γ_V/γ_f how the match
 //! shares the work between moving the signal with the shape and changing
 //! it (the paper's ratios 1, 20, 100 on the digits). `normalize = false`
 //! takes the weights as they are, in the data's units.
