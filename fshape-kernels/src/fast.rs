@@ -137,7 +137,7 @@ pub(crate) const CONV_GRAD: u8 = 4;
 pub(crate) const BOTH_JVP: u8 = 5;
 
 /// Output rows of a mode.
-const fn rows(mode: u8, d: usize, bd: usize) -> usize {
+pub(crate) const fn rows(mode: u8, d: usize, bd: usize) -> usize {
     match mode {
         CONV | CONV_JVP => bd,
         GRAD | GRAD_JVP => d,

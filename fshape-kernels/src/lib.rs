@@ -39,14 +39,16 @@
 
 mod blocks;
 mod fast;
+pub mod grid;
 mod mixed;
 mod profile;
 mod sums;
 mod symmetric;
 
 pub use blocks::{BlockPairs, RunSearch, SourceRun};
+pub use grid::{GRID_ORDERS, Grid, GridBound};
 pub use mixed::Precision;
-pub use profile::{Kernel, Profile, TAPER_WIDTH, Taper};
+pub use profile::{Kernel, Profile, SumPath, TAPER_WIDTH, Taper};
 pub use sums::{KernelSums, Pair, SpatialIndex, SumWorkspace};
 
 /// Lane-wise building blocks for vectorised kernels in other crates: a
@@ -107,6 +109,32 @@ pub enum KernelError {
     TooManyPoints {
         /// Number of sources.
         n: usize,
+    },
+    /// Only sums of Gaussians have a grid path.
+    #[error("only a Gaussian or a sum of at most 4 Gaussians can be summed on a grid")]
+    GridProfile,
+    /// The grid path's B-spline order is out of range.
+    #[error("grid B-spline order must be 4, 6 or 8, got {order}")]
+    GridOrder {
+        /// The order given.
+        order: usize,
+    },
+    /// The grid path takes 1 to `max` weight components per point.
+    #[error("a grid sum takes 1 to {max} weight components per point, got {found}")]
+    GridChannels {
+        /// Components given.
+        found: usize,
+        /// The most the grid path takes.
+        max: usize,
+    },
+    /// The points spread over more lattice nodes than the grid path
+    /// allocates (points far apart for the spacing, or a diverging flow).
+    #[error("the points span {nodes} lattice nodes of spacing {spacing}, more than a grid sum allocates")]
+    GridTooLarge {
+        /// Nodes the window would have (`usize::MAX`: beyond counting).
+        nodes: usize,
+        /// The lattice spacing.
+        spacing: f64,
     },
     /// A point has a NaN or infinite coordinate.
     #[error("{what} {index} has a NaN or infinite coordinate")]

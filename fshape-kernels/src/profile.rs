@@ -3,6 +3,7 @@
 
 use crate::KernelError;
 use crate::fast::{L, exp_lanes};
+use crate::grid::{GRID_ORDERS, Grid};
 
 /// A kernel profile as the user states it. Widths follow the project's one
 /// convention: "a Gaussian of width σ" is exp(−u / (2σ²)). fshapesTk and
@@ -103,14 +104,57 @@ impl Taper {
     }
 }
 
+/// How a kernel's sums are evaluated ([`Kernel::path`]); its `Display`
+/// is the sentence reports use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SumPath {
+    /// Every pair.
+    Exact,
+    /// Pairs within the support radius of a smooth taper.
+    Truncated {
+        /// The tolerance τ it was made for.
+        tolerance: Option<f64>,
+        /// The radius beyond which the kernel is 0.
+        radius: f64,
+    },
+    /// Particle–mesh on a lattice ([`crate::grid`]).
+    Grid {
+        /// The tolerance τ the spacing was chosen for.
+        tolerance: Option<f64>,
+        /// The lattice spacing h.
+        spacing: f64,
+        /// The B-spline order.
+        order: usize,
+        /// The bound on the kernel's values, relative to k(0).
+        bound: f64,
+    },
+}
+
+impl std::fmt::Display for SumPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let tol = |t: &Option<f64>| t.map(|t| format!(", tolerance {t:e}")).unwrap_or_default();
+        match self {
+            SumPath::Exact => write!(f, "exact"),
+            SumPath::Truncated { tolerance, radius } => write!(f, "truncated at radius {radius:.4}{}", tol(tolerance)),
+            SumPath::Grid { tolerance, spacing, order, bound } => {
+                write!(f, "grid of spacing {spacing:.4}, order {order}, bound {bound:.1e}{}", tol(tolerance))
+            }
+        }
+    }
+}
+
 /// How much wider the outer taper radius is than the inner one.
 pub const TAPER_WIDTH: f64 = 0.25;
 
-/// A validated kernel: a sum of terms, optionally tapered to zero.
+/// A validated kernel: a sum of terms, optionally tapered to zero
+/// ([`Kernel::truncated`]) or summed on a grid ([`Kernel::on_grid`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Kernel {
     terms: Vec<Term>,
     taper: Option<Taper>,
+    grid: Option<Grid>,
+    /// The error budget τ the kernel was truncated or gridded for.
+    tolerance: Option<f64>,
 }
 
 impl Kernel {
@@ -137,7 +181,7 @@ impl Kernel {
                     .collect::<Result<_, _>>()?
             }
         };
-        Ok(Kernel { terms, taper: None })
+        Ok(Kernel { terms, taper: None, grid: None, tolerance: None })
     }
 
     /// A single Gaussian of width σ.
@@ -154,7 +198,7 @@ impl Kernel {
         if !(tol > 0.0 && tol < 1.0) {
             return Err(KernelError::Tolerance { tol });
         }
-        let base = Kernel { terms: self.terms.clone(), taper: None };
+        let base = Kernel { terms: self.terms.clone(), taper: None, grid: None, tolerance: None };
         let target = tol * base.value(0.0);
         // k is decreasing in u: bracket then bisect for k(u_in) = target.
         let mut hi = self
@@ -175,7 +219,131 @@ impl Kernel {
         }
         let r_in = hi.sqrt();
         let r_out = (1.0 + TAPER_WIDTH) * r_in;
-        Ok(Kernel { terms: self.terms.clone(), taper: Some(Taper { u_in: r_in * r_in, u_out: r_out * r_out }) })
+        Ok(Kernel {
+            terms: self.terms.clone(),
+            taper: Some(Taper { u_in: r_in * r_in, u_out: r_out * r_out }),
+            grid: None,
+            tolerance: Some(tol),
+        })
+    }
+
+    /// The same sum of Gaussians (untruncated) summed on a grid: the
+    /// particle–mesh kernel k̃ of the module [`crate::grid`], with lattice
+    /// spacing `spacing` and B-spline order `order` ∈ [`GRID_ORDERS`], in
+    /// `dim` dimensions (the dimension sets the error bound,
+    /// [`Grid::bound`]). Every sum of [`crate::KernelSums`] with this kernel
+    /// is the grid's, and every derivative the exact derivative of k̃;
+    /// [`Kernel::value`] and [`Kernel::derivatives`] stay the profile k
+    /// that k̃ approximates. Cauchy kernels have no grid path.
+    ///
+    /// ```
+    /// use fshape_kernels::{Kernel, KernelSums};
+    /// let k = Kernel::gaussian(1.0)?;
+    /// let g = k.on_grid(k.grid_spacing(1e-6, 4, 3)?, 4, 3)?;
+    /// assert!(g.grid().unwrap().bound().value <= 1e-6);
+    /// let (y, b) = ([0.0, 0.0, 0.0, 1.0, 0.5, -0.2], [1.0, 2.0]);
+    /// let exact = KernelSums::try_new(&k, &y, 3)?.conv(&[0.3, 0.1, 0.0], &b, 1)?;
+    /// let grid = KernelSums::try_new(&g, &y, 3)?.conv(&[0.3, 0.1, 0.0], &b, 1)?;
+    /// assert!((grid[0] - exact[0]).abs() <= 1e-6 * 3.0);
+    /// # Ok::<(), fshape_kernels::KernelError>(())
+    /// ```
+    pub fn on_grid(&self, spacing: f64, order: usize, dim: usize) -> Result<Kernel, KernelError> {
+        let terms = self.gaussian_terms_untruncated().ok_or(KernelError::GridProfile)?;
+        if !(spacing > 0.0 && spacing.is_finite()) {
+            return Err(KernelError::Width { sigma: spacing });
+        }
+        if !GRID_ORDERS.contains(&order) {
+            return Err(KernelError::GridOrder { order });
+        }
+        if dim != 2 && dim != 3 {
+            return Err(KernelError::PointDimension { found: dim });
+        }
+        let grid = Some(Grid::new(&terms, spacing, order, dim));
+        Ok(Kernel { terms: self.terms.clone(), taper: None, grid, tolerance: None })
+    }
+
+    /// The error budget τ of a kernel made by [`Kernel::truncated`] or
+    /// chosen by [`Kernel::for_points`] (`None`: exact, or a grid of a
+    /// spacing given by hand).
+    pub fn tolerance(&self) -> Option<f64> {
+        self.tolerance
+    }
+
+    /// The cheapest evaluation of this kernel's sums over `points` (`dim`
+    /// coordinates each) as targets and sources, the shooting's sums,
+    /// within the kernel's tolerance ([`Kernel::tolerance`]): exact,
+    /// truncated ([`Kernel::truncated`]), or on a grid of order 4, 6 or 8
+    /// at the spacing the tolerance allows ([`Kernel::grid_spacing`]),
+    /// whichever [`predicted_seconds`](crate::grid::predicted_seconds) finds
+    /// cheapest. A kernel without a tolerance is returned as it is: exact
+    /// means exact. The choice depends only on the points and the kernel,
+    /// so the same template always gets the same path; keep it while the
+    /// points move (a shooting, an optimisation), so that one function is
+    /// minimised. [`Kernel::path`] tells which was chosen.
+    pub fn for_points(&self, points: &[f64], dim: usize) -> Result<Kernel, KernelError> {
+        let Some(tol) = self.tolerance else { return Ok(self.clone()) };
+        let truncated = self.truncated(tol)?;
+        if self.gaussian_terms_untruncated().is_none() || !(dim == 2 || dim == 3) || points.is_empty() {
+            return Ok(truncated);
+        }
+        let exact = Kernel { tolerance: Some(tol), ..self.untapered() };
+        let mut best = (crate::grid::predicted_seconds(&exact, points, dim), exact);
+        let trunc_cost = crate::grid::predicted_seconds(&truncated, points, dim);
+        if trunc_cost < best.0 {
+            best = (trunc_cost, truncated);
+        }
+        for order in GRID_ORDERS {
+            let spacing = self.grid_spacing(tol, order, dim)?;
+            let grid = Kernel { tolerance: Some(tol), ..self.on_grid(spacing, order, dim)? };
+            let cost = crate::grid::predicted_seconds(&grid, points, dim);
+            if cost < best.0 {
+                best = (cost, grid);
+            }
+        }
+        Ok(best.1)
+    }
+
+    /// The kernel without its taper or grid.
+    fn untapered(&self) -> Kernel {
+        Kernel { terms: self.terms.clone(), taper: None, grid: None, tolerance: None }
+    }
+
+    /// How the kernel's sums are evaluated, for reports.
+    pub fn path(&self) -> SumPath {
+        match (&self.grid, self.taper) {
+            (Some(g), _) => SumPath::Grid {
+                tolerance: self.tolerance,
+                spacing: g.spacing(),
+                order: g.order(),
+                bound: g.bound().value,
+            },
+            (None, Some(t)) => SumPath::Truncated { tolerance: self.tolerance, radius: t.u_out.sqrt() },
+            (None, None) => SumPath::Exact,
+        }
+    }
+
+    /// The largest lattice spacing at which the grid path of order `order`
+    /// in `dim` dimensions keeps its bounds ([`Grid::bound`]) within `tol`
+    /// for the values and [`crate::grid::GRADIENT_SLACK`]·`tol` for the
+    /// gradient: min_t σ_t·(h/σ)_p(τ), each Gaussian term then within them.
+    pub fn grid_spacing(&self, tol: f64, order: usize, dim: usize) -> Result<f64, KernelError> {
+        if !(tol > 0.0 && tol < 1.0) {
+            return Err(KernelError::Tolerance { tol });
+        }
+        if !GRID_ORDERS.contains(&order) {
+            return Err(KernelError::GridOrder { order });
+        }
+        if dim != 2 && dim != 3 {
+            return Err(KernelError::PointDimension { found: dim });
+        }
+        let terms = self.gaussian_terms_untruncated().ok_or(KernelError::GridProfile)?;
+        let sigma = terms.a[..terms.n].iter().map(|a| (0.5 / a).sqrt()).fold(f64::INFINITY, f64::min);
+        Ok(sigma / crate::grid::ratio_for(tol, order, dim))
+    }
+
+    /// The grid, if the kernel is summed on one ([`Kernel::on_grid`]).
+    pub fn grid(&self) -> Option<&Grid> {
+        self.grid.as_ref()
     }
 
     /// The taper, if the kernel is truncated.
@@ -285,6 +453,15 @@ impl Kernel {
     /// (the case with vectorised paths): the coefficients a_t = 1/(2σ_t²)
     /// and weights w_t (the taper is [`Kernel::taper`]).
     pub(crate) fn gaussian_terms(&self) -> Option<GaussTerms> {
+        if self.terms.len() > MAX_TERMS {
+            return None;
+        }
+        self.gaussian_terms_untruncated()
+    }
+
+    /// The terms of a sum of at most [`MAX_TERMS`] Gaussians, whatever its
+    /// evaluation path.
+    pub(crate) fn gaussian_terms_untruncated(&self) -> Option<GaussTerms> {
         if self.terms.len() > MAX_TERMS {
             return None;
         }

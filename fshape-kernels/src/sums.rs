@@ -64,7 +64,10 @@ pub struct KernelSums<'a> {
 /// nothing once the first call has sized it. `SumWorkspace::default()` is
 /// empty; one per thread of work.
 #[derive(Default)]
-pub struct SumWorkspace(fast::FastWorkspace);
+pub struct SumWorkspace {
+    fast: fast::FastWorkspace,
+    grid: crate::grid::GridWorkspace,
+}
 
 /// A pair's geometry handed to per-pair closures.
 pub struct Pair<'p> {
@@ -271,6 +274,12 @@ impl<'a> KernelSums<'a> {
     /// The vectorised path for sums of Gaussians (exact or truncated), or
     /// `None` for other kernels and dimensions.
     fn fast<const MODE: u8>(&self, inp: Inputs<'_>, bdim: usize) -> Result<Option<Vec<f64>>, KernelError> {
+        if self.kernel.grid().is_some() {
+            let w = fast::rows(MODE, self.dim, bdim);
+            let mut out = vec![0.0; inp.x.len() / self.dim * w];
+            self.fast_into::<MODE>(&mut SumWorkspace::default(), inp, bdim, w, &mut out, &mut [])?;
+            return Ok(Some(out));
+        }
         let Some(w) = fast::out_rows::<MODE>(self.dim, bdim) else { return Ok(None) };
         let mut out = vec![0.0; inp.x.len() / self.dim * w];
         let done = self.fast_into::<MODE>(&mut SumWorkspace::default(), inp, bdim, w, &mut out, &mut [])?;
@@ -289,10 +298,27 @@ impl<'a> KernelSums<'a> {
         out1: &mut [f64],
         out2: &mut [f64],
     ) -> Result<bool, KernelError> {
+        if let Some(grid) = self.kernel.grid() {
+            self.check_targets(inp.x)?;
+            let terms = self.kernel.gaussian_terms_untruncated().expect("a grid kernel is a sum of Gaussians");
+            crate::grid::grid_sum_into::<MODE>(
+                grid,
+                &terms,
+                inp,
+                self.dim,
+                bdim,
+                self.parallel,
+                &mut ws.grid,
+                split,
+                out1,
+                out2,
+            )?;
+            return Ok(true);
+        }
         let Some(terms) = self.kernel.gaussian_terms() else { return Ok(false) };
         self.check_targets(inp.x)?;
         let taper = self.kernel.taper();
-        ws.0.pairs.set_search(self.run_search);
+        ws.fast.pairs.set_search(self.run_search);
         Ok(fast::gaussian_sum_into::<MODE>(
             &terms,
             taper,
@@ -300,7 +326,7 @@ impl<'a> KernelSums<'a> {
             self.dim,
             bdim,
             self.parallel,
-            &mut ws.0,
+            &mut ws.fast,
             split,
             out1,
             out2,
@@ -483,10 +509,20 @@ impl<'a> KernelSums<'a> {
         grad: &mut [f64],
     ) -> Result<bool, KernelError> {
         let Some(terms) = self.kernel.gaussian_terms() else { return Ok(false) };
-        if self.kernel.taper().is_some() {
+        // Truncated and grid kernels take the general (target-wise) paths.
+        if self.kernel.taper().is_some() || self.kernel.grid().is_some() {
             return Ok(false);
         }
-        Ok(crate::symmetric::self_sums_into::<JVP>(&terms, inp, self.dim, bdim, self.parallel, &mut ws.0, conv, grad))
+        Ok(crate::symmetric::self_sums_into::<JVP>(
+            &terms,
+            inp,
+            self.dim,
+            bdim,
+            self.parallel,
+            &mut ws.fast,
+            conv,
+            grad,
+        ))
     }
 
     fn check_targets(&self, x: &[f64]) -> Result<(), KernelError> {
@@ -522,7 +558,9 @@ impl<'a> KernelSums<'a> {
     /// ```
     pub fn conv(&self, x: &[f64], b: &[f64], bdim: usize) -> Result<Vec<f64>, KernelError> {
         self.check_len("b", b, self.n_sources() * bdim)?;
-        if let (crate::Precision::MixedF32, Some(terms)) = (self.precision, self.kernel.gaussian_terms()) {
+        if let (crate::Precision::MixedF32, Some(terms), None) =
+            (self.precision, self.kernel.gaussian_terms(), self.kernel.grid())
+        {
             self.check_targets(x)?;
             let taper = self.kernel.taper();
             if let Some(out) = crate::mixed::conv(&terms, taper, x, self.y, b, self.dim, bdim, self.parallel) {

@@ -2,6 +2,8 @@
 
 #[path = "kernels/derivatives.rs"]
 mod derivatives;
+#[path = "kernels/grid.rs"]
+mod grid;
 #[path = "kernels/oracle.rs"]
 mod oracle;
 #[path = "kernels/profiles.rs"]
