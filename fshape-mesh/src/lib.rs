@@ -17,6 +17,9 @@
 //!   gzip by magic bytes or `.gz`), per-vertex signal CSV, images (EXR, digit
 //!   CSV). Parsers never panic or over-allocate on bad input, and report the
 //!   file and line or byte offset; writers are atomic.
+//! - [`FShape::simplified`]: any triangle mesh down to a vertex count,
+//!   keeping a subset of its vertices with their signal (quadric error
+//!   with a signal term), for coarse registration stages.
 //! - [`generate`]: icospheres, Delaunay squares, circles, image grids.
 //! - `test_support` (feature `test-support`): finite-difference checks,
 //!   convergence orders and proptest strategies for the other fshape crates.
@@ -37,6 +40,7 @@
 mod coarsen;
 mod geometry;
 mod shape;
+mod simplify;
 mod topology;
 mod validate;
 
@@ -48,5 +52,6 @@ pub mod test_support;
 pub use coarsen::CoarsenError;
 pub use geometry::BoundingBox;
 pub use shape::{CellKind, FShape, ShapeError};
+pub use simplify::{MIN_QUALITY, Simplified, SimplifyError, SimplifyOptions};
 pub use topology::{Facet, Topology};
 pub use validate::{Finding, RepairLog, Repairs, Severity, Validation, ZERO_VOLUME_REL, summarise};

@@ -10,6 +10,8 @@ mod malformed;
 mod nibabel;
 #[path = "mesh/roundtrip.rs"]
 mod roundtrip;
+#[path = "mesh/simplify.rs"]
+mod simplify;
 #[path = "mesh/validation.rs"]
 mod validation;
 

@@ -189,9 +189,16 @@ pub struct Problem {
 }
 
 impl Problem {
-    /// Shooting only (no target).
+    /// Shooting only (no target). The deformation kernel's sums take the
+    /// cheapest path within its tolerance for this template's points
+    /// ([`fshape_kernels::Kernel::for_points`]: exact, truncated or on a
+    /// grid), chosen here once, so that every shooting of this problem
+    /// computes the same function; [`Problem::model`] has the kernel
+    /// chosen, whose [`fshape_kernels::Kernel::path`] tells which.
     pub fn new(template: &FShape, model: Model) -> Result<Self, ShootError> {
         let (n, dim) = (template.n_vertices(), template.dim());
+        let kernel = model.kernel().for_points(template.points(), dim)?;
+        let model = model.with_kernel(kernel);
         let fem = if model.kind() == ModelKind::Lddmm {
             None
         } else {
