@@ -371,15 +371,15 @@ pub(crate) fn ratio_for(tol: f64, p: usize, dim: usize) -> f64 {
 /// - exact: 0.77 ns a pair (each pair once, the symmetric path);
 /// - truncated: 0.87 ns a pair within the support radius, counted at 64
 ///   sample targets;
-/// - grid: 0.31 µs + 1.76 ns·p^d a point (spreading and interpolating),
-///   plus 0.21 ns per filter tap and node along each axis, per channel and
-///   Gaussian term (the convolution).
+/// - grid: 0.21 µs + 0.64 ns·p^d a point (spreading and interpolating),
+///   plus 0.155 ns per filter tap and node along each axis, per channel
+///   and Gaussian term (the convolution).
 pub fn predicted_seconds(kernel: &crate::Kernel, points: &[f64], dim: usize) -> f64 {
     const EXACT_PAIR: f64 = 0.77e-9;
     const TRUNCATED_PAIR: f64 = 0.87e-9;
-    const GRID_POINT: f64 = 0.31e-6;
-    const GRID_NODE: f64 = 1.76e-9;
-    const GRID_TAP: f64 = 0.21e-9;
+    const GRID_POINT: f64 = 0.21e-6;
+    const GRID_NODE: f64 = 0.64e-9;
+    const GRID_TAP: f64 = 0.155e-9;
     let n = (points.len() / dim) as f64;
     if let Some(grid) = kernel.grid() {
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
@@ -590,7 +590,11 @@ pub(crate) fn grid_sum_into<const MODE: u8>(
     if !(1..=MAX_CHANNELS).contains(&bdim) {
         return Err(KernelError::GridChannels { found: bdim, max: MAX_CHANNELS });
     }
-    let job = Job { grid, terms, inp, c: bdim, parallel, split };
+    #[cfg(test)]
+    let scalar = ws.scalar;
+    #[cfg(not(test))]
+    let scalar = false;
+    let job = Job { grid, terms, inp, c: bdim, parallel, scalar, split };
     match (dim, grid.order) {
         (2, 4) => job.run::<2, 4, MODE>(ws, out1, out2),
         (2, 6) => job.run::<2, 6, MODE>(ws, out1, out2),
@@ -611,6 +615,8 @@ struct Job<'a> {
     /// Weight components per point.
     c: usize,
     parallel: bool,
+    /// Baseline x86-64 instead of the dispatched vector code (tests).
+    scalar: bool,
     /// Values of each target's row that go to the first output.
     split: usize,
 }
@@ -629,10 +635,7 @@ impl Job<'_> {
             return Err(KernelError::GridTooLarge { nodes: win.nodes(), spacing: h });
         }
         let jvp = MODE == CONV_JVP || MODE == GRAD_JVP || MODE == BOTH_JVP;
-        #[cfg(test)]
-        let scalar = ws.scalar;
-        #[cfg(not(test))]
-        let scalar = false;
+        let scalar = self.scalar;
         let GridWorkspace { spread: s, dspread: ds, phi, dphi, tmp, .. } = ws;
         let par = (self.parallel, scalar);
         spread::<D, P>(inp.y, inp.b, None, c, (h, basis), &win, par, s);
@@ -675,10 +678,11 @@ impl Job<'_> {
         for (t, taps) in self.grid.taps.iter().enumerate().take(self.terms.n) {
             let w = self.terms.w[t];
             let [t0, t1] = tmp;
-            first_pass(taps, win, self.c, self.parallel, s, t0);
-            axis_pass(taps, win, self.c, 1, self.parallel, t0, t1);
+            let par = (self.parallel, self.scalar);
+            first_pass(taps, win, self.c, par, s, t0);
+            axis_pass(taps, win, self.c, 1, par, t0, t1);
             let last = if dim == 3 {
-                axis_pass(taps, win, self.c, 2, self.parallel, t1, t0);
+                axis_pass(taps, win, self.c, 2, par, t1, t0);
                 &*t0
             } else {
                 &*t1
@@ -883,21 +887,26 @@ fn add_point<const D: usize, const P: usize, const C: usize, const JVP: bool>(
 /// node-major spread weights `input` into channel-major rows:
 /// out[ch][…, i] = Σ_{i'} G_{|i − i'|} input[(…, i') · c + ch], each output
 /// summed over i' in increasing order.
-fn first_pass(taps: &[f64], win: &Window, c: usize, parallel: bool, input: &[f64], out: &mut Vec<f64>) {
+fn first_pass(
+    taps: &[f64],
+    win: &Window,
+    c: usize,
+    (parallel, scalar): (bool, bool),
+    input: &[f64],
+    out: &mut Vec<f64>,
+) {
     let (nx, nodes) = (win.n[0], win.nodes());
     out.clear();
     out.resize(input.len(), 0.0);
+    // The filter both ways, full[reach + d] = G_{|d|}: for one input node,
+    // its contributions to consecutive outputs are consecutive taps.
     let reach = taps.len() - 1;
+    let full: Vec<f64> = (0..2 * reach + 1).map(|k| taps[k.abs_diff(reach)]).collect();
+    let arch = pulp::Arch::new();
     let line = |(r, o): (usize, &mut [f64])| {
         let (ch, start) = (r / (nodes / nx), (r % (nodes / nx)) * nx);
-        for (i, ov) in o.iter_mut().enumerate() {
-            let (from, to) = (i.saturating_sub(reach), (i + reach + 1).min(nx));
-            let mut acc = 0.0;
-            for i2 in from..to {
-                acc += taps[i.abs_diff(i2)] * input[(start + i2) * c + ch];
-            }
-            *ov = acc;
-        }
+        let input = &input[start * c..(start + nx) * c];
+        dispatch(arch, scalar, FirstLine { full: &full, reach, input, c, ch, o });
     };
     if parallel {
         out.par_chunks_mut(nx).enumerate().with_min_len((1024 / nx).max(1)).for_each(line);
@@ -906,34 +915,94 @@ fn first_pass(taps: &[f64], win: &Window, c: usize, parallel: bool, input: &[f64
     }
 }
 
+/// One line of [`first_pass`]: channel `ch` of the node-major `input`.
+/// Each output sums its inputs in increasing order.
+struct FirstLine<'a> {
+    full: &'a [f64],
+    reach: usize,
+    input: &'a [f64],
+    c: usize,
+    ch: usize,
+    o: &'a mut [f64],
+}
+
+impl pulp::WithSimd for FirstLine<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let FirstLine { full, reach, input, c, ch, o } = self;
+        let nx = o.len();
+        o.fill(0.0);
+        for i2 in 0..nx {
+            let v = input[i2 * c + ch];
+            // Outputs i with |i − i2| ≤ reach take full[reach + i − i2].
+            let (from, to) = (i2.saturating_sub(reach), (i2 + reach + 1).min(nx));
+            let taps = &full[reach + from - i2..reach + to - i2];
+            for (ov, g) in o[from..to].iter_mut().zip(taps) {
+                *ov += g * v;
+            }
+        }
+    }
+}
+
 /// Axis 1 or 2 of the separable convolution on channel-major values:
 /// out[…, i, …] = Σ_{i'} G_{|i − i'|} in[…, i', …], each output row summed
 /// over i' in increasing order.
-fn axis_pass(taps: &[f64], win: &Window, c: usize, axis: usize, parallel: bool, input: &[f64], out: &mut Vec<f64>) {
+fn axis_pass(
+    taps: &[f64],
+    win: &Window,
+    c: usize,
+    axis: usize,
+    (parallel, scalar): (bool, bool),
+    input: &[f64],
+    out: &mut Vec<f64>,
+) {
     let len = win.n[axis];
     // Values per index along the axis (the faster axes).
     let inner: usize = win.n[..axis].iter().product::<usize>();
     debug_assert_eq!(input.len(), win.nodes() * c);
     out.clear();
     out.resize(input.len(), 0.0);
-    let reach = taps.len() - 1;
+    let arch = pulp::Arch::new();
     let row = |(r, o): (usize, &mut [f64])| {
         // The channel and the slower axes are the row's "outer" index.
         let (outer, i) = (r / len, r % len);
-        let base = outer * len * inner;
-        let (from, to) = (i.saturating_sub(reach), (i + reach + 1).min(len));
-        for i2 in from..to {
-            let g = taps[i.abs_diff(i2)];
-            let src = &input[base + i2 * inner..base + (i2 + 1) * inner];
-            for (ov, sv) in o.iter_mut().zip(src) {
-                *ov += g * sv;
-            }
-        }
+        let block = &input[outer * len * inner..(outer + 1) * len * inner];
+        dispatch(arch, scalar, AxisRow { taps, block, inner, i, o });
     };
     if parallel {
         out.par_chunks_mut(inner).enumerate().with_min_len((4096 / inner).max(1)).for_each(row);
     } else {
         out.chunks_mut(inner).enumerate().for_each(row);
+    }
+}
+
+/// Row `i` of [`axis_pass`] within one block of rows (`inner` values each),
+/// its inputs summed in increasing order.
+struct AxisRow<'a> {
+    taps: &'a [f64],
+    block: &'a [f64],
+    inner: usize,
+    i: usize,
+    o: &'a mut [f64],
+}
+
+impl pulp::WithSimd for AxisRow<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let AxisRow { taps, block, inner, i, o } = self;
+        let (len, reach) = (block.len() / inner, taps.len() - 1);
+        let (from, to) = (i.saturating_sub(reach), (i + reach + 1).min(len));
+        for i2 in from..to {
+            let g = taps[i.abs_diff(i2)];
+            let src = &block[i2 * inner..(i2 + 1) * inner];
+            for (ov, sv) in o.iter_mut().zip(src) {
+                *ov += g * sv;
+            }
+        }
     }
 }
 
