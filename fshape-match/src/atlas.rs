@@ -535,6 +535,9 @@ pub struct Atlas {
     subjects: Vec<FShape>,
     /// Per stage, its coarser initial template or `None` (the source).
     stage_templates: Vec<Option<FShape>>,
+    /// Per stage, the subjects simplified for it (`[schedule] vertices`
+    /// with coarse targets) or `None` (the subjects themselves).
+    stage_subjects: Vec<Option<Vec<FShape>>>,
     /// Per stage, the index of the first stage template equal to its own
     /// (`None`: the source): stages on one key share a level.
     keys: Vec<Option<usize>>,
@@ -607,7 +610,33 @@ impl Atlas {
                 Some(m.clone().with_kind(ModelKind::Lddmm).with_weights(gamma_v0, m.gamma_f(), m.gamma_w())?)
             }
         };
-        let level = Level::new(&source, subjects.len(), &plan, hyper_model.as_ref())?;
+        let counts: Vec<Option<usize>> = plan.stages.iter().map(|s| s.vertices).collect();
+        let auto = counts.iter().any(Option::is_some);
+        let templates = crate::resolution::simplified_stages(&source, &counts, "template")?;
+        let mut stage_subjects = vec![None; plan.stages.len()];
+        if plan.stages.iter().any(|s| s.coarse_target) {
+            let counts: Vec<Option<usize>> =
+                plan.stages.iter().map(|s| s.vertices.filter(|_| s.coarse_target)).collect();
+            let mut per_subject = Vec::with_capacity(subjects.len());
+            for (i, subject) in subjects.iter().enumerate() {
+                per_subject.push(crate::resolution::simplified_stages(subject, &counts, &format!("subject {i}"))?);
+            }
+            for (k, slot) in stage_subjects.iter_mut().enumerate() {
+                if counts[k].is_some() {
+                    *slot = Some(
+                        per_subject
+                            .iter()
+                            .zip(subjects)
+                            .map(|(c, s)| c[k].clone().unwrap_or_else(|| s.clone()))
+                            .collect(),
+                    );
+                }
+            }
+        }
+        // The first level on stage 0's template: a source that stage
+        // templates replace at once is not set up.
+        let first_template = templates.first().and_then(Option::as_ref).unwrap_or(&source);
+        let level = Level::new(first_template, subjects.len(), &plan, hyper_model.as_ref())?;
         let checkpoint = Checkpoint {
             format: CHECKPOINT_FORMAT,
             fingerprint: atlas_fingerprint(&source, subjects, config),
@@ -617,11 +646,12 @@ impl Atlas {
             seconds: 0.0,
         };
         let stages = plan.stages.len();
-        Ok(Atlas {
+        let atlas = Atlas {
             plan,
             source,
             subjects: subjects.to_vec(),
             stage_templates: vec![None; stages],
+            stage_subjects,
             keys: vec![None; stages],
             hyper_model,
             level,
@@ -630,7 +660,14 @@ impl Atlas {
             checkpoint,
             checkpoint_file: None,
             staged: None,
-        })
+        };
+        if !auto {
+            return Ok(atlas);
+        }
+        // The level holds stage 0's template.
+        let mut atlas = atlas.set_stage_templates(templates)?;
+        atlas.on = atlas.template_of(0).0;
+        Ok(atlas)
     }
 
     /// Runs stage k on a coarser initial template `templates[k]` (the same
@@ -643,7 +680,15 @@ impl Atlas {
     /// their velocity field ([`crate::resolution::prolongate_fitted`], one
     /// factor for all subjects). The templates enter
     /// the checkpoint's fingerprint: call this before [`Atlas::resume`].
-    pub fn with_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Atlas, MatchError> {
+    pub fn with_stage_templates(self, templates: Vec<Option<FShape>>) -> Result<Atlas, MatchError> {
+        if self.plan.stages.iter().any(|s| s.vertices.is_some()) {
+            return Err(MatchError::StageTemplatesTwice);
+        }
+        self.set_stage_templates(templates)
+    }
+
+    /// [`Atlas::with_stage_templates`], from the schedule's counts too.
+    fn set_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Atlas, MatchError> {
         let n = self.plan.stages.len();
         if templates.len() != n {
             return Err(MatchError::Shapes(format!("{} stage templates for {n} stages", templates.len())));
@@ -810,7 +855,8 @@ impl Atlas {
         self.ensure_level(k)?;
         if self.staged != Some(k) {
             let stage = &self.plan.stages[k];
-            for (problem, subject) in self.level.problems.iter_mut().zip(&self.subjects) {
+            let subjects = self.stage_subjects.get(k).and_then(Option::as_ref).unwrap_or(&self.subjects);
+            for (problem, subject) in self.level.problems.iter_mut().zip(subjects) {
                 problem.set_target(subject, stage.kernel.clone())?;
                 problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
             }
@@ -943,6 +989,13 @@ impl Atlas {
                 }),
             };
             self.stage_target(k)?;
+            let first = self.stage_subjects.get(k).and_then(Option::as_ref).unwrap_or(&self.subjects);
+            let setup = crate::session::StageSetup {
+                template_vertices: self.level.template.n_vertices(),
+                target_vertices: first[0].n_vertices(),
+                deformation: self.level.problems[0].model().kernel().path().to_string(),
+                attachment: self.plan.stages[k].kernel.position().path().to_string(),
+            };
             let mut objective = self.level.objective(self.cluster.as_ref());
             let mut journal = Journal {
                 checkpoint: &mut self.checkpoint,
@@ -951,7 +1004,7 @@ impl Atlas {
                 stages,
             };
             let spec = &self.plan.stages[k];
-            if run_stage(k, spec, &self.plan.settings, &mut objective, begin, &mut journal, observer)?
+            if run_stage(k, spec, setup, &self.plan.settings, &mut objective, begin, &mut journal, observer)?
                 == Outcome::Interrupted
             {
                 return Ok(Outcome::Interrupted);

@@ -48,6 +48,8 @@
 //! max_iterations = [200, 100, 30]           # per stage (default [optimizer]'s)
 //! decrease_tolerance = [1e-2, 1e-2, 1e-3]    # per stage (default [optimizer]'s)
 //! decrease_window = [10, 10, 3]              # per stage (default [optimizer]'s)
+//! vertices = [2000, 10000]                   # each stage's template but the last (default: the source)
+//! coarse_targets = true                      # with vertices: the target simplified alike (default true)
 //!
 //! [atlas]                           # fshape atlas only
 //! template = "free"                 # free | hypertemplate              (default free)
@@ -461,6 +463,21 @@ pub struct ScheduleSection {
     /// decrease_window` for all): a short final stage needs a short window.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub decrease_window: Option<Vec<usize>>,
+    /// The vertex count of each stage's template but the last, which runs
+    /// on the source: the source simplified to it
+    /// ([`fshape_mesh::FShape::simplified`], keeping a subset of its
+    /// vertices with their signal); a count at least the source's is the
+    /// source. One value per stage before the last, as
+    /// `--stage-templates` takes one mesh each (default: every stage on the
+    /// source). Not with hand-made stage templates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertices: Option<Vec<usize>>,
+    /// With `vertices`: each such stage also matches the target simplified
+    /// to the same count (default true), so that a coarse stage's data
+    /// term costs what its template's size calls for; the last stage
+    /// always matches the target itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_targets: Option<bool>,
 }
 
 impl ScheduleSection {
@@ -474,6 +491,8 @@ impl ScheduleSection {
             max_iterations: None,
             decrease_tolerance: None,
             decrease_window: None,
+            vertices: None,
+            coarse_targets: None,
         }
     }
 }
@@ -493,6 +512,11 @@ pub struct StageSpec {
     pub max_iterations: usize,
     /// The stage's relative-decrease tolerance and window.
     pub decrease: (f64, usize),
+    /// The vertex count of the stage's template (`[schedule] vertices`;
+    /// `None`: the source, or a hand-made stage template).
+    pub vertices: Option<usize>,
+    /// Whether the stage matches the target simplified to `vertices`.
+    pub coarse_target: bool,
 }
 
 /// Everything a registration needs, checked: the model, the stages, the
@@ -656,6 +680,8 @@ impl Config {
                     integrator,
                     max_iterations,
                     decrease: (self.optimizer.decrease_tolerance, self.optimizer.decrease_window),
+                    vertices: None,
+                    coarse_target: false,
                 }])
             }
             Some(s) if s.kernel_geom.is_empty() => Err(bad("schedule.kernel_geom", "needs at least one kernel")),
@@ -694,6 +720,28 @@ impl Config {
                 if let Some(i) = (0..n).find(|&i| steps(i) == 0) {
                     return Err(bad(format!("schedule.steps[{i}]"), "must be at least 1"));
                 }
+                if let Some(v) = &s.vertices {
+                    if v.len() + 1 != n {
+                        return Err(bad(
+                            "schedule.vertices",
+                            format!(
+                                "{} values for {n} stages: one per stage before the last, which runs on the source",
+                                v.len()
+                            ),
+                        ));
+                    }
+                    if let Some(i) = v.iter().position(|&c| c < 4) {
+                        return Err(bad(
+                            format!("schedule.vertices[{i}]"),
+                            format!("a surface needs at least 4 vertices, got {}", v[i]),
+                        ));
+                    }
+                }
+                if s.coarse_targets.is_some() && s.vertices.is_none() {
+                    return Err(bad("schedule.coarse_targets", "needs schedule.vertices"));
+                }
+                let vertices = |i: usize| s.vertices.as_ref().and_then(|v| v.get(i).copied());
+                let coarse_target = s.coarse_targets.unwrap_or(true);
                 (0..n)
                     .map(|i| {
                         let g = &s.kernel_geom[i];
@@ -704,6 +752,8 @@ impl Config {
                             integrator: (scheme(i), steps(i)),
                             max_iterations: budget(i),
                             decrease: (tolerance(i), window(i)),
+                            vertices: vertices(i),
+                            coarse_target: coarse_target && vertices(i).is_some(),
                         })
                     })
                     .collect()

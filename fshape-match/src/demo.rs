@@ -57,3 +57,71 @@ pub fn bunny_setting_at_level(bunny: &FShape, level: u32) -> Result<(FShape, FSh
     let template = sphere.with_signal(Some(vec![0.0; n_sphere]))?;
     Ok((template, target))
 }
+
+/// A surface and its copy moved by a known smooth displacement with a
+/// known signal change ([`displaced`]).
+#[derive(Clone, Debug)]
+pub struct DisplacedPair {
+    /// The moved copy: the source's cells, its points plus `displacement`,
+    /// its signal plus `signal_change`.
+    pub target: FShape,
+    /// The displacement of each vertex (P × n).
+    pub displacement: Vec<f64>,
+    /// The signal change at each vertex (P).
+    pub signal_change: Vec<f64>,
+}
+
+/// The native-resolution benchmark's target: `source` (with a signal)
+/// moved by six Gaussian bumps of displacement of width `width`, at
+/// vertices and in directions drawn from `seed`, scaled so that the
+/// largest displacement of a vertex is `amplitude`, and its signal changed
+/// by four Gaussian bumps of the same width and of heights ±½ the signal's
+/// standard deviation. Deterministic: the same inputs give the same bits.
+pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Result<DisplacedPair, MatchError> {
+    use fshape_mesh::generate::SplitMix64;
+    let (n, dim) = (source.n_vertices(), source.dim());
+    let signal =
+        source.signal().ok_or_else(|| MatchError::Shapes("the source of a displaced pair needs a signal".into()))?;
+    if n == 0 || !(amplitude >= 0.0 && amplitude.is_finite() && width > 0.0 && width.is_finite()) {
+        return Err(MatchError::Shapes(format!(
+            "a displaced pair needs vertices, an amplitude ≥ 0 and a width > 0 (got {n} vertices, {amplitude}, {width})"
+        )));
+    }
+    let mut rng = SplitMix64(seed);
+    let x = source.points();
+    let bump = |c: usize, p: &[f64]| {
+        let u: f64 = (0..dim).map(|k| (p[k] - x[c * dim + k]).powi(2)).sum();
+        (-u / (2.0 * width * width)).exp()
+    };
+    let mut displacement = vec![0.0; n * dim];
+    for _ in 0..6 {
+        let c = (rng.next_u64() % n as u64) as usize;
+        let mut dir: Vec<f64> = (0..dim).map(|_| rng.range(-1.0, 1.0)).collect();
+        let norm = dir.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
+        dir.iter_mut().for_each(|v| *v /= norm);
+        for (i, p) in x.chunks_exact(dim).enumerate() {
+            let b = bump(c, p);
+            for k in 0..dim {
+                displacement[i * dim + k] += b * dir[k];
+            }
+        }
+    }
+    let largest =
+        displacement.chunks_exact(dim).map(|d| d.iter().map(|v| v * v).sum::<f64>().sqrt()).fold(0.0, f64::max);
+    let scale = if largest > 0.0 { amplitude / largest } else { 0.0 };
+    displacement.iter_mut().for_each(|v| *v *= scale);
+    let mean = signal.iter().sum::<f64>() / n as f64;
+    let sd = (signal.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64).sqrt();
+    let mut signal_change = vec![0.0; n];
+    for k in 0..4 {
+        let c = (rng.next_u64() % n as u64) as usize;
+        let height = if k % 2 == 0 { 0.5 * sd } else { -0.5 * sd };
+        for (i, p) in x.chunks_exact(dim).enumerate() {
+            signal_change[i] += height * bump(c, p);
+        }
+    }
+    let points: Vec<f64> = x.iter().zip(&displacement).map(|(a, b)| a + b).collect();
+    let target_signal: Vec<f64> = signal.iter().zip(&signal_change).map(|(a, b)| a + b).collect();
+    let target = source.clone().with_points(points)?.with_signal(Some(target_signal))?;
+    Ok(DisplacedPair { target, displacement, signal_change })
+}

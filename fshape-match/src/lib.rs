@@ -52,7 +52,7 @@ pub use config::{
 pub use quality::{Quality, quality};
 pub use session::{
     CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, MatchResult, Observer, Outcome, Session, StageRecord,
-    fingerprint,
+    StageSetup, fingerprint,
 };
 pub use unknowns::{Metric, Metrics};
 
@@ -112,6 +112,22 @@ pub enum MatchError {
     /// A mesh could not be built.
     #[error(transparent)]
     Shape(#[from] fshape_mesh::ShapeError),
+    /// A stage's template or target could not be simplified to the count
+    /// `[schedule] vertices` gives.
+    #[error("simplifying the {what} to {vertices} vertices for stage {stage}: {source}")]
+    Simplify {
+        /// `source`, `target`, `template` or `subject N`.
+        what: String,
+        /// The count asked for.
+        vertices: usize,
+        /// The stage (from 0).
+        stage: usize,
+        /// The simplifier's reason.
+        source: fshape_mesh::SimplifyError,
+    },
+    /// Stage templates were given twice.
+    #[error("stage templates are given both by hand (--stage-templates) and by [schedule] vertices: keep one")]
+    StageTemplatesTwice,
     /// Another process of a distributed atlas failed (its own message is
     /// on that process's output).
     #[error("subject {subject} failed on process {rank} of the atlas")]

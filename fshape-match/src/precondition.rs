@@ -22,8 +22,9 @@
 //! treating directions of K-eigenvalue below it as L²; a ten times smaller
 //! ridge made line searches fail on the bunny (docs/experiments.md). The
 //! factor costs n³/3 operations and n² values for n vertices, hence
-//! [`MAX_VERTICES`]: a larger template keeps the stage's other metric
-//! ([`crate::unknowns::Unknowns::kernel_metric`] tells).
+//! [`MAX_VERTICES`]: a larger template takes a two-scale approximation of
+//! the same inverse ([`TwoLevel`]), whose cost grows linearly with the
+//! vertices ([`MomentumMetric`] is either).
 
 use fshape_fem::{Norm, SignalNorm};
 use fshape_kernels::Kernel;
@@ -195,5 +196,227 @@ impl NormMatrix {
         let block = &mut v[self.offset..];
         let out = self.norm.matvec(&self.points, block).expect("checked when built");
         block.iter_mut().zip(&out).for_each(|(x, o)| *x = o * self.inv_mean_mass);
+    }
+}
+
+/// How much larger [`TwoLevel`]'s coarse ridge is than the fine one: the
+/// coarse kernel matrix meets the fine velocities' averages only
+/// approximately, and its inverse scales what it misses by M_c/λ_c. On a
+/// 2562-vertex sphere (the precondition tests), the energy H gives a
+/// smooth momentum's velocity against the exact A⁻¹'s: 13× too large
+/// with the fine ridge, 2.8× with ten times it, 1.2× with a hundred times
+/// (while random vectors lose weight: 0.033, 0.0049, 0.00067 of A⁻¹'s).
+/// At ten times the two ratios spread over a factor of 565, where the
+/// Euclidean metric's spread over 45 000.
+pub const COARSE_RIDGE: f64 = 10.0;
+
+/// The number of vertices of [`TwoLevel`]'s coarse space: enough to
+/// resolve the kernel's smooth modes on a cortex, small enough that its
+/// dense factor costs a second.
+pub const COARSE_VERTICES: usize = 4000;
+
+/// The energy metric's operator for a template of any size, where a
+/// dense factor of A = K + λD_0⁻¹ is out of reach (more than
+/// [`MAX_VERTICES`] vertices): A⁻¹ on the scales a coarse mesh resolves,
+///
+/// ```text
+/// H = Q E⁻¹ Qᵀ + (I − S)ᵀ B (I − S),   S = R Qᵀ,   B = diag(m_i / (k̂(0) + λ)),
+/// ```
+///
+/// with a coarse space of [`COARSE_VERTICES`] vertices (the template
+/// simplified, [`FShape::simplified`]). Each fine vertex i has a closest
+/// point on the coarse mesh with barycentric coordinates φ_c(x_i). Q
+/// carries coarse momenta to the fine vertices, Q_ic = m_i φ_c(x_i)/M_c
+/// with M_c = Σ_i m_i φ_c(x_i) (a coarse momentum keeps its total), so Qᵀ
+/// averages fine velocities onto the coarse vertices; R interpolates
+/// coarse velocities at the fine vertices (R_ic = φ_c(x_i)). E is the
+/// coarse K_c + λ M_c⁻¹ (≈ QᵀAQ), factored densely: Q E⁻¹ Qᵀ is A⁻¹ on
+/// the modes the coarse mesh resolves. What the coarse velocities do not
+/// interpolate, (I − S) v, is scaled by B, A⁻¹ on the smoothest mode (on
+/// a momentum p_i = ρ(x_i) m_i with ρ of frequency ξ, A acts as
+/// (k̂(ξ) + λ)/m_i, k̂ the kernel's Fourier transform): never more than
+/// the coarse term gives a smooth mode, so nothing the coarse space
+/// misrepresents is amplified. (A⁻¹ itself scales the finest modes by
+/// m_i/λ: inverting it by conjugate gradients or by the balancing
+/// preconditioner of domain decomposition multiplies any error of the
+/// coarse solve by that; measured, a smooth field came back 10⁷ times too
+/// large, and 10⁴ times with B at the coarse mesh's cutoff frequency.)
+/// H is symmetric, positive definite and linear: a proper L-BFGS H_0. An
+/// application costs a few sparse maps and one coarse solve, no kernel
+/// sum.
+pub struct TwoLevel {
+    dim: usize,
+    /// B's diagonal, per vertex.
+    fine: Vec<f64>,
+    /// Per fine vertex, its three coarse vertices, Q's entries and R's.
+    corners: Vec<[u32; 3]>,
+    weights: Vec<[f64; 3]>,
+    bary: Vec<[f64; 3]>,
+    coarse: KernelFactor,
+    n_coarse: usize,
+}
+
+impl std::fmt::Debug for TwoLevel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TwoLevel").field("n", &self.fine.len()).field("coarse", &self.n_coarse).finish_non_exhaustive()
+    }
+}
+
+/// k̂(0) = ∫_{R^d} k(|x|²) dx, the kernel's integral on `d`-dimensional
+/// cells, by radial quadrature: 2∫_0^∞ k(r²) dr, or 2π∫_0^∞ k(r²) r dr.
+fn integral(kernel: &Kernel, d: usize) -> f64 {
+    let r_max = 12.0 * half_width(kernel);
+    let steps = 4000;
+    let dr = r_max / steps as f64;
+    (0..=steps)
+        .map(|i| {
+            let r = i as f64 * dr;
+            let w = if i == 0 || i == steps { 0.5 } else { 1.0 };
+            let k = kernel.value(r * r);
+            w * dr * if d == 1 { 2.0 * k } else { 2.0 * std::f64::consts::PI * k * r }
+        })
+        .sum()
+}
+
+impl TwoLevel {
+    /// The two-level operator on `template` with the deformation kernel
+    /// `kernel` and a coarse space of `coarse` vertices. `Ok(None)` where
+    /// the coarse factor meets a pivot that is not positive; an error
+    /// where the lumped mass is not defined.
+    pub fn new(template: &FShape, kernel: &Kernel, coarse: usize) -> Result<Option<TwoLevel>, crate::MatchError> {
+        let (n, dim, cell_dim) = (template.n_vertices(), template.dim(), template.kind().dim());
+        let lumped = || SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(template.points());
+        let masses = lumped().map_err(|e: fshape_fem::FemError| crate::MatchError::Shoot(e.into()))?;
+        let lambda = KernelFactor::ridge(kernel, cell_dim);
+        let small = template
+            .simplified(coarse.min(n))
+            .map_err(|source| crate::MatchError::Simplify {
+                what: "template".into(),
+                vertices: coarse,
+                stage: 0,
+                source,
+            })?
+            .shape;
+        let closest = crate::quality::ClosestPoints::new(&small)?;
+        let k = small.kind().n_corners();
+        let (mut corners, mut weights, mut bary) =
+            (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut total = vec![0.0; small.n_vertices()];
+        for (i, m) in masses.iter().enumerate() {
+            let x = template.point(i);
+            let c = closest.closest([x[0], x[1], if dim == 3 { x[2] } else { 0.0 }]);
+            let ids = &small.cells()[c.cell * k..(c.cell + 1) * k];
+            let mut corner = [0u32; 3];
+            let mut weight = [0.0; 3];
+            for (j, (&id, &b)) in ids.iter().zip(&c.bary).enumerate() {
+                corner[j] = id as u32;
+                weight[j] = m * b;
+                total[id] += m * b;
+            }
+            corners.push(corner);
+            weights.push(weight);
+            bary.push(c.bary);
+        }
+        // Each coarse vertex is a fine one, whose closest point is itself:
+        // a total without mass means a vertex without area.
+        if let Some(c) = total.iter().position(|t| t.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
+            return Err(crate::MatchError::Shapes(format!(
+                "the energy metric's coarse vertex {c} carries no area (a vertex without cells?)"
+            )));
+        }
+        for (corner, weight) in corners.iter().zip(&mut weights) {
+            for (j, w) in weight.iter_mut().enumerate() {
+                *w /= total[corner[j] as usize];
+            }
+        }
+        let coarse_ridge: Vec<f64> = total.iter().map(|t| COARSE_RIDGE * lambda / t).collect();
+        let Some(factor) = KernelFactor::factor(small.points(), dim, kernel, &coarse_ridge) else { return Ok(None) };
+        let smoothest = integral(kernel, cell_dim) + lambda;
+        Ok(Some(TwoLevel {
+            dim,
+            fine: masses.iter().map(|m| m / smoothest).collect(),
+            corners,
+            weights,
+            bary,
+            coarse: factor,
+            n_coarse: small.n_vertices(),
+        }))
+    }
+
+    /// Qᵀ v (`weights`) or Rᵀ v (`bary`): fine values summed onto the
+    /// coarse vertices.
+    fn down(&self, v: &[f64], by: &[[f64; 3]]) -> Vec<f64> {
+        let d = self.dim;
+        let mut c = vec![0.0; self.n_coarse * d];
+        for (i, (corner, w)) in self.corners.iter().zip(by).enumerate() {
+            for j in 0..3 {
+                for k in 0..d {
+                    c[corner[j] as usize * d + k] += w[j] * v[i * d + k];
+                }
+            }
+        }
+        c
+    }
+
+    /// Q c (`weights`) or R c (`bary`): coarse values onto the fine vertices.
+    fn up(&self, c: &[f64], by: &[[f64; 3]]) -> Vec<f64> {
+        let d = self.dim;
+        let mut v = vec![0.0; self.fine.len() * d];
+        for (i, (corner, w)) in self.corners.iter().zip(by).enumerate() {
+            for j in 0..3 {
+                for k in 0..d {
+                    v[i * d + k] += w[j] * c[corner[j] as usize * d + k];
+                }
+            }
+        }
+        v
+    }
+
+    /// v ← H v on the first n·dim values of `v` (the p_0 block); the rest
+    /// is left as it is.
+    pub fn apply(&self, v: &mut [f64]) {
+        let d = self.dim;
+        let n = self.fine.len() * d;
+        let r = &v[..n];
+        let mut c = self.down(r, &self.weights);
+        self.coarse.apply(&mut c);
+        let coarse = self.up(&c, &self.weights);
+        // (I − S)ᵀ B (I − S) r, S = R Qᵀ.
+        let s = self.up(&self.down(r, &self.weights), &self.bary);
+        let b: Vec<f64> = r.iter().zip(&s).enumerate().map(|(i, (a, b))| self.fine[i / d] * (a - b)).collect();
+        let back = self.up(&self.down(&b, &self.bary), &self.weights);
+        for (i, o) in v[..n].iter_mut().enumerate() {
+            *o = coarse[i] + b[i] - back[i];
+        }
+    }
+}
+
+/// The energy metric of p_0 ([`Unknowns::scaled`](crate::unknowns::Unknowns::scaled)):
+/// the dense factor up to [`MAX_VERTICES`] vertices, the two-level
+/// operator beyond.
+#[derive(Debug)]
+pub enum MomentumMetric {
+    /// (K + λD_0⁻¹)⁻¹ by a dense Cholesky factor.
+    Dense(KernelFactor),
+    /// Its two-level approximation ([`TwoLevel`]).
+    TwoLevel(TwoLevel),
+}
+
+impl MomentumMetric {
+    /// The metric of `template` with `kernel`: dense where it fits, else
+    /// two-level; `None` where a factor meets a non-positive pivot.
+    pub fn new(template: &FShape, kernel: &Kernel) -> Result<Option<MomentumMetric>, crate::MatchError> {
+        if template.n_vertices() <= MAX_VERTICES {
+            return Ok(KernelFactor::new(template, kernel)?.map(MomentumMetric::Dense));
+        }
+        Ok(TwoLevel::new(template, kernel, COARSE_VERTICES)?.map(MomentumMetric::TwoLevel))
+    }
+
+    /// v ← H v on the p_0 block of `v`.
+    pub fn apply(&self, v: &mut [f64]) {
+        match self {
+            MomentumMetric::Dense(f) => f.apply(v),
+            MomentumMetric::TwoLevel(t) => t.apply(v),
+        }
     }
 }

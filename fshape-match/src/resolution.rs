@@ -133,6 +133,37 @@ impl VelocityFit {
     }
 }
 
+/// The coarse versions of `shape` that stages ask for: per stage, `shape`
+/// simplified to `counts[k]` vertices ([`FShape::simplified`]), or `None`
+/// (the shape itself) where the count is `None` or at least the shape's.
+/// Each distinct count is simplified once, so stages of equal counts get
+/// equal meshes (and share a problem). `what` names the shape in errors.
+pub fn simplified_stages(
+    shape: &FShape,
+    counts: &[Option<usize>],
+    what: &str,
+) -> Result<Vec<Option<FShape>>, MatchError> {
+    let mut made: Vec<(usize, FShape)> = Vec::new();
+    let mut out = Vec::with_capacity(counts.len());
+    for (stage, count) in counts.iter().enumerate() {
+        let Some(&n) = count.as_ref().filter(|&&n| n < shape.n_vertices()) else {
+            out.push(None);
+            continue;
+        };
+        if let Some((_, m)) = made.iter().find(|(c, _)| *c == n) {
+            out.push(Some(m.clone()));
+            continue;
+        }
+        let coarse = shape
+            .simplified(n)
+            .map_err(|source| MatchError::Simplify { what: what.to_string(), vertices: n, stage, source })?
+            .shape;
+        made.push((n, coarse.clone()));
+        out.push(Some(coarse));
+    }
+    Ok(out)
+}
+
 /// The momenta (p_0: P_c × n, p^f: P_c) of `coarse` carried to `fine`
 /// (the same surface at another resolution): fine areas times the coarse
 /// densities interpolated at the fine vertices. For the tangential model

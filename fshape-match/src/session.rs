@@ -52,11 +52,27 @@ impl Iteration {
     }
 }
 
+/// What a stage ran on: the sizes of its shapes and how its kernel sums
+/// were evaluated ([`fshape_kernels::SumPath`], as sentences).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StageSetup {
+    /// Vertices of the stage's template.
+    pub template_vertices: usize,
+    /// Vertices of the stage's target (of the first subject's, for an atlas).
+    pub target_vertices: usize,
+    /// The deformation kernel's sums: exact, truncated or on a grid.
+    pub deformation: String,
+    /// The data attachment's position kernel: exact or truncated.
+    pub attachment: String,
+}
+
 /// A finished stage.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct StageRecord {
     /// The stage's position kernel as written.
     pub kernel_geom: String,
+    /// What it ran on.
+    pub setup: StageSetup,
     /// Why it stopped.
     pub stop: Stop,
     /// The same, as a sentence.
@@ -219,6 +235,8 @@ pub struct Session {
     staged: Option<usize>,
     /// A coarser template per stage (`None`: the source), empty for none.
     stage_templates: Vec<Option<FShape>>,
+    /// A coarser target per stage (`None`: the target), empty for none.
+    stage_targets: Vec<Option<FShape>>,
     /// Per stage, which template it runs on: the first stage with an equal
     /// template, or `None` for the source (equal templates share a problem
     /// and need no transfer between them).
@@ -290,9 +308,11 @@ impl Journal<'_> {
 /// its end becomes the warm start. [`Outcome::Interrupted`] when the
 /// observer stops it, with the stage under way in the checkpoint.
 /// [`Session::run`] and [`crate::Atlas::run`] share it.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn run_stage<O>(
     k: usize,
     spec: &StageSpec,
+    setup: StageSetup,
     base: &Settings,
     objective: &mut O,
     start: StageStart,
@@ -341,6 +361,7 @@ where
     };
     let record = StageRecord {
         kernel_geom: spec.label.clone(),
+        setup,
         stop,
         reason: stop.describe().into(),
         initial: current.initial,
@@ -371,7 +392,19 @@ impl Session {
             )));
         }
         let plan = config.plan(source, target)?;
-        let problem = Problem::new(source, plan.model.clone())?;
+        let counts: Vec<Option<usize>> = plan.stages.iter().map(|s| s.vertices).collect();
+        let auto = counts.iter().any(Option::is_some);
+        let templates = crate::resolution::simplified_stages(source, &counts, "source")?;
+        let targets = if plan.stages.iter().any(|s| s.coarse_target) {
+            let counts: Vec<Option<usize>> =
+                plan.stages.iter().map(|s| s.vertices.filter(|_| s.coarse_target)).collect();
+            crate::resolution::simplified_stages(target, &counts, "target")?
+        } else {
+            Vec::new()
+        };
+        // The problem on the first stage's template: a source that stage
+        // templates replace at once is not set up.
+        let problem = Problem::new(templates.first().and_then(Option::as_ref).unwrap_or(source), plan.model.clone())?;
         // The metric's matrices (a dense kernel factor) wait for the first
         // stage on the source: it may run on a stage template first.
         let unknowns = Unknowns::for_template(source, plan.model.kind(), plan.metrics, plan.scales)?;
@@ -383,7 +416,7 @@ impl Session {
             warm: None,
             seconds: 0.0,
         };
-        Ok(Session {
+        let session = Session {
             plan,
             problem,
             source: source.clone(),
@@ -393,11 +426,17 @@ impl Session {
             checkpoint_file: None,
             staged: None,
             stage_templates: Vec::new(),
+            stage_targets: targets,
             template_keys: Vec::new(),
             on_template: None,
             metric_built: false,
             parallel: true,
-        })
+        };
+        // The problem holds stage 0's template: say so, or the first stage
+        // would set it up again.
+        let mut session = if auto { session.set_stage_templates(templates)? } else { session };
+        session.on_template = session.template_of(0).0;
+        Ok(session)
     }
 
     /// Writes the checkpoint to `path` (atomically, as JSON) after every
@@ -421,7 +460,19 @@ impl Session {
     /// different templates the momenta are carried over keeping their
     /// velocity field ([`crate::resolution::prolongate_fitted`]). The templates enter the
     /// checkpoint's fingerprint: call this before [`Session::resume`].
-    pub fn with_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Session, MatchError> {
+    pub fn with_stage_templates(self, templates: Vec<Option<FShape>>) -> Result<Session, MatchError> {
+        if self.plan.stages.iter().any(|s| s.vertices.is_some()) {
+            return Err(MatchError::StageTemplatesTwice);
+        }
+        let on = self.on_template;
+        let mut session = self.set_stage_templates(templates)?;
+        // The problem still holds the source.
+        session.on_template = on;
+        Ok(session)
+    }
+
+    /// [`Session::with_stage_templates`], from the schedule's counts too.
+    fn set_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Session, MatchError> {
         let n = self.plan.stages.len();
         if templates.len() != n {
             return Err(MatchError::Shapes(format!("{} stage templates for {n} stages", templates.len())));
@@ -553,7 +604,8 @@ impl Session {
         }
         if self.staged != Some(k) {
             let stage = &self.plan.stages[k];
-            self.problem.set_target(&self.target, stage.kernel.clone())?;
+            let target = self.stage_targets.get(k).and_then(Option::as_ref).unwrap_or(&self.target);
+            self.problem.set_target(target, stage.kernel.clone())?;
             self.problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
             self.staged = Some(k);
         }
@@ -588,7 +640,18 @@ impl Session {
                 stages,
             };
             let spec = &self.plan.stages[k];
-            if run_stage(k, spec, &self.plan.settings, &mut objective, begin, &mut journal, observer)?
+            let setup = StageSetup {
+                template_vertices: self.problem.template().n_vertices(),
+                target_vertices: self
+                    .stage_targets
+                    .get(k)
+                    .and_then(Option::as_ref)
+                    .unwrap_or(&self.target)
+                    .n_vertices(),
+                deformation: self.problem.model().kernel().path().to_string(),
+                attachment: spec.kernel.position().path().to_string(),
+            };
+            if run_stage(k, spec, setup, &self.plan.settings, &mut objective, begin, &mut journal, observer)?
                 == Outcome::Interrupted
             {
                 return Ok(Outcome::Interrupted);

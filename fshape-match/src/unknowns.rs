@@ -29,7 +29,7 @@ use fshape_fem::{Norm, SignalNorm};
 use fshape_shoot::{Energies, ModelKind, Problem, ShootError};
 
 use crate::optimize::{Settings, State, Stop};
-use crate::precondition::{KernelFactor, NormMatrix};
+use crate::precondition::{MomentumMetric, NormMatrix};
 
 /// The metric in which one block of unknowns is optimised (configuration
 /// spellings `l2`, `euclidean`).
@@ -73,9 +73,9 @@ impl From<Metric> for Metrics {
 /// The packing of (p_0, p^f) into the optimiser's unknowns.
 #[derive(Clone, Debug)]
 pub struct Unknowns {
-    /// The energy metric of p_0: the kernel matrix's factor (a template of
-    /// at most [`crate::precondition::MAX_VERTICES`] vertices).
-    factor: Option<std::sync::Arc<KernelFactor>>,
+    /// The energy metric of p_0: the kernel matrix's factor, or its
+    /// two-level approximation on larger templates.
+    factor: Option<std::sync::Arc<MomentumMetric>>,
     /// The energy metric of p^f: the signal norm's matrix.
     signal_matrix: Option<std::sync::Arc<NormMatrix>>,
     /// P·n and P.
@@ -90,7 +90,7 @@ pub struct Unknowns {
 impl Unknowns {
     /// The packing for `problem` with its blocks in `metrics` (a
     /// [`Metric`] alone sets the signal block's).
-    pub fn new(problem: &Problem, metrics: impl Into<Metrics>) -> Result<Unknowns, ShootError> {
+    pub fn new(problem: &Problem, metrics: impl Into<Metrics>) -> Result<Unknowns, crate::MatchError> {
         Unknowns::scaled(problem, metrics, None)
     }
 
@@ -103,12 +103,12 @@ impl Unknowns {
         problem: &Problem,
         metrics: impl Into<Metrics>,
         scales: Option<crate::Scales>,
-    ) -> Result<Unknowns, ShootError> {
+    ) -> Result<Unknowns, crate::MatchError> {
         let metrics = metrics.into();
         let mut unknowns = Unknowns::for_template(problem.template(), problem.model().kind(), metrics, scales)?;
         if metrics.momentum == Metric::Energy {
             let t = problem.template();
-            unknowns.factor = KernelFactor::new(t, problem.model().kernel())?.map(std::sync::Arc::new);
+            unknowns.factor = MomentumMetric::new(t, problem.model().kernel())?.map(std::sync::Arc::new);
         }
         if metrics.signal == Metric::Energy && problem.model().kind() == ModelKind::Metamorphosis {
             let t = problem.template();
@@ -118,8 +118,8 @@ impl Unknowns {
         Ok(unknowns)
     }
 
-    /// Whether p_0 is in the energy metric (`Metric::Energy` and a
-    /// template small enough to factor its kernel matrix).
+    /// Whether p_0 is in the energy metric (`Metric::Energy` and a kernel
+    /// matrix whose factor exists).
     pub fn kernel_metric(&self) -> bool {
         self.factor.is_some()
     }
@@ -315,7 +315,7 @@ pub fn minimize(
     pf: &[f64],
     settings: &Settings,
     mut each: impl FnMut(&State, &Energies),
-) -> Result<(State, Stop, Unknowns), ShootError> {
+) -> Result<(State, Stop, Unknowns), crate::MatchError> {
     let unknowns = Unknowns::new(problem, metric)?;
     let mut objective = MatchObjective::new(problem, unknowns.clone());
     let mut state = State::start(unknowns.pack(p0, pf), &mut objective)?;

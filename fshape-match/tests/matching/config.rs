@@ -81,6 +81,8 @@ fn a_config_written_with_serde_reads_back_to_the_same_value() {
         max_iterations: Some(vec![50, 20]),
         decrease_tolerance: Some(vec![1e-2, 1e-3]),
         decrease_window: Some(vec![10, 3]),
+        vertices: Some(vec![500]),
+        coarse_targets: Some(false),
     });
     for c in [shipped, full] {
         let text = c.to_toml();

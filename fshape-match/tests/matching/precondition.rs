@@ -157,3 +157,67 @@ fn a_preconditioner_close_to_the_inverse_hessian_makes_an_ill_conditioned_quadra
     assert!(runs[0].0 == Stop::Gradient && runs[0].1 <= 3, "preconditioned: {:?}", runs[0]);
     assert!(runs[1].1 > 10 * runs[0].1.max(1), "plain L-BFGS was as fast: {:?} against {:?}", runs[1], runs[0]);
 }
+
+#[test]
+fn the_two_level_metric_is_symmetric_positive_and_near_the_dense_inverse() {
+    use fshape_match::precondition::TwoLevel;
+    // A 2562-vertex sphere, small enough for the dense factor to judge by.
+    let shape = fshape_mesh::test_support::perturbed_icosphere(4, 0.02, 5);
+    let (n, d) = (shape.n_vertices(), 3);
+    let kernel =
+        Kernel::try_new(&fshape_kernels::Profile::Gaussians { sigmas: vec![0.6, 0.3], weights: vec![1.0, 0.5] })
+            .unwrap();
+    let dense = KernelFactor::new(&shape, &kernel).unwrap().unwrap();
+    let two = TwoLevel::new(&shape, &kernel, 400).unwrap().expect("a positive definite coarse kernel");
+    let apply = |m: &dyn Fn(&mut [f64]), v: &[f64]| {
+        let mut w = v.to_vec();
+        w.extend([5.0]);
+        m(&mut w);
+        assert_eq!(w[n * d], 5.0, "the signal block changed");
+        w.truncate(n * d);
+        w
+    };
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let (u, v) = (random_vector_field(n, d, 1.0, 7), random_vector_field(n, d, 1.0, 8));
+    let (hu, hv) = (apply(&|w| two.apply(w), &u), apply(&|w| two.apply(w), &v));
+    // Symmetric and positive.
+    assert!((dot(&u, &hv) - dot(&v, &hu)).abs() <= 1e-9 * dot(&u, &hu).abs().max(dot(&v, &hv).abs()));
+    assert!(dot(&u, &hu) > 0.0 && dot(&v, &hv) > 0.0);
+    // A x for a smooth momentum x (a density the coarse mesh resolves,
+    // times the lumped masses), where the dense factor gives x back, and
+    // random vectors: the energy H gives each against A⁻¹'s stays within
+    // a factor of 20 for the smooth one, and the two ratios' spread is at
+    // least ten times smaller than the Euclidean metric's (H = I).
+    let masses = shape.vertex_volumes();
+    let x_smooth: Vec<f64> = shape
+        .points()
+        .chunks_exact(3)
+        .zip(&masses)
+        .flat_map(|(p, m)| [m * p[1], m * p[2] * p[0], m * (1.0 - p[0])])
+        .collect();
+    let lambda = KernelFactor::ridge(&kernel, 2);
+    let mut ax = vec![0.0; n * d];
+    for i in 0..n {
+        for j in 0..n {
+            let u: f64 = (0..3).map(|c| (shape.points()[3 * i + c] - shape.points()[3 * j + c]).powi(2)).sum();
+            for c in 0..3 {
+                ax[3 * i + c] += kernel.value(u) * x_smooth[3 * j + c];
+            }
+        }
+        for c in 0..3 {
+            ax[3 * i + c] += lambda / masses[i] * x_smooth[3 * i + c];
+        }
+    }
+    let (exact, approx) = (apply(&|w| dense.apply(w), &ax), apply(&|w| two.apply(w), &ax));
+    let rel = |a: &[f64], b: &[f64]| {
+        a.iter().zip(b).map(|(p, q)| (p - q) * (p - q)).sum::<f64>().sqrt()
+            / b.iter().map(|q| q * q).sum::<f64>().sqrt()
+    };
+    assert!(rel(&exact, &x_smooth) < 1e-6, "dense: {}", rel(&exact, &x_smooth));
+    let du = apply(&|w| dense.apply(w), &u);
+    let smooth = dot(&ax, &approx) / dot(&ax, &exact);
+    let random = dot(&u, &hu) / dot(&u, &du);
+    assert!((0.05..20.0).contains(&smooth), "smooth: energy ratio {smooth}");
+    let euclidean = (dot(&ax, &ax) / dot(&ax, &exact)) / (dot(&u, &u) / dot(&u, &du));
+    assert!(smooth / random < 0.1 * euclidean, "spread {} against the Euclidean {euclidean}", smooth / random);
+}

@@ -440,3 +440,67 @@ fn stages_on_equal_templates_share_them_without_a_transfer() {
     // Stage 1 starts from stage 0's unknowns as they are.
     assert_eq!(bits(&ck.current.as_ref().unwrap().state.x), bits(ck.warm.as_ref().unwrap()));
 }
+
+/// A 642-vertex source and target and a three-stage schedule.
+fn fine_inputs(vertices: &str) -> (FShape, FShape, Config) {
+    let source = perturbed_icosphere(3, 0.02, 4);
+    let signal: Vec<f64> = source.points().chunks_exact(3).map(|p| 0.3 * p[2]).collect();
+    let source = source.with_signal(Some(signal)).unwrap();
+    let target = perturbed_icosphere(3, 0.08, 5);
+    let signal: Vec<f64> = target.points().chunks_exact(3).map(|p| 0.5 * p[0]).collect();
+    let target = target.with_signal(Some(signal)).unwrap();
+    let mut config = Config::parse(&format!(
+        "[model]\ngamma_w = 10.0\ngamma_f = 1.0\n[deformation]\nwidths = [0.5]\n\
+         [attachment]\nkernel_geom = \"gaussian:0.3\"\nkernel_signal = \"gaussian:1.0\"\n\
+         [schedule]\nkernel_geom = [\"gaussian:0.6\", \"gaussian:0.3\", \"gaussian:0.3\"]\n{vertices}\n"
+    ))
+    .unwrap();
+    config.integrator.steps = 4;
+    config.optimizer.max_iterations = 4;
+    (source, target, config)
+}
+
+#[test]
+fn stages_from_vertex_counts_run_on_simplified_templates_and_targets() {
+    let (source, target, config) = fine_inputs("vertices = [60, 200]");
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    session.run(&mut ()).unwrap();
+    let result = session.result().unwrap();
+    let sizes: Vec<(usize, usize)> =
+        result.stages.iter().map(|s| (s.setup.template_vertices, s.setup.target_vertices)).collect();
+    assert_eq!(sizes, [(60, 60), (200, 200), (642, 642)]);
+    assert!(result.stages.iter().all(|s| s.setup.deformation == "exact" && s.setup.attachment == "exact"));
+    assert!(result.energies.attachment < result.stages[0].initial.attachment);
+    // Without coarse targets, the counts are the hand-made templates
+    // `FShape::simplified` gives, to the bit.
+    let (_, _, auto) = fine_inputs("vertices = [60, 200]\ncoarse_targets = false");
+    let mut a = Session::new(&source, &target, &auto).unwrap();
+    a.run(&mut ()).unwrap();
+    let (_, _, plain) = fine_inputs("");
+    let templates = vec![Some(source.simplified(60).unwrap().shape), Some(source.simplified(200).unwrap().shape), None];
+    let mut b = Session::new(&source, &target, &plain).unwrap().with_stage_templates(templates).unwrap();
+    b.run(&mut ()).unwrap();
+    let (ra, rb) = (a.result().unwrap(), b.result().unwrap());
+    assert_eq!(bits(&ra.p0), bits(&rb.p0));
+    assert_eq!(ra.stages[1].setup.target_vertices, 642);
+    // Both at once is an error.
+    let twice = Session::new(&source, &target, &auto).unwrap().with_stage_templates(vec![None, None, None]);
+    assert!(matches!(twice, Err(MatchError::StageTemplatesTwice)));
+}
+
+#[test]
+fn vertex_counts_are_checked_with_their_key() {
+    let (source, target, _) = fine_inputs("");
+    for (lines, key) in [
+        ("vertices = [60]", "schedule.vertices"),
+        ("vertices = [60, 200, 300]", "schedule.vertices"),
+        ("vertices = [60, 3]", "schedule.vertices[1]"),
+        ("coarse_targets = false", "schedule.coarse_targets"),
+    ] {
+        let (_, _, config) = fine_inputs(lines);
+        match Session::new(&source, &target, &config) {
+            Err(MatchError::Config { key: k, .. }) => assert_eq!(k, key, "{lines}"),
+            other => panic!("{lines}: {:?}", other.map(|_| ())),
+        }
+    }
+}

@@ -70,6 +70,40 @@ fn the_gradient_is_exact_for_each_integrator_and_for_curves() {
     }
 }
 
+#[test]
+fn the_gradient_is_exact_with_the_deformation_kernel_on_a_grid() {
+    // The grid kernel's sums and derivatives are one operator's: J's
+    // gradient through the shooting and its adjoint stays exact.
+    let mut rng = SplitMix64(7);
+    for (what, (template, target)) in [("surface", surfaces()), ("curve", curves())] {
+        let (p0, pf) = momenta(&template, 0.3, 3);
+        let dim = template.dim();
+        for order in fshape_kernels::GRID_ORDERS {
+            let m = model("norm = \"h1\"\nlength = 0.5\ngamma_f = 0.5\ngamma_w = 2.0", "", "rk4", 4);
+            let k = m.kernel().clone();
+            let grid = k.on_grid(k.grid_spacing(1e-3, order, dim).unwrap(), order, dim).unwrap();
+            let problem =
+                Problem::new(&template, m.with_kernel(grid)).unwrap().with_target(&target, attachment()).unwrap();
+            assert!(problem.model().kernel().grid().is_some());
+            check(&problem, &p0, &pf, &format!("grid order {order}, {what}"), &mut rng);
+        }
+    }
+}
+
+#[test]
+fn a_problem_takes_the_grid_for_a_wide_kernel_on_many_points_within_its_tolerance() {
+    let template = fshape_mesh::generate::icosphere(5, 1.0);
+    let wide = model("", "tolerance = 1e-6", "rk4", 4);
+    let problem = Problem::new(&template, wide.clone()).unwrap();
+    let grid = problem.model().kernel().grid().expect("10242 points, sigma 0.6 and 0.3 on a unit sphere");
+    assert!(grid.bound().value <= 1e-6);
+    // Exact stays exact; a small template keeps its pairs.
+    let exact = model("", "", "rk4", 4);
+    assert_eq!(Problem::new(&template, exact).unwrap().model().kernel().path(), fshape_kernels::SumPath::Exact);
+    let small = fshape_mesh::generate::icosphere(1, 1.0);
+    assert!(Problem::new(&small, wide).unwrap().model().kernel().grid().is_none());
+}
+
 /// `shape` with the signal `scale`·(x + y²) plus a little noise.
 fn with_signal(shape: FShape, scale: f64, rng: &mut SplitMix64) -> FShape {
     let d = shape.dim();

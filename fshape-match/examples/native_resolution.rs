@@ -1,0 +1,215 @@
+//! Time to quality at native resolution: a real cortex with its real
+//! signal registered onto a copy of itself moved by a known smooth
+//! displacement with a known signal change ([`fshape_match::demo::displaced`]).
+//!
+//! ```text
+//! cargo run --release -p fshape-match --example native_resolution -- CASE [--out DIR] [--config FILE] [--profile]
+//! ```
+//!
+//! CASE is `s1` (data/pycortex_S1/lh.pia, 152 893 vertices, with its
+//! pial-to-white distance) or `conte69` (data/conte69_32k/lh.midthickness,
+//! 32 492 vertices, with its thickness; the medial wall, `nan` in the
+//! file, set to 0 mm). The target is the source moved by six 20 mm wide
+//! bumps of displacement, at most 10 mm, with four 20 mm wide bumps of
+//! ±½ standard deviation added to its signal (seed 35). The configuration
+//! is [`config`]'s unless `--config` gives one. It prints a line per
+//! iteration, then the time, evaluations, peak memory (the process's
+//! VmHWM) and `fshape quality`'s figures before and after, and writes
+//! source, target and matched shape (PLY) and summary.json into DIR
+//! (default target/native_resolution/CASE). `--profile` instead times two
+//! evaluations of J and its gradient at full resolution with the last
+//! stage's kernels, from zero momenta, split into kernel sums, FEM and
+//! data attachment (the first two run at the same time in parallel).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use fshape_match::{Config, Control, Iteration, Observer, Session, StageSpec};
+use fshape_mesh::io::{self, Encoding, ReadOptions};
+
+/// The registration the benchmark runs: the cortex demo's model (H¹
+/// metamorphosis, ℓ = 5 mm; deformation widths 20 and 10 mm with
+/// τ = 1e-6; attachment gaussian:σ / gaussian:1 mm / Binet with
+/// τ = 1e-6), γ_f = 0.01, RK4 with 5 steps, p_0 in the energy metric,
+/// and four stages: k_p 20, 10 and 5 mm on copies simplified to 2000,
+/// 10000 and 40000 vertices (targets simplified alike; a count at least
+/// the surface's is the surface), then k_p 2.5 mm on the surface itself.
+fn config() -> Result<Config> {
+    let text = r#"
+[model]
+kind = "metamorphosis"
+norm = "h1"
+length = 5.0
+gamma_f = 0.01
+
+[deformation]
+widths = [20.0, 10.0]
+tolerance = 1e-6
+
+[integrator]
+steps = 5
+
+[attachment]
+kernel_geom = "gaussian:5"
+kernel_signal = "gaussian:1"
+kernel_grass = "binet"
+tolerance = 1e-6
+
+[optimizer]
+momentum_metric = "energy"
+
+[schedule]
+kernel_geom = ["gaussian:20", "gaussian:10", "gaussian:5", "gaussian:2.5"]
+max_iterations = [100, 100, 60, 20]
+decrease_tolerance = [1e-3, 1e-3, 1e-3, 1e-3]
+decrease_window = [5, 5, 5, 3]
+vertices = [2000, 10000, 40000]
+"#;
+    Ok(Config::parse(text)?)
+}
+
+/// A line per stage and per iteration, with the elapsed time.
+struct Lines(Instant);
+
+impl Observer for Lines {
+    fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
+        let t = self.0.elapsed().as_secs_f64();
+        println!("[{t:7.1} s] stage {}/{stages}: {} ({done} iterations done)", stage + 1, spec.label);
+        Control::Continue
+    }
+    fn iteration(&mut self, stage: usize, r: &Iteration) -> Control {
+        let t = self.0.elapsed().as_secs_f64();
+        println!(
+            "[{t:7.1} s] stage {} iteration {:3}: J {:.6e} (energy {:.3e}, signal {:.3e}, attachment {:.3e}), {} evaluations",
+            stage + 1,
+            r.iteration,
+            r.value,
+            r.energy,
+            r.signal_energy,
+            r.attachment,
+            r.evaluations
+        );
+        Control::Continue
+    }
+}
+
+/// Two evaluations of J and its gradient on the full-resolution pair with
+/// the last stage's data term, split by component.
+fn profile(source: &fshape_mesh::FShape, target: &fshape_mesh::FShape, config: &Config) -> Result<()> {
+    let plan = config.plan(source, target)?;
+    let last = plan.stages.last().context("a stage")?;
+    let t = Instant::now();
+    let problem = fshape_shoot::Problem::new(source, plan.model.clone())?.with_target(target, last.kernel.clone())?;
+    println!(
+        "set up in {:.2} s; deformation: {}; attachment: {}",
+        t.elapsed().as_secs_f64(),
+        problem.model().kernel().path(),
+        last.kernel.position().path()
+    );
+    let (p0, pf) = (vec![0.0; source.points().len()], vec![0.0; source.n_vertices()]);
+    for _ in 0..2 {
+        let t = Instant::now();
+        let g = problem.objective_grad(&p0, &pf)?;
+        println!(
+            "J and gradient {:.2} s: forward {:.2} s, backward {:.2} s; kernel sums {:.2} s, FEM {:.2} s, attachment {:.2} s",
+            t.elapsed().as_secs_f64(),
+            g.forward,
+            g.backward,
+            g.timings.kernels,
+            g.timings.fem,
+            g.timings.attachment
+        );
+    }
+    Ok(())
+}
+
+/// The process's peak resident memory in MB (VmHWM), where Linux tells.
+fn peak_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let case = args.first().map(String::as_str).unwrap_or("s1");
+    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(PathBuf::from);
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let (mesh, signal) = match case {
+        "s1" => ("pycortex_S1/lh.pia.ply.gz", "pycortex_S1/lh.pia_wm_distance.csv.gz"),
+        "conte69" => ("conte69_32k/lh.midthickness.ply.gz", "conte69_32k/lh.thickness.csv.gz"),
+        other => anyhow::bail!("unknown case {other}: s1 or conte69"),
+    };
+    let out = flag("--out").unwrap_or_else(|| Path::new("target/native_resolution").join(case));
+    std::fs::create_dir_all(&out)?;
+    let clock = Instant::now();
+    let shape = io::read_mesh(&data.join(mesh), &ReadOptions::default())?;
+    let column = io::csv::read_signal(&data.join(signal), true)?;
+    let missing = column.values.iter().filter(|v| v.is_nan()).count();
+    let values: Vec<f64> = column.values.iter().map(|v| if v.is_nan() { 0.0 } else { *v }).collect();
+    let source = shape.with_signal(Some(values))?;
+    let pair = fshape_match::demo::displaced(&source, 10.0, 20.0, 35)?;
+    let target = pair.target;
+    println!(
+        "{case}: {} vertices, {} triangles; signal {signal} ({missing} missing values set to 0); read and paired in {:.1} s",
+        source.n_vertices(),
+        source.n_cells(),
+        clock.elapsed().as_secs_f64()
+    );
+    let config = match flag("--config") {
+        Some(path) => Config::read(&path)?,
+        None => config()?,
+    };
+    if args.iter().any(|a| a == "--profile") {
+        return profile(&source, &target, &config);
+    }
+    std::fs::write(out.join("config.toml"), config.to_toml())?;
+    let start = Instant::now();
+    let mut session = Session::new(&source, &target, &config).context("setting up")?;
+    println!("set up in {:.1} s", start.elapsed().as_secs_f64());
+    session.run(&mut Lines(start))?;
+    let result = session.result()?;
+    let seconds = start.elapsed().as_secs_f64();
+    let last = result.trajectory.steps();
+    let matched = source
+        .clone()
+        .with_points(result.trajectory.points(last).to_vec())?
+        .with_signal(Some(result.trajectory.signal(last).to_vec()))?;
+    for (name, s) in [("source.ply", &source), ("target.ply", &target), ("matched.ply", &matched)] {
+        io::write_mesh(&out.join(name), s, Encoding::Binary)?;
+    }
+    let (q0, q) = (result.initial_quality, result.quality);
+    let pct = |v: f64| 100.0 * v;
+    println!(
+        "wall {seconds:.0} s ({:.1} min), {} evaluations, {} iterations, peak memory {:.0} MB",
+        seconds / 60.0,
+        result.evaluations,
+        result.iterations,
+        peak_mb().unwrap_or(f64::NAN)
+    );
+    println!(
+        "mean distance {:.3} % -> {:.3} % of the diagonal ({:.1} mm); within 1 %: {:.1} % -> {:.1} %; signal error {:.2} % -> {:.2} % of its range",
+        pct(q0.mean_distance),
+        pct(q.mean_distance),
+        q.diagonal,
+        pct(q0.target_within_1pct),
+        pct(q.target_within_1pct),
+        pct(q0.signal_rms.unwrap_or(f64::NAN)),
+        pct(q.signal_rms.unwrap_or(f64::NAN))
+    );
+    let summary = serde_json::json!({
+        "case": case,
+        "vertices": source.n_vertices(),
+        "seconds": seconds,
+        "evaluations": result.evaluations,
+        "iterations": result.iterations,
+        "peak_mb": peak_mb(),
+        "initial_quality": q0,
+        "quality": q,
+        "stages": result.stages,
+    });
+    std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
+    Ok(())
+}
