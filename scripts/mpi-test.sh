@@ -53,12 +53,17 @@ for r in 1 2 3; do
     echo "   the same bytes as one process ($(awk "BEGIN { printf \"%.1f\", $(seconds) - $t0 }") s)"
 done
 
+# Accepted iterations in a checkpoint, finished stages included.
+iterations() {
+    "$fshape" checkpoint "$1" 2> /dev/null | python3 -c 'import json, sys; c = json.load(sys.stdin); print(c["iterations"] + c["iterations_done"])' 2> /dev/null || echo 0
+}
+
 echo "== a process killed midway"
 "${mpi[@]}" -n 2 "$fshape" "${args[@]}" --out killed > killed.log 2>&1 &
 runner=$!
 # Wait for the checkpoint of the third iteration, then kill process 1.
 for _ in $(seq 600); do
-    if [ -f killed/checkpoint.json ] && [ "$(grep -o '"evaluations"' killed/checkpoint.json | wc -l)" -ge 4 ]; then
+    if [ -f killed/checkpoint.bin ] && [ "$(iterations killed/checkpoint.bin)" -ge 3 ]; then
         break
     fi
     sleep 0.1
@@ -70,7 +75,7 @@ for pid in $(pgrep -f "fshape atlas.*--out killed" || true); do
     fi
 done
 [ -n "$victim" ] || { echo "FAIL: no process 1 to kill (the run ended too soon?)"; cat killed.log; exit 1; }
-echo "   killing process 1 after $(($(grep -o '"evaluations"' killed/checkpoint.json | wc -l) - 1)) iterations"
+echo "   killing process 1 after $(iterations killed/checkpoint.bin) iterations"
 kill -9 "$victim"
 start=$(date +%s)
 status=0

@@ -165,7 +165,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => atlas,
         Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
     };
-    let checkpoint_path = a.out.join("checkpoint.json");
+    let checkpoint_path = a.out.join("checkpoint.bin");
     let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };
     let atlas = match cluster {
         Some(c) => atlas.with_cluster(c),

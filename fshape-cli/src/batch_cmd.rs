@@ -168,7 +168,7 @@ fn entry(out: &Path, pairs: &Path, row: &Row) -> Entry {
     } else if let Ok(why) = std::fs::read_to_string(dir.join("error.txt")) {
         e.status = "failed";
         e.error = Some(why.trim().to_string());
-    } else if dir.join("checkpoint.json").exists() {
+    } else if dir.join("checkpoint.bin").exists() {
         e.status = "incomplete";
     }
     e
@@ -233,7 +233,7 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
     if error_file.exists() {
         std::fs::remove_file(&error_file).with_context(|| format!("removing {}", error_file.display()))?;
     }
-    let resume = dir.join("checkpoint.json").exists();
+    let resume = dir.join("checkpoint.bin").exists();
     let result = crate::match_cmd::run(&crate::match_cmd::MatchArgs {
         source: &row.source,
         target: &row.target,

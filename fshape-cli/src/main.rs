@@ -15,6 +15,7 @@ use serde::Serialize;
 
 mod atlas_cmd;
 mod batch_cmd;
+mod checkpoint_cmd;
 mod demo;
 mod match_cmd;
 #[cfg(feature = "mpi")]
@@ -176,7 +177,7 @@ enum Command {
         /// Output directory (created if needed).
         #[arg(long)]
         out: PathBuf,
-        /// Continue from OUT/checkpoint.json.
+        /// Continue from OUT/checkpoint.bin.
         #[arg(long)]
         resume: bool,
         /// Stop after this many iterations in this run, leaving the checkpoint.
@@ -267,7 +268,7 @@ enum Command {
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
-        /// Continue from OUT/checkpoint.json.
+        /// Continue from OUT/checkpoint.bin.
         #[arg(long)]
         resume: bool,
         /// Stop after this many iterations in this run, leaving the checkpoint.
@@ -362,6 +363,13 @@ enum Command {
         /// Drop unused vertices, zero-volume and duplicate cells before writing.
         #[arg(long)]
         repair: bool,
+    },
+    /// Where a run's checkpoint (OUT/checkpoint.bin, binary) stands, as one
+    /// line of JSON: finished stages, the stage under way with its
+    /// iterations and evaluations, wall seconds so far.
+    Checkpoint {
+        /// The checkpoint file.
+        file: PathBuf,
     },
 }
 
@@ -502,6 +510,7 @@ fn main() -> ExitCode {
         Command::Convert { input, output, signal_name, signal, ascii, repair } => {
             convert(&input, &output, signal_name, signal.as_deref(), ascii, repair)
         }
+        Command::Checkpoint { file } => checkpoint_cmd::run(&file),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

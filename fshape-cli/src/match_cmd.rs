@@ -179,7 +179,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         None => session,
         Some(templates) => session.with_stage_templates(templates).context("--stage-templates")?,
     };
-    let checkpoint_path = a.out.join("checkpoint.json");
+    let checkpoint_path = a.out.join("checkpoint.bin");
     let session = if a.resume { session.resume_from_file(&checkpoint_path).context("--resume")? } else { session };
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut session = session.with_checkpoint_file(&checkpoint_path);

@@ -387,15 +387,14 @@ fn a_checkpoint_cut_short_is_refused_naming_the_file_and_the_array() {
     let o = out.display().to_string();
     let r = fshape(&["match", &s, &t, "--config", &c, "--out", &o, "--stop-after", "3"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let path = out.join("checkpoint.json");
-    let mut ck: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    let x = ck["current"]["state"]["x"].as_array_mut().unwrap();
+    let path = out.join("checkpoint.bin");
+    let mut ck = fshape_match::Checkpoint::read(&path).unwrap();
+    let x = &mut ck.current.as_mut().unwrap().state.x;
     let n = x.len();
     x.truncate(n / 2);
-    std::fs::write(&path, serde_json::to_string(&ck).unwrap()).unwrap();
-    // Also bytes cut short: not JSON any more.
-    let text = std::fs::read_to_string(&path).unwrap();
-    for (case, contents) in [("short arrays", text.clone()), ("short file", text[..text.len() / 3].to_string())] {
+    let bytes = ck.to_bytes().unwrap();
+    // Also bytes cut short.
+    for (case, contents) in [("short arrays", bytes.clone()), ("short file", bytes[..bytes.len() / 3].to_vec())] {
         std::fs::write(&path, contents).unwrap();
         let r = fshape(&["match", &s, &t, "--config", &c, "--out", &o, "--resume"]);
         let err = String::from_utf8_lossy(&r.stderr);
@@ -405,7 +404,7 @@ fn a_checkpoint_cut_short_is_refused_naming_the_file_and_the_array() {
         let what = if case == "short arrays" {
             format!("current.state.x has {} values", n / 2)
         } else {
-            "not a readable checkpoint".to_string()
+            "damaged or truncated".to_string()
         };
         assert!(err.contains(&what), "{case}: {err}");
         assert!(!out.join("summary.json").exists());
@@ -531,7 +530,7 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
         fshape(&["shoot", &s, "--momentum", &file("p0.csv"), "--config", &c, "--out", &again.display().to_string()]);
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("normalize = false"));
-    for f in ["momenta.vtk", "energy.svg", "energy.png", "trajectory.pvd", "checkpoint.json"] {
+    for f in ["momenta.vtk", "energy.svg", "energy.png", "trajectory.pvd", "checkpoint.bin"] {
         assert!(out.join(f).exists(), "{f}");
     }
     // The renders are PNG images that differ from frame to frame and end
@@ -580,6 +579,12 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     // second), resumed each time.
     run(&parts, &["--stop-after", "5"]);
     assert!(!parts.join("summary.json").exists(), "no result before the end");
+    // `fshape checkpoint` tells where the binary checkpoint stands.
+    let o = fshape(&["checkpoint", &parts.join("checkpoint.bin").display().to_string()]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["format"], fshape_match::CHECKPOINT_FORMAT);
+    let done = v["iterations_done"].as_u64().unwrap() + v["iterations"].as_u64().unwrap();
+    assert_eq!(done, 5, "{v}");
     run(&parts, &["--resume", "--stop-after", "6"]);
     run(&parts, &["--resume"]);
     for f in ["p0.csv", "pf.csv", "state_004.ply", "state_002.vtk", "momenta.vtk", "render_004.png"] {
@@ -595,12 +600,15 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     // change of --view or --times), without iterating.
     std::fs::remove_file(whole.join("p0.csv")).unwrap();
     let seconds = |f: &PathBuf| -> f64 {
+        if f.extension().is_some_and(|e| e == "bin") {
+            return fshape_match::Checkpoint::read(f).unwrap().seconds;
+        }
         let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(f).unwrap()).unwrap();
         v["seconds"].as_f64().unwrap()
     };
     // The checkpoint carries the wall time so far, and the summary of the
     // resumed run counts it.
-    let before = seconds(&whole.join("checkpoint.json"));
+    let before = seconds(&whole.join("checkpoint.bin"));
     assert!(before > 0.0);
     run(&whole, &["--resume"]);
     assert!(seconds(&whole.join("summary.json")) >= before);
@@ -610,9 +618,7 @@ fn an_interrupted_match_resumes_to_the_same_result_bit_for_bit() {
     std::fs::write(&c, std::fs::read_to_string(&c).unwrap().replace("gamma_w = 400.0", "gamma_w = 5.0")).unwrap();
     let o = fshape(&["match", &s, &t, "--config", &c, "--out", &parts.display().to_string(), "--resume"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        String::from_utf8_lossy(&o.stderr).contains("checkpoint.json: the checkpoint was written for other inputs")
-    );
+    assert!(String::from_utf8_lossy(&o.stderr).contains("checkpoint.bin: the checkpoint was written for other inputs"));
 }
 
 #[test]

@@ -38,7 +38,7 @@ fn main() -> Result<()> {
     let target = read_mesh(target, &ReadOptions::default())?;
     let config = Config::read(config)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let checkpoint: &Path = &out.join("checkpoint.json");
+    let checkpoint: &Path = &out.join("checkpoint.bin");
     let mut session = Session::new(&source, &target, &config)?;
     if checkpoint.exists() {
         session = session.resume_from_file(checkpoint)?; // checked against these inputs first

@@ -832,10 +832,7 @@ impl Atlas {
 
     /// [`Atlas::resume`] from a checkpoint file; errors name the file.
     pub fn resume_from_file(self, path: &Path) -> Result<Atlas, MatchError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })?;
-        let checkpoint: Checkpoint = serde_json::from_str(&text)
-            .map_err(|e| checkpoint_error(format!("not a readable checkpoint ({e})")).in_file(path))?;
+        let checkpoint = Checkpoint::read(path)?;
         self.resume(checkpoint).map_err(|e| e.in_file(path))
     }
 

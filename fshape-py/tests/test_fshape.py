@@ -208,8 +208,8 @@ def test_a_match_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(t
     src, tgt = sphere_pair()
     whole = fshape.match(src, tgt, CONFIG)
     assert whole["iterations"] > 4
-    path = tmp_path / "run.json"
-    with pytest.raises(fshape.FShapeError, match=r"checkpoint=.*run\.json resumes it"):
+    path = tmp_path / "run.ckpt"
+    with pytest.raises(fshape.FShapeError, match=r"checkpoint=.*run\.ckpt resumes it"):
         fshape.match(src, tgt, CONFIG, progress=stop_at(4), checkpoint=path)
     assert path.exists()
     events = []
@@ -225,10 +225,10 @@ def test_a_match_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(t
     assert not any(e["event"] == "iteration" for e in events)
     assert np.array_equal(again["p0"], whole["p0"])
     # A checkpoint of other inputs, or a damaged one, is refused, naming the file.
-    with pytest.raises(fshape.FShapeError, match=r"run\.json: .*other inputs"):
+    with pytest.raises(fshape.FShapeError, match=r"run\.ckpt: .*other inputs"):
         fshape.match(src, src, CONFIG, checkpoint=path)
-    path.write_text("{not json")
-    with pytest.raises(fshape.FShapeError, match=r"run\.json: not a readable checkpoint"):
+    path.write_bytes(path.read_bytes()[:40])
+    with pytest.raises(fshape.FShapeError, match=r"run\.ckpt: the checkpoint is damaged or truncated"):
         fshape.match(src, tgt, CONFIG, checkpoint=path)
 
 
@@ -278,7 +278,7 @@ def test_an_atlas_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(
     src, tgt = sphere_pair()
     config = {**CONFIG, "optimizer": {"max_iterations": 4}}
     whole = fshape.atlas([src, tgt], config)
-    path = tmp_path / "atlas.json"
+    path = tmp_path / "atlas.ckpt"
     with pytest.raises(fshape.FShapeError, match="resumes it"):
         fshape.atlas([src, tgt], config, progress=stop_at(3), checkpoint=path)
     resumed = fshape.atlas([src, tgt], config, checkpoint=path)

@@ -181,7 +181,7 @@ fn an_atlas_decreases_j_and_a_stopped_one_resumes_to_the_same_bits() {
     }
     let dir = std::env::temp_dir().join(format!("fshape-atlas-resume-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("checkpoint.json");
+    let file = dir.join("checkpoint.bin");
     let mut first = Atlas::new(&template(), &subjects, &config).unwrap().with_checkpoint_file(&file);
     assert_eq!(first.run(&mut StopAfter(3, 0)).unwrap(), Outcome::Interrupted);
     let mut second = Atlas::new(&template(), &subjects, &config).unwrap().resume_from_file(&file).unwrap();
@@ -193,7 +193,7 @@ fn an_atlas_decreases_j_and_a_stopped_one_resumes_to_the_same_bits() {
     // Another population's checkpoint is refused.
     let other = Atlas::new(&template(), &subjects[..2], &config).unwrap();
     let err = other.resume_from_file(&file).err().unwrap().to_string();
-    assert!(err.contains("other inputs") && err.contains("checkpoint.json"), "{err}");
+    assert!(err.contains("other inputs") && err.contains("checkpoint.bin"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -460,7 +460,7 @@ fn a_coarse_stage_solution_carried_to_the_template_keeps_its_progress_and_resume
     };
     let dir = std::env::temp_dir().join(format!("fshape-atlas-levels-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("checkpoint.json");
+    let file = dir.join("checkpoint.bin");
     let mut atlas = build().with_checkpoint_file(&file);
     assert_eq!(atlas.run(&mut StopAtStage(1)).unwrap(), Outcome::Interrupted);
     let xc = atlas.checkpoint().warm.clone().unwrap();

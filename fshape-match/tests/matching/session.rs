@@ -87,7 +87,7 @@ fn a_stopped_session_resumes_to_the_same_bits() {
     for stop_after in [1, 6, 8] {
         let dir = std::env::temp_dir().join(format!("fshape-match-resume-{}-{stop_after}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let file = dir.join("checkpoint.json");
+        let file = dir.join("checkpoint.bin");
         let mut first = Session::new(&source, &target, &config).unwrap().with_checkpoint_file(&file);
         let mut rec = Recorder { stop_after: Some(stop_after), ..Recorder::default() };
         assert_eq!(first.run(&mut rec).unwrap(), Outcome::Interrupted);
@@ -147,16 +147,28 @@ fn a_checkpoint_file_cut_short_or_with_short_arrays_names_the_file() {
     let (good, fresh) = checkpoint_after_three();
     let dir = std::env::temp_dir().join(format!("fshape-match-damaged-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("checkpoint.json");
-    // Truncated bytes: not JSON any more.
-    let text = serde_json::to_string_pretty(&good).unwrap();
-    std::fs::write(&file, &text[..text.len() / 2]).unwrap();
+    let file = dir.join("checkpoint.bin");
+    // Truncated bytes, another file, an earlier format: each said as it is.
+    let bytes = good.to_bytes().unwrap();
+    for (contents, says) in [
+        (bytes[..bytes.len() / 2].to_vec(), "damaged or truncated"),
+        (bytes[..18].to_vec(), "before its format number"),
+        (b"ply\nformat ascii 1.0\n".to_vec(), "not an fshape checkpoint"),
+        (serde_json::to_vec(&serde_json::json!({"format": 2})).unwrap(), "JSON checkpoint of an earlier version"),
+    ] {
+        std::fs::write(&file, contents).unwrap();
+        let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
+        assert!(e.contains(&file.display().to_string()) && e.contains(says), "{says}: {e}");
+    }
+    let mut other = bytes.clone();
+    other[16] = 9; // format 9
+    std::fs::write(&file, other).unwrap();
     let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
-    assert!(e.contains(&file.display().to_string()) && e.contains("not a readable checkpoint"), "{e}");
-    // Valid JSON whose arrays were cut short (the case).
+    assert!(e.contains("format 9"), "{e}");
+    // A well-formed checkpoint whose arrays were cut short.
     let mut short = good.clone();
     short.current.as_mut().unwrap().state.x.truncate(10);
-    std::fs::write(&file, serde_json::to_string(&short).unwrap()).unwrap();
+    std::fs::write(&file, short.to_bytes().unwrap()).unwrap();
     let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
     assert!(e.contains(&file.display().to_string()) && e.contains("current.state.x has 10 values"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -361,7 +373,7 @@ fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
     // Stopped on the coarse template, resumed from the file: the same bits.
     let dir = std::env::temp_dir().join(format!("fshape-match-multires-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("checkpoint.json");
+    let file = dir.join("checkpoint.bin");
     let mut first = session().with_checkpoint_file(&file);
     first.run(&mut Recorder { stop_after: Some(3), ..Recorder::default() }).unwrap();
     let x = first.checkpoint().current.as_ref().unwrap().state.x.len();
