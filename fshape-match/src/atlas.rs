@@ -179,7 +179,10 @@ fn record_len(len: usize, pn: usize, p: usize) -> usize {
 /// problems hold the template of the last evaluation.
 pub struct AtlasObjective<'p> {
     cluster: &'p dyn Cluster,
+    /// This process's subjects' problems (`mine`), of `n_subjects`.
     problems: &'p mut [Problem],
+    mine: std::ops::Range<usize>,
+    n_subjects: usize,
     unknowns: Unknowns,
     metric: &'p TemplateMetric,
     hyper: Option<&'p Hyper>,
@@ -226,7 +229,7 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         let mut starts = vec![self.pn];
         let m = self.subject_len();
         let signal_block = m > self.pn;
-        for i in 0..self.problems.len() {
+        for i in 0..self.n_subjects {
             let start = self.pn + self.p + i * m;
             starts.push(start);
             if signal_block {
@@ -265,9 +268,9 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         let signal: Vec<f64> = x[self.pn..self.pn + self.p].iter().map(|u| u * self.metric.signal).collect();
         let len = self.subject_len();
         let unknowns = &self.unknowns;
-        let n_subjects = self.problems.len();
-        let mine = self.cluster.subjects(self.cluster.rank(), n_subjects);
-        let evals: Vec<Result<SubjectEval, ShootError>> = self.problems[mine.clone()]
+        let (n_subjects, mine) = (self.n_subjects, self.mine.clone());
+        let evals: Vec<Result<SubjectEval, ShootError>> = self
+            .problems
             .par_iter_mut()
             .zip(x[self.pn + self.p..].par_chunks(len).skip(mine.start).take(mine.len()))
             .map(|(problem, xi)| {
@@ -441,26 +444,41 @@ pub struct AtlasResult {
 /// the template blocks' metric and the hypertemplate's shooting.
 struct Level {
     template: FShape,
+    /// The problems of this process's subjects (`mine`), in order: the
+    /// others are set up by the processes that evaluate them.
     problems: Vec<Problem>,
+    mine: std::ops::Range<usize>,
     unknowns: Unknowns,
     metric: TemplateMetric,
     hyper: Option<Hyper>,
+    /// How the deformation kernel's sums are evaluated on this template.
+    deformation: String,
 }
 
 impl Level {
     fn new(
         template: &FShape,
-        subjects: usize,
+        mine: std::ops::Range<usize>,
         plan: &Plan,
         hyper: Option<&fshape_shoot::Model>,
     ) -> Result<Level, MatchError> {
         // Parallel over the subjects, each subject's work serial (the same
         // bits as parallel problems): the subjects fill the threads without
         // nested parallelism.
-        let problems = (0..subjects)
+        let problems = mine
+            .clone()
             .map(|_| Problem::new(template, plan.model.clone()).map(|p| p.with_parallel(false)))
             .collect::<Result<Vec<_>, _>>()?;
-        let unknowns = Unknowns::scaled(&problems[0], plan.metrics, plan.scales)?;
+        let spare;
+        let first = match problems.first() {
+            Some(p) => p,
+            None => {
+                spare = Problem::new(template, plan.model.clone())?;
+                &spare
+            }
+        };
+        let deformation = first.model().kernel().path().to_string();
+        let unknowns = Unknowns::scaled(first, plan.metrics, plan.scales)?;
         let metric = TemplateMetric::new(template, plan.model.kernel(), plan.scales)?;
         let hyper = match hyper {
             None => None,
@@ -470,7 +488,7 @@ impl Level {
                 Some(Hyper { problem, unknowns })
             }
         };
-        Ok(Level { template: template.clone(), problems, unknowns, metric, hyper })
+        Ok(Level { template: template.clone(), problems, mine, unknowns, metric, hyper, deformation })
     }
 
     /// The template's positions and signal at the unknowns `x` of this
@@ -498,13 +516,15 @@ impl Level {
         x
     }
 
-    fn objective<'a>(&'a mut self, cluster: &'a dyn Cluster) -> AtlasObjective<'a> {
+    fn objective<'a>(&'a mut self, cluster: &'a dyn Cluster, n_subjects: usize) -> AtlasObjective<'a> {
         let t = &self.template;
         AtlasObjective {
             cluster,
             pn: t.n_vertices() * t.dim(),
             p: t.n_vertices(),
             problems: &mut self.problems,
+            mine: self.mine.clone(),
+            n_subjects,
             unknowns: self.unknowns.clone(),
             metric: &self.metric,
             hyper: self.hyper.as_ref(),
@@ -542,7 +562,10 @@ pub struct Atlas {
     /// (`None`: the source): stages on one key share a level.
     keys: Vec<Option<usize>>,
     hyper_model: Option<fshape_shoot::Model>,
-    level: Level,
+    /// The working level, built when first needed (after
+    /// [`Atlas::with_cluster`], so that a process sets up only its own
+    /// subjects).
+    level: Option<Level>,
     on: Option<usize>,
     cluster: Box<dyn Cluster>,
     checkpoint: Checkpoint,
@@ -633,10 +656,6 @@ impl Atlas {
                 }
             }
         }
-        // The first level on stage 0's template: a source that stage
-        // templates replace at once is not set up.
-        let first_template = templates.first().and_then(Option::as_ref).unwrap_or(&source);
-        let level = Level::new(first_template, subjects.len(), &plan, hyper_model.as_ref())?;
         let checkpoint = Checkpoint {
             format: CHECKPOINT_FORMAT,
             fingerprint: atlas_fingerprint(&source, subjects, config),
@@ -654,7 +673,7 @@ impl Atlas {
             stage_subjects,
             keys: vec![None; stages],
             hyper_model,
-            level,
+            level: None,
             on: None,
             cluster: Box::new(Local),
             checkpoint,
@@ -664,10 +683,7 @@ impl Atlas {
         if !auto {
             return Ok(atlas);
         }
-        // The level holds stage 0's template.
-        let mut atlas = atlas.set_stage_templates(templates)?;
-        atlas.on = atlas.template_of(0).0;
-        Ok(atlas)
+        atlas.set_stage_templates(templates)
     }
 
     /// Runs stage k on a coarser initial template `templates[k]` (the same
@@ -803,7 +819,8 @@ impl Atlas {
     pub fn initial_unknowns_at(&mut self, stage: usize) -> Result<Vec<f64>, MatchError> {
         self.check_stage(stage)?;
         self.ensure_level(stage)?;
-        Ok(self.level.start(self.subjects.len()))
+        let n = self.subjects.len();
+        Ok(self.level().start(n))
     }
 
     /// [`Atlas::initial_unknowns_at`] the last stage (full resolution).
@@ -836,16 +853,32 @@ impl Atlas {
         self.resume(checkpoint).map_err(|e| e.in_file(path))
     }
 
-    /// Makes stage k's template the working level.
-    fn ensure_level(&mut self, k: usize) -> Result<(), MatchError> {
-        let (key, template) = self.template_of(k);
-        if key != self.on {
-            let level = Level::new(template, self.subjects.len(), &self.plan, self.hyper_model.as_ref())?;
-            self.level = level;
+    /// Makes stage k's template the working level (this process's
+    /// subjects only) and returns it.
+    fn ensure_level(&mut self, k: usize) -> Result<&mut Level, MatchError> {
+        let key = self.template_of(k).0;
+        if self.level.is_none() || key != self.on {
+            let mine = self.cluster.subjects(self.cluster.rank(), self.subjects.len());
+            // The old level goes first: two levels' problems are not held at once.
+            self.level = None;
+            let template = self.template_of(k).1;
+            let level = Level::new(template, mine, &self.plan, self.hyper_model.as_ref())?;
+            self.level = Some(level);
             self.on = key;
             self.staged = None;
         }
-        Ok(())
+        Ok(self.level.as_mut().expect("just built"))
+    }
+
+    /// The working level, after [`Atlas::ensure_level`].
+    fn level(&mut self) -> &mut Level {
+        self.level.as_mut().expect("ensure_level runs first")
+    }
+
+    /// How many subjects this process has set up (its block of the
+    /// cluster's subjects, once a stage has started; 0 before).
+    pub fn subjects_set_up(&self) -> usize {
+        self.level.as_ref().map_or(0, |l| l.problems.len())
     }
 
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
@@ -853,7 +886,8 @@ impl Atlas {
         if self.staged != Some(k) {
             let stage = &self.plan.stages[k];
             let subjects = self.stage_subjects.get(k).and_then(Option::as_ref).unwrap_or(&self.subjects);
-            for (problem, subject) in self.level.problems.iter_mut().zip(subjects) {
+            let level = self.level.as_mut().expect("ensured");
+            for (problem, subject) in level.problems.iter_mut().zip(&subjects[level.mine.clone()]) {
                 problem.set_target(subject, stage.kernel.clone())?;
                 problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
             }
@@ -864,8 +898,7 @@ impl Atlas {
 
     /// Stage k's unknowns `x` read as a [`Solution`].
     fn solution(&mut self, k: usize, x: &[f64]) -> Result<Solution, MatchError> {
-        self.ensure_level(k)?;
-        let level = &self.level;
+        let level = &*self.ensure_level(k)?;
         let (template, hyper_p0, _) = level.template_at(x)?;
         let offset = level.template.n_vertices() * (level.template.dim() + 1);
         let momenta = x[offset..].chunks_exact(level.unknowns.len()).map(|xi| level.unknowns.unpack(xi)).collect();
@@ -876,7 +909,7 @@ impl Atlas {
     fn prolongate(&mut self, k: usize, coarse: &Solution) -> Result<Vec<f64>, MatchError> {
         use crate::resolution::{VelocityFit, prolongate_fitted, sample};
         self.ensure_level(k)?;
-        let level = &self.level;
+        let level = self.level.as_ref().expect("ensured");
         let fine0 = &level.template;
         let (n, dim) = (fine0.n_vertices(), fine0.dim());
         let kind = self.plan.model.kind();
@@ -987,13 +1020,14 @@ impl Atlas {
             };
             self.stage_target(k)?;
             let first = self.stage_subjects.get(k).and_then(Option::as_ref).unwrap_or(&self.subjects);
+            let level = self.level.as_mut().expect("ensured");
             let setup = crate::session::StageSetup {
-                template_vertices: self.level.template.n_vertices(),
+                template_vertices: level.template.n_vertices(),
                 target_vertices: first[0].n_vertices(),
-                deformation: self.level.problems[0].model().kernel().path().to_string(),
+                deformation: level.deformation.clone(),
                 attachment: self.plan.stages[k].kernel.position().path().to_string(),
             };
-            let mut objective = self.level.objective(self.cluster.as_ref());
+            let mut objective = level.objective(self.cluster.as_ref(), self.subjects.len());
             let mut journal = Journal {
                 checkpoint: &mut self.checkpoint,
                 file: self.checkpoint_file.as_deref(),
@@ -1016,9 +1050,12 @@ impl Atlas {
         if !self.is_finished() {
             return Err(MatchError::NotFinished);
         }
-        self.stage_target(self.plan.stages.len() - 1)?;
+        let last_stage = self.plan.stages.len() - 1;
+        self.stage_target(last_stage)?;
         let x = self.checkpoint.warm.clone().ok_or(MatchError::NotFinished)?;
-        let level = &mut self.level;
+        let stage = &self.plan.stages[last_stage];
+        let model = self.plan.model.clone();
+        let level = self.level.as_mut().expect("ensured");
         let (template, template_momenta, hyper_energy) = level.template_at(&x)?;
         let len = level.unknowns.len();
         let offset = template.n_vertices() * (template.dim() + 1);
@@ -1027,7 +1064,18 @@ impl Atlas {
         let mut subjects = Vec::with_capacity(self.subjects.len());
         let start = &self.source;
         let zeros = (vec![0.0; start.n_vertices() * start.dim()], vec![0.0; start.n_vertices()]);
-        for (i, (problem, subject)) in level.problems.iter_mut().zip(&self.subjects).enumerate() {
+        for (i, subject) in self.subjects.iter().enumerate() {
+            // This process's subjects are set up; the others (on process 0
+            // of a cluster, which reports) one at a time.
+            let mut spare;
+            let problem = match i.checked_sub(level.mine.start).and_then(|j| level.problems.get_mut(j)) {
+                Some(p) => p,
+                None => {
+                    spare = Problem::new(&level.template, model.clone())?.with_target(subject, stage.kernel.clone())?;
+                    spare.set_integrator(stage.integrator.0, stage.integrator.1)?;
+                    &mut spare
+                }
+            };
             problem.set_template(start.points(), start.signal())?;
             let initial_attachment = problem.objective(&zeros.0, &zeros.1)?.0.attachment;
             problem.set_template(template.points(), template.signal())?;
@@ -1076,7 +1124,8 @@ impl Atlas {
         use crate::optimize::Objective;
         self.check_len(stage, x)?;
         self.stage_target(stage)?;
-        self.level.objective(self.cluster.as_ref()).value_grad(x)
+        let n = self.subjects.len();
+        self.level.as_mut().expect("ensured").objective(self.cluster.as_ref(), n).value_grad(x)
     }
 
     /// Applies stage `stage`'s initial Hessian shape M⁻¹ (module docs) to
@@ -1084,8 +1133,9 @@ impl Atlas {
     pub fn precondition(&mut self, stage: usize, v: &mut [f64]) -> Result<(), MatchError> {
         use crate::optimize::Objective;
         self.check_len(stage, v)?;
+        let n = self.subjects.len();
         self.ensure_level(stage)?;
-        self.level.objective(self.cluster.as_ref()).precondition(v);
+        self.level.as_mut().expect("ensured").objective(self.cluster.as_ref(), n).precondition(v);
         Ok(())
     }
 }
@@ -1251,9 +1301,17 @@ impl Atlas {
     /// The template of `result` shot by momenta (p_0, p^f): the shape at
     /// t = 1 (to see a mode at ±2 standard deviations).
     pub fn shoot_template(&mut self, result: &AtlasResult, p0: &[f64], pf: &[f64]) -> Result<FShape, MatchError> {
-        self.ensure_level(self.plan.stages.len() - 1)?;
+        let model = self.plan.model.clone();
+        let level = self.ensure_level(self.plan.stages.len() - 1)?;
         let t = &result.template;
-        let problem = &mut self.level.problems[0];
+        let mut spare;
+        let problem = match level.problems.first_mut() {
+            Some(p) => p,
+            None => {
+                spare = Problem::new(&level.template, model)?;
+                &mut spare
+            }
+        };
         problem.set_template(t.points(), t.signal())?;
         let traj = problem.shoot(p0, pf)?;
         let k = traj.steps();

@@ -46,10 +46,18 @@ pub const FIT_RIDGE: f64 = 1e-6;
 /// velocity the one of smallest density. Both terms scale alike with the
 /// data, so the transfer is the same for a copy scaled in length.
 ///
-/// The solve is dense (a Cholesky factor, n²/2 values and n³/3
-/// operations, about 10 s for 10242 vertices on the machine of
-/// docs/experiments.md); beyond [`MAX_VERTICES`] fine vertices, or where
-/// the factor fails, p_0 is carried as a density ([`prolongate`]).
+/// Up to [`MAX_VERTICES`] fine vertices the solve is dense (a Cholesky
+/// factor, n²/2 values and n³/3 operations, about 10 s for 10242
+/// vertices on the machine of docs/experiments.md). Beyond, it is
+/// [`FIT_ITERATIONS`] steps of conjugate gradients on the kernel's fast
+/// sums (its evaluation path for the fine template, as the fine stage's
+/// shooting takes it), from the momenta carried as densities
+/// ([`prolongate`]): each step costs one kernel sum, and conjugate
+/// gradients reduce first the error along the kernel matrix's large
+/// eigenvalues — the smooth part of the velocity, which the densities'
+/// quadrature gets wrong — and leave the rest, which the ridge would
+/// have kept small, as the densities had it. Where the dense factor
+/// fails, p_0 is carried as a density.
 pub fn prolongate_fitted(
     coarse: &FShape,
     fine: &FShape,
@@ -61,22 +69,39 @@ pub fn prolongate_fitted(
     VelocityFit::new(fine, kernel)?.carry(coarse, p0, pf, kind)
 }
 
+/// The conjugate-gradient steps of [`prolongate_fitted`] beyond
+/// [`MAX_VERTICES`] fine vertices.
+pub const FIT_ITERATIONS: usize = 20;
+
 /// [`prolongate_fitted`] onto one fine template, its factor computed
 /// once for any number of coarse solutions (an atlas's subjects).
 pub struct VelocityFit {
     fine: FShape,
     kernel: Kernel,
-    /// The factor of K_ff + ε·k(0)·m̄·D_f⁻¹; `None` beyond
-    /// [`MAX_VERTICES`] or where it failed (densities then).
-    factor: Option<KernelFactor>,
+    /// How p_0 is fitted.
+    solve: FitSolve,
+}
+
+/// How [`VelocityFit`] solves for the fine p_0.
+enum FitSolve {
+    /// The factor of K_ff + ε·k(0)·m̄·D_f⁻¹.
+    Dense(KernelFactor),
+    /// Conjugate gradients on the fine template's fast sums (`kernel`,
+    /// its evaluation path for the fine points) with the ridge's diagonal
+    /// ε·k(0)·m̄/m_i.
+    Iterative { kernel: Kernel, ridge: Vec<f64> },
+    /// No fit: the densities' transfer.
+    Densities,
 }
 
 impl std::fmt::Debug for VelocityFit {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("VelocityFit")
-            .field("n", &self.fine.n_vertices())
-            .field("factor", &self.factor.is_some())
-            .finish_non_exhaustive()
+        let solve = match self.solve {
+            FitSolve::Dense(_) => "dense",
+            FitSolve::Iterative { .. } => "iterative",
+            FitSolve::Densities => "densities",
+        };
+        f.debug_struct("VelocityFit").field("n", &self.fine.n_vertices()).field("solve", &solve).finish_non_exhaustive()
     }
 }
 
@@ -85,6 +110,17 @@ impl VelocityFit {
     /// `kernel`. Fails where a fine vertex has no area (an unused vertex
     /// or a degenerate cell).
     pub fn new(fine: &FShape, kernel: &Kernel) -> Result<VelocityFit, MatchError> {
+        let nf = fine.n_vertices();
+        VelocityFit::with(fine, kernel, nf > MAX_VERTICES)
+    }
+
+    /// The fit large templates get ([`FIT_ITERATIONS`] steps of conjugate
+    /// gradients), on a template of any size.
+    pub fn iterative(fine: &FShape, kernel: &Kernel) -> Result<VelocityFit, MatchError> {
+        VelocityFit::with(fine, kernel, true)
+    }
+
+    fn with(fine: &FShape, kernel: &Kernel, iterative: bool) -> Result<VelocityFit, MatchError> {
         let (nf, dim) = (fine.n_vertices(), fine.dim());
         let mf = fine.vertex_volumes();
         if let Some(v) = mf.iter().position(|m| m.is_nan() || *m <= 0.0) {
@@ -92,20 +128,21 @@ impl VelocityFit {
                 "prolongation: fine vertex {v} has no area (unused or degenerate)"
             )));
         }
-        let factor = if nf > MAX_VERTICES {
-            None
+        let mean = mf.iter().sum::<f64>() / nf as f64;
+        let scale = FIT_RIDGE * kernel.value(0.0) * mean;
+        let ridge: Vec<f64> = mf.iter().map(|m| scale / m).collect();
+        let solve = if iterative {
+            let path = kernel.for_points(fine.points(), dim).map_err(fshape_shoot::ShootError::from)?;
+            FitSolve::Iterative { kernel: path, ridge }
         } else {
-            let mean = mf.iter().sum::<f64>() / nf as f64;
-            let scale = FIT_RIDGE * kernel.value(0.0) * mean;
-            let ridge: Vec<f64> = mf.iter().map(|m| scale / m).collect();
-            KernelFactor::factor(fine.points(), dim, kernel, &ridge)
+            KernelFactor::factor(fine.points(), dim, kernel, &ridge).map_or(FitSolve::Densities, FitSolve::Dense)
         };
-        Ok(VelocityFit { fine: fine.clone(), kernel: kernel.clone(), factor })
+        Ok(VelocityFit { fine: fine.clone(), kernel: kernel.clone(), solve })
     }
 
     /// Whether p_0 is fitted (false: carried as a density).
     pub fn fits(&self) -> bool {
-        self.factor.is_some()
+        !matches!(self.solve, FitSolve::Densities)
     }
 
     /// The momenta `p0`, `pf` of `coarse` carried to the fine template.
@@ -117,19 +154,39 @@ impl VelocityFit {
         kind: ModelKind,
     ) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
         let (q0, qf) = prolongate(coarse, &self.fine, p0, pf, kind)?;
-        let Some(factor) = &self.factor else { return Ok((q0, qf)) };
-        // K_fc p_0: the coarse velocity at the fine vertices, a plain sum.
         let dim = self.fine.dim();
-        let mut v = vec![0.0; q0.len()];
-        for (x, out) in self.fine.points().chunks_exact(dim).zip(v.chunks_exact_mut(dim)) {
-            for (y, p) in coarse.points().chunks_exact(dim).zip(p0.chunks_exact(dim)) {
-                let u: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
-                let k = self.kernel.value(u);
-                out.iter_mut().zip(p).for_each(|(o, p)| *o += k * p);
+        match &self.solve {
+            FitSolve::Densities => Ok((q0, qf)),
+            FitSolve::Dense(factor) => {
+                // K_fc p_0: the coarse velocity at the fine vertices, a plain sum.
+                let mut v = vec![0.0; q0.len()];
+                for (x, out) in self.fine.points().chunks_exact(dim).zip(v.chunks_exact_mut(dim)) {
+                    for (y, p) in coarse.points().chunks_exact(dim).zip(p0.chunks_exact(dim)) {
+                        let u: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
+                        let k = self.kernel.value(u);
+                        out.iter_mut().zip(p).for_each(|(o, p)| *o += k * p);
+                    }
+                }
+                factor.apply(&mut v);
+                Ok((v, qf))
+            }
+            FitSolve::Iterative { kernel, ridge } => {
+                // K_fc p_0 with the fine stage's evaluation of the kernel.
+                let to_fine = fshape_kernels::KernelSums::try_new(kernel, coarse.points(), dim)
+                    .map_err(fshape_shoot::ShootError::from)?;
+                let b = to_fine.conv(self.fine.points(), p0, dim).map_err(fshape_shoot::ShootError::from)?;
+                let fine = fshape_kernels::KernelSums::try_new(kernel, self.fine.points(), dim)
+                    .map_err(fshape_shoot::ShootError::from)?;
+                let a = |q: &[f64]| -> Result<Vec<f64>, MatchError> {
+                    let mut out = fine.conv(self.fine.points(), q, dim).map_err(fshape_shoot::ShootError::from)?;
+                    for (i, o) in out.iter_mut().enumerate() {
+                        *o += ridge[i / dim] * q[i];
+                    }
+                    Ok(out)
+                };
+                Ok((conjugate_gradients(a, &b, q0, FIT_ITERATIONS)?, qf))
             }
         }
-        factor.apply(&mut v);
-        Ok((v, qf))
     }
 }
 
@@ -162,6 +219,39 @@ pub fn simplified_stages(
         out.push(Some(coarse));
     }
     Ok(out)
+}
+
+/// `steps` steps of conjugate gradients on A q = b (A symmetric positive
+/// definite, applied by `a`) from `q`; serial dot products, so the bits
+/// do not depend on the threads.
+fn conjugate_gradients(
+    a: impl Fn(&[f64]) -> Result<Vec<f64>, MatchError>,
+    b: &[f64],
+    mut q: Vec<f64>,
+    steps: usize,
+) -> Result<Vec<f64>, MatchError> {
+    let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x * y).sum::<f64>();
+    let aq = a(&q)?;
+    let mut r: Vec<f64> = b.iter().zip(&aq).map(|(b, a)| b - a).collect();
+    let mut d = r.clone();
+    let mut rr = dot(&r, &r);
+    for _ in 0..steps {
+        if rr.is_nan() || rr <= 0.0 {
+            break;
+        }
+        let ad = a(&d)?;
+        let alpha = rr / dot(&d, &ad);
+        if !alpha.is_finite() {
+            break;
+        }
+        q.iter_mut().zip(&d).for_each(|(x, p)| *x += alpha * p);
+        r.iter_mut().zip(&ad).for_each(|(x, p)| *x -= alpha * p);
+        let next = dot(&r, &r);
+        let beta = next / rr;
+        d.iter_mut().zip(&r).for_each(|(p, x)| *p = x + beta * *p);
+        rr = next;
+    }
+    Ok(q)
 }
 
 /// The momenta (p_0: P_c × n, p^f: P_c) of `coarse` carried to `fine`

@@ -594,3 +594,35 @@ fn an_atlas_shared_among_processes_gives_the_bits_of_one_process() {
         }
     }
 }
+
+/// Process `rank` of `size`, for what a process sets up (no gathering:
+/// only the setup is tested here; scripts/mpi-test.sh runs real MPI).
+struct Rank(usize, usize);
+
+impl fshape_match::Cluster for Rank {
+    fn rank(&self) -> usize {
+        self.0
+    }
+    fn size(&self) -> usize {
+        self.1
+    }
+    fn all_gather(&self, mine: &[f64]) -> Vec<f64> {
+        mine.to_vec()
+    }
+}
+
+#[test]
+fn each_process_sets_up_only_its_own_subjects() {
+    // Seven subjects over three processes: blocks of 2, 2 and 3.
+    let subjects: Vec<FShape> = (0..7).map(|i| subjects()[i % 3].clone()).collect();
+    let c = config("metamorphosis", "h1");
+    let mut alone = Atlas::new(&template(), &subjects, &c).unwrap();
+    assert_eq!(alone.subjects_set_up(), 0, "nothing before a stage needs it");
+    let start = alone.initial_unknowns().unwrap();
+    assert_eq!(alone.subjects_set_up(), 7);
+    for (rank, held) in [(0, 2), (1, 2), (2, 3)] {
+        let mut atlas = Atlas::new(&template(), &subjects, &c).unwrap().with_cluster(Box::new(Rank(rank, 3)));
+        assert_eq!(atlas.initial_unknowns().unwrap(), start, "every process starts from the same unknowns");
+        assert_eq!(atlas.subjects_set_up(), held, "process {rank}");
+    }
+}

@@ -144,4 +144,12 @@ fn fitted_momenta_keep_the_velocity_of_rough_momenta() {
     let (p0s, _) =
         prolongate_fitted(&scaled(&coarse), &scaled(&fine), &p0c, &pfc, kind, &Kernel::gaussian(3.0).unwrap()).unwrap();
     assert!(relative(&p0s, &p0f) < 1e-6, "scaled: {}", relative(&p0s, &p0f));
+    // The fit of templates beyond the dense limit (conjugate gradients on
+    // the fast sums, from the densities) keeps most of what they lose.
+    let fit = fshape_match::resolution::VelocityFit::iterative(&fine, &kernel).unwrap();
+    let (p0i, pfi) = fit.carry(&coarse, &p0c, &pfc, kind).unwrap();
+    assert_eq!(pfi, pfd);
+    let err_i = relative(&velocity(&fine, &p0i), &vc);
+    eprintln!("velocity error, iterative fit: {err_i:.2e}");
+    assert!(err_i < err_d / 20.0, "velocity error: density {err_d}, iterative fit {err_i}");
 }
