@@ -117,7 +117,7 @@ pub struct Checkpoint {
 }
 
 impl Checkpoint {
-    /// The file's bytes: [`CHECKPOINT_MAGIC`], the format (u32, little
+    /// The file's bytes: the 16-byte magic `fshape-checkpnt\n`, the format (u32, little
     /// endian), then the checkpoint in postcard's binary encoding (f64 as
     /// their 8 bytes, so a resumed run continues bit for bit). At 150k
     /// vertices a checkpoint holds about 13 million values (the point,
