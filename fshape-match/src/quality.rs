@@ -306,11 +306,20 @@ fn closest_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f
 /// The exact closest point of a shape to query points.
 pub struct ClosestPoints<'a> {
     shape: &'a FShape,
-    tree: ImmutableKdTree<f64, 3>,
-    /// Largest distance from a cell's centre to one of its corners.
-    reach: f64,
+    /// The cells grouped by their reach (the largest distance from a
+    /// cell's centre to one of its corners) in classes whose reaches
+    /// differ by at most a factor 2, so that a few long slivers do not
+    /// widen the search around every query.
+    classes: Vec<ReachClass>,
 }
 
+/// Cells of similar reach: a k-d tree of their centres (items index
+/// `cells`) and the largest reach among them.
+struct ReachClass {
+    tree: ImmutableKdTree<f64, 3>,
+    cells: Vec<usize>,
+    reach: f64,
+}
 /// The closest point of a shape to one query point: its squared distance,
 /// cell and barycentric coordinates in that cell.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -324,26 +333,41 @@ pub struct Closest {
 }
 
 impl<'a> ClosestPoints<'a> {
-    /// A k-d tree of `shape`'s cell centres.
+    /// k-d trees of `shape`'s cell centres, one per class of reach.
     pub fn new(shape: &'a FShape) -> Result<Self, MatchError> {
         if shape.n_cells() == 0 {
             return Err(MatchError::Shapes("a shape without cells has no closest points".into()));
         }
-        let mut centres = Vec::with_capacity(shape.n_cells());
-        let mut reach: f64 = 0.0;
         let k = shape.kind().n_corners();
+        let (mut centres, mut reaches) = (Vec::with_capacity(shape.n_cells()), Vec::with_capacity(shape.n_cells()));
         for c in 0..shape.n_cells() {
             let p = corners(shape, c);
             let centre = if k == 3 { combine(&p, [1.0 / 3.0; 3]) } else { combine(&p, [0.5, 0.5, 0.0]) };
-            for q in &p[..k] {
-                let d = sub(*q, centre);
-                reach = reach.max(dot(d, d).sqrt());
-            }
+            let reach = p[..k].iter().map(|q| dot(sub(*q, centre), sub(*q, centre)).sqrt()).fold(0.0, f64::max);
             centres.push(centre);
+            reaches.push(reach);
         }
-        let tree = ImmutableKdTree::new_from_slice(&centres)
-            .map_err(|e| MatchError::Shapes(format!("closest points: {e:?}")))?;
-        Ok(ClosestPoints { shape, tree, reach })
+        // Class j holds the reaches in (2^(j−1) r₀, 2^j r₀], class 0 those
+        // up to r₀, the smallest positive reach.
+        let r0 = reaches.iter().copied().filter(|&r| r > 0.0).fold(f64::INFINITY, f64::min);
+        let class_of = |r: f64| if r <= r0 { 0 } else { ((r / r0).log2().ceil() as usize).min(1100) };
+        let mut members: Vec<Vec<usize>> = Vec::new();
+        for (c, &r) in reaches.iter().enumerate() {
+            let j = class_of(r);
+            if members.len() <= j {
+                members.resize(j + 1, Vec::new());
+            }
+            members[j].push(c);
+        }
+        let mut classes = Vec::new();
+        for cells in members.into_iter().filter(|m| !m.is_empty()) {
+            let points: Vec<[f64; 3]> = cells.iter().map(|&c| centres[c]).collect();
+            let tree = ImmutableKdTree::new_from_slice(&points)
+                .map_err(|e| MatchError::Shapes(format!("closest points: {e:?}")))?;
+            let reach = cells.iter().map(|&c| reaches[c]).fold(0.0, f64::max);
+            classes.push(ReachClass { tree, cells, reach });
+        }
+        Ok(ClosestPoints { shape, classes })
     }
 
     fn to_cell(&self, q: [f64; 3], c: usize) -> Closest {
@@ -358,25 +382,41 @@ impl<'a> ClosestPoints<'a> {
     }
 
     /// The closest point of the shape to `q` (3-D; z = 0 for planar
-    /// shapes). Exact: the nearest cell centre bounds the distance, and
-    /// every cell that could be closer has its centre within that bound
-    /// plus the largest centre-to-corner distance. Ties go to the lower
-    /// cell index.
+    /// shapes). Exact: the nearest cell centre of each class bounds the
+    /// distance, and every cell that could be closer has its centre within
+    /// that bound plus its class's largest centre-to-corner distance. Ties
+    /// go to the lower cell index.
     pub fn closest(&self, q: [f64; 3]) -> Closest {
-        let first = self.tree.query(&q).nearest_one::<SquaredEuclidean<f64>>().execute();
-        let mut best = self.to_cell(q, first.item as usize);
-        let r = best.distance + self.reach;
-        let mut candidates: Vec<usize> = Vec::new();
-        self.tree
-            .query(&q)
-            .within::<SquaredEuclidean<f64>>(r * r * (1.0 + 1e-12) + f64::MIN_POSITIVE)
-            .unsorted()
-            .visit(|h| candidates.push(h.item as usize));
-        candidates.sort_unstable();
-        for c in candidates {
-            let t = self.to_cell(q, c);
-            if t.distance < best.distance || (t.distance == best.distance && c < best.cell) {
+        let better = |t: &Closest, best: &Closest| {
+            t.distance < best.distance || (t.distance == best.distance && t.cell < best.cell)
+        };
+        let nearest = |class: &ReachClass| {
+            let first = class.tree.query(&q).nearest_one::<SquaredEuclidean<f64>>().execute();
+            self.to_cell(q, class.cells[first.item as usize])
+        };
+        // `new` makes at least one class.
+        let mut best = nearest(&self.classes[0]);
+        for class in &self.classes[1..] {
+            let t = nearest(class);
+            if better(&t, &best) {
                 best = t;
+            }
+        }
+        let mut candidates: Vec<usize> = Vec::new();
+        for class in &self.classes {
+            let r = best.distance + class.reach;
+            candidates.clear();
+            class
+                .tree
+                .query(&q)
+                .within::<SquaredEuclidean<f64>>(r * r * (1.0 + 1e-12) + f64::MIN_POSITIVE)
+                .unsorted()
+                .visit(|h| candidates.push(class.cells[h.item as usize]));
+            for &c in &candidates {
+                let t = self.to_cell(q, c);
+                if better(&t, &best) {
+                    best = t;
+                }
             }
         }
         best

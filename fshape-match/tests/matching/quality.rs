@@ -299,6 +299,31 @@ fn the_closest_point_search_agrees_with_brute_force() {
         let got = cp.closest(q).distance;
         assert!((got - brute).abs() <= 1e-12 * (1.0 + brute), "{q:?}: {got} against {brute}");
     }
+    // A soup of triangles whose sizes span three decades, with long
+    // slivers among them (the search groups cells by size).
+    let mut points = Vec::new();
+    for t in 0..300 {
+        let centre = [rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)];
+        let size = 10f64.powf(rng.range(-3.0, 0.0));
+        let stretch = if t % 10 == 0 { 20.0 } else { 1.0 };
+        for k in 0..3 {
+            let along = if k == 1 { stretch } else { 1.0 };
+            points.extend((0..3).map(|d| centre[d] + size * along * rng.range(-1.0, 1.0)));
+        }
+    }
+    let soup = FShape::try_new(3, CellKind::Triangle, points, (0..900).collect(), None).unwrap();
+    let cp = ClosestPoints::new(&soup).unwrap();
+    let p3 = |v: usize| -> [f64; 3] { std::array::from_fn(|k| soup.point(v)[k]) };
+    for _ in 0..400 {
+        let q = [rng.range(-1.5, 1.5), rng.range(-1.5, 1.5), rng.range(-1.5, 1.5)];
+        let brute = soup
+            .cells()
+            .chunks_exact(3)
+            .map(|c| oracle_triangle(q, [p3(c[0]), p3(c[1]), p3(c[2])]))
+            .fold(f64::INFINITY, f64::min);
+        let got = cp.closest(q).distance;
+        assert!((got - brute).abs() <= 1e-12 * (1.0 + brute), "{q:?}: {got} against {brute}");
+    }
     // Segments in the plane.
     let curve = random_curve(2, 30, 3);
     let cp = ClosestPoints::new(&curve).unwrap();
