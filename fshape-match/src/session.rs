@@ -121,8 +121,9 @@ impl Checkpoint {
     /// endian), then the checkpoint in postcard's binary encoding (f64 as
     /// their 8 bytes, so a resumed run continues bit for bit). At 150k
     /// vertices a checkpoint holds about 13 million values (the point,
-    /// its gradient and L-BFGS's pairs): about 100 MB, where the JSON of
-    /// format 2 was about 400 MB and took seconds to write every iteration.
+    /// its gradient and L-BFGS's pairs): about 110 MB, where the JSON of
+    /// format 2 took 2.7 times as much (22.9 MB against 61.5 MB measured
+    /// at 32 492 vertices).
     pub fn to_bytes(&self) -> Result<Vec<u8>, MatchError> {
         let mut bytes = CHECKPOINT_MAGIC.to_vec();
         bytes.extend(self.format.to_le_bytes());
