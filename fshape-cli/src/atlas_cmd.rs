@@ -158,7 +158,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
     };
     let template = fshape_match::atlas::initial_template(template, &subjects)?;
     let atlas = match Atlas::new(&template, &subjects, &config) {
-        Err(MatchError::Shapes(why)) => bail!("{}: {why}", template_path.display()),
+        Err(e @ MatchError::Kinds(_)) => bail!("{}: {e}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
     };
     let atlas = match crate::stage_templates(a.stage_templates, a.signal_name.clone())? {

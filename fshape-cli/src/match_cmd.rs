@@ -170,9 +170,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let source = crate::load(a.source, a.signal_name.clone(), a.signals.0)?;
     let target = crate::load(a.target, a.signal_name.clone(), a.signals.1)?;
     let session = match Session::new(&source, &target, &config) {
-        Err(MatchError::Shapes(why)) => {
-            bail!("{} and {} are not the same kind of shape: {why}", a.source.display(), a.target.display())
-        }
+        Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,
     };
     let session = match crate::stage_templates(a.stage_templates, a.signal_name.clone())? {

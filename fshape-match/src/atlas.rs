@@ -306,10 +306,7 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
         }
         let all = self.cluster.all_gather(&records);
         if all.len() != n_subjects * width {
-            return Err(MatchError::Shapes(format!(
-                "the atlas's processes gathered {} values for {n_subjects} subjects of {width}",
-                all.len()
-            )));
+            return Err(MatchError::Gather { got: all.len(), expected: n_subjects * width });
         }
         let n = n_subjects as f64;
         let mut grad = vec![0.0; x.len()];
@@ -597,10 +594,10 @@ impl Atlas {
     /// scales (length L, signal S) are the initial template's against the
     /// first subject's, as [`Config::plan`] takes them for one match.
     pub fn new(template: &FShape, subjects: &[FShape], config: &Config) -> Result<Atlas, MatchError> {
-        let first = subjects.first().ok_or_else(|| MatchError::Shapes("an atlas needs at least one subject".into()))?;
+        let first = subjects.first().ok_or(MatchError::NoSubjects)?;
         for (i, s) in subjects.iter().enumerate() {
             if s.dim() != template.dim() || s.kind() != template.kind() {
-                return Err(MatchError::Shapes(format!(
+                return Err(MatchError::Kinds(format!(
                     "subject {i} is a {} mesh in R^{}, the template a {} mesh in R^{}",
                     s.kind().name(),
                     s.dim(),
@@ -707,10 +704,13 @@ impl Atlas {
     fn set_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Atlas, MatchError> {
         let n = self.plan.stages.len();
         if templates.len() != n {
-            return Err(MatchError::Shapes(format!("{} stage templates for {n} stages", templates.len())));
+            return Err(MatchError::StageTemplates(format!(
+                "{} given for a schedule of {n} stages (one per stage, the last None)",
+                templates.len()
+            )));
         }
         if templates.last().is_some_and(Option::is_some) {
-            return Err(MatchError::Shapes(
+            return Err(MatchError::StageTemplates(
                 "the last stage runs on the initial template: its stage template must be None".into(),
             ));
         }
@@ -720,7 +720,7 @@ impl Atlas {
             let t = match t {
                 None => None,
                 Some(t) if t.dim() != source.dim() || t.kind() != source.kind() || t.n_cells() == 0 => {
-                    return Err(MatchError::Shapes(format!(
+                    return Err(MatchError::StageTemplates(format!(
                         "stage {k}'s template is not a non-empty mesh of the initial template's kind and dimension"
                     )));
                 }
@@ -984,7 +984,7 @@ impl Atlas {
     /// Errors unless `stage` is in the schedule.
     fn check_stage(&self, stage: usize) -> Result<(), MatchError> {
         if stage >= self.plan.stages.len() {
-            return Err(MatchError::Shapes(format!("stage {stage} of a schedule of {}", self.plan.stages.len())));
+            return Err(MatchError::NoSuchStage { stage, stages: self.plan.stages.len() });
         }
         Ok(())
     }
@@ -995,7 +995,7 @@ impl Atlas {
         self.check_stage(stage)?;
         let n = self.len_at(stage);
         if x.len() != n {
-            return Err(MatchError::Shapes(format!("{} unknowns for stage {stage} of an atlas of {n}", x.len())));
+            return Err(MatchError::UnknownsLength { stage, got: x.len(), expected: n });
         }
         Ok(())
     }

@@ -39,7 +39,7 @@
 //! decrease_tolerance = 1e-6         # stop when J fell by ≤ tol·|J|...  (default 1e-6)
 //! decrease_window = 10              # ...over this many iterations      (default 10)
 //! signal_metric = "l2"              # metric of p^f: l2 (L²(x_0), the paper's) | euclidean | energy (default l2)
-//! momentum_metric = "euclidean"     # metric of p_0: euclidean | l2 | energy (default euclidean)
+//! momentum_metric = "energy"        # metric of p_0: euclidean | l2 | energy (default energy)
 //!
 //! [schedule]                        # coarse to fine (default: one stage, [attachment])
 //! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]

@@ -27,7 +27,7 @@ pub fn bunny_setting(bunny: &FShape) -> Result<(FShape, FShape), MatchError> {
 /// experiments and coarse stages.
 pub fn bunny_setting_at_level(bunny: &FShape, level: u32) -> Result<(FShape, FShape), MatchError> {
     if bunny.dim() != 3 || bunny.kind().dim() != 2 || bunny.n_vertices() == 0 {
-        return Err(MatchError::Shapes(format!(
+        return Err(MatchError::InvalidInput(format!(
             "the bunny must be a non-empty triangle surface in R^3, got a {} mesh in R^{} with {} vertices",
             bunny.kind().name(),
             bunny.dim(),
@@ -80,10 +80,11 @@ pub struct DisplacedPair {
 pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Result<DisplacedPair, MatchError> {
     use fshape_mesh::generate::SplitMix64;
     let (n, dim) = (source.n_vertices(), source.dim());
-    let signal =
-        source.signal().ok_or_else(|| MatchError::Shapes("the source of a displaced pair needs a signal".into()))?;
+    let signal = source
+        .signal()
+        .ok_or_else(|| MatchError::InvalidInput("the source of a displaced pair needs a signal".into()))?;
     if n == 0 || !(amplitude >= 0.0 && amplitude.is_finite() && width > 0.0 && width.is_finite()) {
-        return Err(MatchError::Shapes(format!(
+        return Err(MatchError::InvalidInput(format!(
             "a displaced pair needs vertices, an amplitude ≥ 0 and a width > 0 (got {n} vertices, {amplitude}, {width})"
         )));
     }

@@ -99,9 +99,53 @@ pub enum MatchError {
         /// What is wrong, and what to do.
         problem: String,
     },
-    /// Source and target cannot be matched (dimension or cell type differ).
-    #[error("source and target are not the same kind of shape: {0}")]
-    Shapes(String),
+    /// Two shapes that must be of one kind (cell type and dimension) are
+    /// not: source and target, template and subject, a stage template and
+    /// its source, the shapes a quality or a transfer compares.
+    #[error("{0}: shapes of one kind (the same cell type in the same dimension) are needed")]
+    Kinds(String),
+    /// Stage templates that do not fit the schedule or the source.
+    #[error("stage templates: {0}")]
+    StageTemplates(String),
+    /// A stage index beyond the schedule.
+    #[error("stage {stage} does not exist: the schedule has {stages} stage(s), counted from 0")]
+    NoSuchStage {
+        /// The index asked for.
+        stage: usize,
+        /// The schedule's length.
+        stages: usize,
+    },
+    /// A vector of unknowns of the wrong length for its stage.
+    #[error("{got} unknowns given for stage {stage}, which has {expected}")]
+    UnknownsLength {
+        /// The stage (from 0).
+        stage: usize,
+        /// The length given.
+        got: usize,
+        /// The stage's number of unknowns.
+        expected: usize,
+    },
+    /// An atlas without subjects.
+    #[error("an atlas needs at least one subject")]
+    NoSubjects,
+    /// A shape without the cells, area or extent a computation needs
+    /// (which vertex or what, in the message).
+    #[error("degenerate shape: {0}")]
+    Degenerate(String),
+    /// The processes of a distributed atlas gathered a wrong number of
+    /// values: they are out of step (different inputs or versions).
+    #[error(
+        "the atlas's processes gathered {got} values where {expected} were expected: are they running the same inputs and version?"
+    )]
+    Gather {
+        /// Values gathered.
+        got: usize,
+        /// Values expected (subjects × record width).
+        expected: usize,
+    },
+    /// An argument out of its domain (which, and its value, in the message).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
     /// [`Session::result`] before every stage has run.
     #[error("the registration has not finished: run the session to its end first")]
     NotFinished,

@@ -320,7 +320,7 @@ impl TwoLevel {
         // Each coarse vertex is a fine one, whose closest point is itself:
         // a total without mass means a vertex without area.
         if let Some(c) = total.iter().position(|t| t.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
-            return Err(crate::MatchError::Shapes(format!(
+            return Err(crate::MatchError::Degenerate(format!(
                 "the energy metric's coarse vertex {c} carries no area (a vertex without cells?)"
             )));
         }

@@ -336,7 +336,7 @@ impl<'a> ClosestPoints<'a> {
     /// k-d trees of `shape`'s cell centres, one per class of reach.
     pub fn new(shape: &'a FShape) -> Result<Self, MatchError> {
         if shape.n_cells() == 0 {
-            return Err(MatchError::Shapes("a shape without cells has no closest points".into()));
+            return Err(MatchError::Degenerate("a shape without cells has no closest points".into()));
         }
         let k = shape.kind().n_corners();
         let (mut centres, mut reaches) = (Vec::with_capacity(shape.n_cells()), Vec::with_capacity(shape.n_cells()));
@@ -363,7 +363,7 @@ impl<'a> ClosestPoints<'a> {
         for cells in members.into_iter().filter(|m| !m.is_empty()) {
             let points: Vec<[f64; 3]> = cells.iter().map(|&c| centres[c]).collect();
             let tree = ImmutableKdTree::new_from_slice(&points)
-                .map_err(|e| MatchError::Shapes(format!("closest points: {e:?}")))?;
+                .map_err(|e| MatchError::Degenerate(format!("closest points: {e:?}")))?;
             let reach = cells.iter().map(|&c| reaches[c]).fold(0.0, f64::max);
             classes.push(ReachClass { tree, cells, reach });
         }
@@ -498,11 +498,11 @@ fn quantile(mut pairs: Vec<(f64, f64)>, q: f64) -> f64 {
 /// are evaluated in parallel but summed in order.
 pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     if shape.dim() != target.dim() || shape.kind() != target.kind() {
-        return Err(MatchError::Shapes("quality: the shapes differ in dimension or cell type".into()));
+        return Err(MatchError::Kinds("quality: the matched shape and the target differ".into()));
     }
     let diagonal = target.bounding_box().diagonal();
     if !(diagonal > 0.0 && diagonal.is_finite()) {
-        return Err(MatchError::Shapes(format!("quality: the target's bounding-box diagonal is {diagonal}")));
+        return Err(MatchError::Degenerate(format!("quality: the target's bounding-box diagonal is {diagonal}")));
     }
     let (to_target, to_shape) = (ClosestPoints::new(target)?, ClosestPoints::new(shape)?);
     let (xs, ys) = (samples(shape), samples(target));
@@ -510,7 +510,7 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     let dy: Vec<Closest> = ys.points.par_iter().map(|p| to_shape.closest(*p)).collect();
     let (wx, wy): (f64, f64) = (xs.weights.iter().sum(), ys.weights.iter().sum());
     if !(wx > 0.0 && wy > 0.0) {
-        return Err(MatchError::Shapes("quality: a shape has no area (or length)".into()));
+        return Err(MatchError::Degenerate("quality: a shape has no area (or length)".into()));
     }
     let mean = |d: &[Closest], w: &[f64], total: f64| d.iter().zip(w).map(|(c, w)| c.distance * w).sum::<f64>() / total;
     let mean_distance = 0.5 * (mean(&dx, &xs.weights, wx) + mean(&dy, &ys.weights, wy)) / diagonal;

@@ -124,7 +124,7 @@ impl VelocityFit {
         let (nf, dim) = (fine.n_vertices(), fine.dim());
         let mf = fine.vertex_volumes();
         if let Some(v) = mf.iter().position(|m| m.is_nan() || *m <= 0.0) {
-            return Err(MatchError::Shapes(format!(
+            return Err(MatchError::Degenerate(format!(
                 "prolongation: fine vertex {v} has no area (unused or degenerate)"
             )));
         }
@@ -268,10 +268,10 @@ pub fn prolongate(
     let signal_density = kind != ModelKind::Tangential;
     let (nc, dim) = (coarse.n_vertices(), coarse.dim());
     if fine.dim() != dim || fine.kind() != coarse.kind() {
-        return Err(MatchError::Shapes("prolongation: the templates differ in dimension or cell type".into()));
+        return Err(MatchError::Kinds("prolongation: the coarse and fine templates differ".into()));
     }
     if p0.len() != nc * dim || pf.len() != nc {
-        return Err(MatchError::Shapes(format!(
+        return Err(MatchError::InvalidInput(format!(
             "prolongation: {} and {} momentum values for a coarse template of {nc} vertices in R^{dim}",
             p0.len(),
             pf.len()
@@ -279,7 +279,9 @@ pub fn prolongate(
     }
     let (mc, mf) = (coarse.vertex_volumes(), fine.vertex_volumes());
     if let Some(v) = mc.iter().position(|m| m.is_nan() || *m <= 0.0) {
-        return Err(MatchError::Shapes(format!("prolongation: coarse vertex {v} has no area (unused or degenerate)")));
+        return Err(MatchError::Degenerate(format!(
+            "prolongation: coarse vertex {v} has no area (unused or degenerate)"
+        )));
     }
     let density0: Vec<f64> = p0.iter().enumerate().map(|(i, p)| p / mc[i / dim]).collect();
     let densityf: Vec<f64> =
@@ -302,10 +304,10 @@ pub fn prolongate(
 pub fn sample(coarse: &FShape, fine: &FShape, values: &[f64], width: usize) -> Result<Vec<f64>, MatchError> {
     let dim = coarse.dim();
     if fine.dim() != dim || fine.kind() != coarse.kind() {
-        return Err(MatchError::Shapes("resampling: the meshes differ in dimension or cell type".into()));
+        return Err(MatchError::Kinds("resampling: the coarse and fine meshes differ".into()));
     }
     if values.len() != coarse.n_vertices() * width {
-        return Err(MatchError::Shapes(format!(
+        return Err(MatchError::InvalidInput(format!(
             "resampling: {} values for {} vertices of {width} each",
             values.len(),
             coarse.n_vertices()

@@ -434,7 +434,7 @@ impl Session {
     /// norm analysis, once) and starts an empty checkpoint.
     pub fn new(source: &FShape, target: &FShape, config: &Config) -> Result<Session, MatchError> {
         if source.dim() != target.dim() || source.kind() != target.kind() {
-            return Err(MatchError::Shapes(format!(
+            return Err(MatchError::Kinds(format!(
                 "the source is a {} mesh in R^{}, the target a {} mesh in R^{}",
                 source.kind().name(),
                 source.dim(),
@@ -526,10 +526,13 @@ impl Session {
     fn set_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Session, MatchError> {
         let n = self.plan.stages.len();
         if templates.len() != n {
-            return Err(MatchError::Shapes(format!("{} stage templates for {n} stages", templates.len())));
+            return Err(MatchError::StageTemplates(format!(
+                "{} given for a schedule of {n} stages (one per stage, the last None)",
+                templates.len()
+            )));
         }
         if templates.last().is_some_and(Option::is_some) {
-            return Err(MatchError::Shapes(
+            return Err(MatchError::StageTemplates(
                 "the last stage runs on the source: its stage template must be None".into(),
             ));
         }
@@ -537,7 +540,7 @@ impl Session {
             if let Some(t) = t
                 && (t.dim() != self.source.dim() || t.kind() != self.source.kind() || t.n_cells() == 0)
             {
-                return Err(MatchError::Shapes(format!(
+                return Err(MatchError::StageTemplates(format!(
                     "stage {k}'s template is not a non-empty mesh of the source's kind and dimension"
                 )));
             }

@@ -64,7 +64,7 @@ impl Default for Metrics {
 }
 
 impl From<Metric> for Metrics {
-    /// `signal` for p^f, Euclidean for p_0.
+    /// `signal` for p^f, the default (energy) for p_0.
     fn from(signal: Metric) -> Self {
         Metrics { signal, ..Metrics::default() }
     }

@@ -4,6 +4,8 @@
 mod atlas;
 #[path = "matching/config.rs"]
 mod config;
+#[path = "matching/errors.rs"]
+mod errors;
 #[path = "matching/objective.rs"]
 mod objective;
 #[path = "matching/optimize.rs"]

@@ -179,7 +179,7 @@ fn source_and_target_of_different_kinds_are_refused() {
     let (source, _, config) = inputs();
     let curve = fshape_mesh::generate::circle(20, 1.0);
     let e = Session::new(&source, &curve, &config).err().expect("refused");
-    assert!(matches!(e, MatchError::Shapes(_)), "{e}");
+    assert!(matches!(e, MatchError::Kinds(_)), "{e}");
 }
 
 #[test]
