@@ -161,7 +161,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         Err(e @ MatchError::Kinds(_)) => bail!("{}: {e}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
     };
-    let atlas = match crate::stage_templates(a.stage_templates, a.signal_name.clone())? {
+    let atlas = match crate::stage_templates(a.stage_templates, a.signal_name.clone(), atlas.plan().stages.len())? {
         None => atlas,
         Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
     };

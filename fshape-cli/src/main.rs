@@ -535,9 +535,20 @@ fn camera(view: &[f64]) -> Option<(f64, f64)> {
 
 /// `--stage-templates`: the meshes, then `None` for the last stage (none
 /// given: no stage templates).
-fn stage_templates(paths: &[PathBuf], signal_name: Option<String>) -> Result<Option<Vec<Option<FShape>>>> {
+fn stage_templates(
+    paths: &[PathBuf],
+    signal_name: Option<String>,
+    stages: usize,
+) -> Result<Option<Vec<Option<FShape>>>> {
     if paths.is_empty() {
         return Ok(None);
+    }
+    if paths.len() + 1 != stages {
+        bail!(
+            "--stage-templates: {} meshes for a schedule of {stages} stages: give one per stage before the last ({})",
+            paths.len(),
+            stages.saturating_sub(1)
+        );
     }
     let mut templates =
         paths.iter().map(|p| load(p, signal_name.clone(), None).map(Some)).collect::<Result<Vec<_>>>()?;

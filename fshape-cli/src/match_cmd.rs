@@ -173,7 +173,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
         Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,
     };
-    let session = match crate::stage_templates(a.stage_templates, a.signal_name.clone())? {
+    let session = match crate::stage_templates(a.stage_templates, a.signal_name.clone(), session.plan().stages.len())? {
         None => session,
         Some(templates) => session.with_stage_templates(templates).context("--stage-templates")?,
     };

@@ -653,7 +653,8 @@ fn match_runs_coarse_stages_on_stage_templates() {
     ]);
     assert_eq!(r.status.code(), Some(1));
     assert!(
-        String::from_utf8_lossy(&r.stderr).contains("3 stage templates for 2 stages"),
+        String::from_utf8_lossy(&r.stderr)
+            .contains("--stage-templates: 2 meshes for a schedule of 2 stages: give one per stage before the last (1)"),
         "{}",
         String::from_utf8_lossy(&r.stderr)
     );
@@ -934,7 +935,10 @@ fn atlas_runs_its_first_stage_on_a_coarser_template() {
     let o = fshape(&args(&format!("{coarse},{coarse}")).each_ref().map(String::as_str));
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("--stage-templates") && err.contains("3 stage templates for 2 stages"), "{err}");
+    assert!(
+        err.contains("--stage-templates: 2 meshes for a schedule of 2 stages: give one per stage before the last (1)"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -523,14 +523,16 @@ fn stage_templates_must_fit_the_schedule_and_the_template() {
     let (fine, coarse) = fine_and_coarse();
     let atlas = || Atlas::new(&fine, &subjects(), &two_stages("metamorphosis", "h1")).unwrap();
     let err = |r: Result<Atlas, fshape_match::MatchError>| r.err().unwrap().to_string();
-    assert!(err(atlas().with_stage_templates(vec![None])).contains("1 stage templates for 2 stages"));
+    assert!(err(atlas().with_stage_templates(vec![None])).contains("1 given for a schedule of 2 stages"));
     assert!(err(atlas().with_stage_templates(vec![None, Some(coarse.clone())])).contains("must be None"));
     let curve = fshape_mesh::test_support::random_curve(3, 10, 1);
     assert!(err(atlas().with_stage_templates(vec![Some(curve), None])).contains("stage 0's template"));
     let mut a = atlas();
     let x = a.initial_unknowns_at(0).unwrap();
-    assert!(a.value_grad(1, &x[1..]).err().unwrap().to_string().contains("unknowns for stage 1"));
-    assert!(a.value_grad(2, &x).err().unwrap().to_string().contains("stage 2 of a schedule of 2"));
+    assert!(a.value_grad(1, &x[1..]).err().unwrap().to_string().contains("unknowns given for stage 1"));
+    assert!(
+        a.value_grad(2, &x).err().unwrap().to_string().contains("stage 2 does not exist: the schedule has 2 stage(s)")
+    );
 }
 
 /// Processes simulated by threads: all_gather through shared slots and a
