@@ -120,6 +120,10 @@ class Geodesic(TypedDict):
     hamiltonian: npt.NDArray[np.float64]
 
 class MatchResult(TypedDict):
+    stopped: bool
+    """True when the progress callback ended the run before its end: the
+    rest is the result so far (the current momenta carried to the source
+    and shot)."""
     p0: npt.NDArray[np.float64]
     pf: npt.NDArray[np.float64]
     energies: Energies
@@ -154,7 +158,10 @@ class AtlasResult(TypedDict):
 
 Progress = Callable[[dict[str, Any]], Optional[bool]]
 """Called with {"event": "stage" | "iteration" | "stage_finished", ...};
-returning True stops the run, as in scipy.optimize (FShapeError)."""
+returning True ends the run, as in scipy.optimize: `match` returns its
+result so far (`stopped` True), `atlas` raises FShapeError naming the
+checkpoint that resumes it. An exception raised by the callback ends the
+run and propagates."""
 
 def read_mesh(path: Union[str, "PathLike[str]"], signal_name: Optional[str] = None) -> FShape:
     """Reads PLY, OBJ, VTK legacy, GIfTI (.gii) or a FreeSurfer surface
@@ -227,7 +234,9 @@ def match(
     accepted iteration and, when the file exists, resumes from it: calling
     again with the same arguments continues a run stopped by the progress
     callback, Ctrl-C or a kill, to the same result bit for bit. A
-    checkpoint written for other inputs or another config is refused."""
+    checkpoint written for other inputs or another config is refused.
+    A progress callback returning True ends the run with its result so far,
+    marked `stopped`."""
 
 def atlas(
     subjects: Sequence[FShape],

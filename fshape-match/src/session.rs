@@ -215,7 +215,7 @@ pub struct MatchResult {
     pub energies: Energies,
     /// The geodesic from the template.
     pub trajectory: Trajectory,
-    /// Every stage's records.
+    /// Every finished stage's records.
     pub stages: Vec<StageRecord>,
     /// Accepted iterations, all stages.
     pub iterations: usize,
@@ -227,6 +227,9 @@ pub struct MatchResult {
     pub quality: crate::Quality,
     /// How close the template was, for comparison.
     pub initial_quality: crate::Quality,
+    /// Whether every stage ran to its stopping rule; `false` for
+    /// [`Session::result_so_far`] of a run stopped before its end.
+    pub finished: bool,
 }
 
 /// FNV-1a, 64 bits: only to recognise a checkpoint of the same inputs
@@ -734,9 +737,43 @@ impl Session {
         if !self.is_finished() {
             return Err(MatchError::NotFinished);
         }
+        let x = self.checkpoint.warm.clone().ok_or(MatchError::NotFinished)?;
+        let (p0, pf) = self.unknowns_of(self.plan.stages.len() - 1)?.unpack(&x);
+        self.shot(p0, pf, true)
+    }
+
+    /// The result as of now, for a run an observer stopped before its end
+    /// (scipy's callbacks and argmin's observers end a run, they do not
+    /// fail it): the current point of the stage under way, or the end of
+    /// the last finished stage, carried to the source's vertices if that
+    /// stage ran on a coarser template, and shot with the last stage's
+    /// data term like [`Session::result`], marked `finished: false`. The
+    /// finished run's result once every stage has run; `None` before the
+    /// first iteration of the first stage.
+    pub fn result_so_far(&mut self) -> Result<Option<MatchResult>, MatchError> {
+        if self.is_finished() {
+            return self.result().map(Some);
+        }
+        let done = self.checkpoint.done.len();
+        let (k, x) = match (&self.checkpoint.current, &self.checkpoint.warm) {
+            (Some(current), _) => (done, current.state.x.clone()),
+            (None, Some(warm)) => (done - 1, warm.clone()),
+            (None, None) => return Ok(None),
+        };
+        let last = self.plan.stages.len() - 1;
+        let (mut p0, mut pf) = self.unknowns_of(k)?.unpack(&x);
+        if self.template_of(k).0 != self.template_of(last).0 {
+            let (coarse, fine) = (self.template_of(k).1, self.template_of(last).1);
+            let kind = self.plan.model.kind();
+            (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, self.plan.model.kernel())?;
+        }
+        self.shot(p0, pf, false).map(Some)
+    }
+
+    /// Shoots momenta on the source with the last stage's data term and
+    /// measures where they end.
+    fn shot(&mut self, p0: Vec<f64>, pf: Vec<f64>, finished: bool) -> Result<MatchResult, MatchError> {
         self.stage_target(self.plan.stages.len() - 1)?;
-        let x = self.checkpoint.warm.as_ref().ok_or(MatchError::NotFinished)?;
-        let (p0, pf) = self.unknowns.unpack(x);
         let (energies, trajectory) = self.problem.objective(&p0, &pf)?;
         let template = self.problem.template();
         let last = trajectory.steps();
@@ -746,18 +783,27 @@ impl Session {
             .with_signal(Some(trajectory.signal(last).to_vec()))?;
         let quality = crate::quality(&matched, &self.target)?;
         let initial_quality = crate::quality(template, &self.target)?;
-        let done = &self.checkpoint.done;
+        // Finished stages, and the one under way when stopped within it.
+        let stages = self.checkpoint.done.clone();
+        let mut runs: Vec<(&[Iteration], &Iteration)> =
+            stages.iter().map(|s| (s.iterations.as_slice(), &s.initial)).collect();
+        if let Some(current) = &self.checkpoint.current {
+            runs.push((&current.iterations, &current.initial));
+        }
+        let iterations = runs.iter().map(|(its, _)| its.len()).sum();
+        let evaluations = runs.iter().map(|(its, initial)| its.last().unwrap_or(initial).evaluations).sum();
         Ok(MatchResult {
             p0,
             pf,
             energies,
             trajectory,
-            stages: done.clone(),
-            iterations: done.iter().map(|s| s.iterations.len()).sum(),
-            evaluations: done.iter().map(|s| s.iterations.last().unwrap_or(&s.initial).evaluations).sum(),
+            stages,
+            iterations,
+            evaluations,
             seconds: self.checkpoint.seconds,
             quality,
             initial_quality,
+            finished,
         })
     }
 }

@@ -460,7 +460,7 @@ impl Progress {
         })
     }
 
-    /// The run's outcome as Python sees it: an error if the callback
+    /// An atlas's outcome as Python sees it: an error if the callback
     /// raised or stopped it (naming the checkpoint that resumes it).
     fn finish(self, outcome: Outcome, checkpoint: Option<&Path>) -> PyResult<()> {
         if let Some(e) = self.error {
@@ -474,6 +474,14 @@ impl Progress {
             return Err(err(format!("stopped by the progress callback (it returned True){resume}")));
         }
         Ok(())
+    }
+
+    /// The callback's exception or Ctrl-C, re-raised.
+    fn raised(&mut self) -> PyResult<()> {
+        match self.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
     }
 }
 
@@ -522,7 +530,9 @@ fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<O
 /// Registers `source` onto `target` (both `FShape`) as `fshape match`
 /// does, with `config` a dict, a TOML path or TOML text. `progress`, if
 /// given, is called with a dict per event (`event`: "stage", "iteration",
-/// "stage_finished"); returning True stops the run (FShapeError).
+/// "stage_finished"); returning True ends the run with its result so far
+/// (`stopped` True: the current momenta carried to the source and shot),
+/// raising ends it and re-raises.
 /// `stage_templates` are coarser templates for the stages before the last.
 /// `checkpoint`, a path, is written after every accepted iteration; when
 /// the file exists the run resumes from it (to the bits of a run never
@@ -530,7 +540,8 @@ fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<O
 /// Ctrl-C or a kill; on a finished run it returns the result without
 /// iterating. A checkpoint of other inputs or configuration is refused.
 ///
-/// Returns a dict: `p0` (n × d), `pf` (n), `energies`, `quality` and
+/// Returns a dict: `stopped` (whether the callback ended the run before
+/// its end), `p0` (n × d), `pf` (n), `energies`, `quality` and
 /// `initial_quality` (how close the matched shape and the template are to
 /// the target), `stages` (every iteration's J), `iterations`,
 /// `evaluations`, `seconds`, `geodesic` (`times`, `points` T × n × d,
@@ -570,15 +581,24 @@ fn match_shapes<'py>(
             session = session.with_checkpoint_file(path);
         }
         let outcome = session.run(&mut observer)?;
-        let result = if outcome == Outcome::Finished { Some(session.result()?) } else { None };
+        // A callback that returned True ends the run with its result so
+        // far; one that raised (or Ctrl-C) gets no result.
+        let result = match outcome {
+            Outcome::Finished => Some(session.result()?),
+            Outcome::Interrupted if observer.error.is_none() => session.result_so_far()?,
+            Outcome::Interrupted => None,
+        };
         let used = config.resolved(session.plan().scales);
         let template = session.problem().template().clone();
-        Ok((outcome, result, used, template))
+        Ok((result, used, template))
     });
-    let (outcome, result, used, template) = run.map_err(err)?;
-    observer.finish(outcome, checkpoint.as_deref())?;
-    let r = result.expect("a finished run has a result");
+    let (result, used, template) = run.map_err(err)?;
+    observer.raised()?;
+    let Some(r) = result else {
+        return Err(err("stopped by the progress callback before the first iteration: there is no result yet"));
+    };
     let d = PyDict::new(py);
+    d.set_item("stopped", !r.finished)?;
     let dim = template.dim();
     d.set_item("p0", rows(py, r.p0.clone(), dim))?;
     d.set_item("pf", PyArray1::from_slice(py, &r.pf))?;

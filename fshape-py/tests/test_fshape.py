@@ -181,10 +181,19 @@ def test_a_small_match_equals_the_cli_on_the_same_inputs_and_config(tmp_path):
     assert np.array_equal(shot["points"][-1], end.points)
 
 
-def test_the_callback_stops_a_run_and_its_exceptions_propagate():
+def test_the_callback_ends_a_run_with_its_result_so_far_and_its_exceptions_propagate():
     src, tgt = sphere_pair()
-    with pytest.raises(fshape.FShapeError, match="stopped by the progress callback"):
-        fshape.match(src, tgt, CONFIG, progress=lambda e: e["event"] == "iteration")
+    whole = fshape.match(src, tgt, CONFIG)
+    assert whole["stopped"] is False
+    # True at the third iteration: the run ends there and returns where it got.
+    early = fshape.match(src, tgt, CONFIG, progress=stop_at(3))
+    assert early["stopped"] is True and early["iterations"] == 3
+    assert early["p0"].shape == whole["p0"].shape and early["matched"].points.shape == src.points.shape
+    assert early["energies"]["value"] > whole["energies"]["value"]
+    # True at the first event: the start, zero momenta.
+    start = fshape.match(src, tgt, CONFIG, progress=lambda e: True)
+    assert start["stopped"] is True and start["iterations"] == 0
+    assert not start["p0"].any() and np.array_equal(start["matched"].points, src.points)
 
     def boom(event):
         raise RuntimeError("from the callback")
@@ -209,8 +218,8 @@ def test_a_match_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(t
     whole = fshape.match(src, tgt, CONFIG)
     assert whole["iterations"] > 4
     path = tmp_path / "run.ckpt"
-    with pytest.raises(fshape.FShapeError, match=r"checkpoint=.*run\.ckpt resumes it"):
-        fshape.match(src, tgt, CONFIG, progress=stop_at(4), checkpoint=path)
+    stopped = fshape.match(src, tgt, CONFIG, progress=stop_at(4), checkpoint=path)
+    assert stopped["stopped"] is True and stopped["iterations"] == 4
     assert path.exists()
     events = []
     resumed = fshape.match(src, tgt, CONFIG, progress=events.append, checkpoint=path)

@@ -516,3 +516,37 @@ fn vertex_counts_are_checked_with_their_key() {
         }
     }
 }
+
+#[test]
+fn a_stopped_run_gives_its_result_so_far_on_the_source_and_then_goes_on_unchanged() {
+    let (source, target, config) = fine_inputs("vertices = [60, 200]");
+    let mut whole = Session::new(&source, &target, &config).unwrap();
+    whole.run(&mut ()).unwrap();
+    let whole = whole.result().unwrap();
+    assert!(whole.finished);
+    let mut session = Session::new(&source, &target, &config).unwrap();
+    assert!(session.result_so_far().unwrap().is_none(), "nothing before the first iteration");
+    // Stopped in the first stage, on the 60-vertex template.
+    let mut stop = Recorder { stop_after: Some(3), ..Recorder::default() };
+    assert_eq!(session.run(&mut stop).unwrap(), Outcome::Interrupted);
+    let so_far = session.result_so_far().unwrap().expect("three iterations");
+    assert!(!so_far.finished);
+    assert_eq!((so_far.iterations, so_far.p0.len(), so_far.pf.len()), (3, 642 * 3, 642));
+    assert!(so_far.stages.is_empty(), "no stage finished");
+    assert!(so_far.energies.value.is_finite() && so_far.quality.signal_rms.is_some());
+    assert!(matches!(session.result(), Err(MatchError::NotFinished)));
+    // The session goes on to the bits of a run never stopped.
+    assert_eq!(session.run(&mut ()).unwrap(), Outcome::Finished);
+    let end = session.result_so_far().unwrap().unwrap();
+    assert!(end.finished);
+    assert_eq!((bits(&end.p0), bits(&end.pf)), (bits(&whole.p0), bits(&whole.pf)));
+    assert_eq!(end.iterations, whole.iterations);
+    // Stopped in the last stage, on the source: the result is the point the
+    // optimiser holds, J as the observer saw it at the last iteration.
+    let mut late = Session::new(&source, &target, &config).unwrap();
+    let mut stop = Recorder { stop_after: Some(whole.iterations - 1), ..Recorder::default() };
+    assert_eq!(late.run(&mut stop).unwrap(), Outcome::Interrupted);
+    let so_far = late.result_so_far().unwrap().unwrap();
+    assert_eq!(so_far.stages.len(), 2);
+    assert_eq!(so_far.energies.value.to_bits(), stop.iterations.last().unwrap().value.to_bits());
+}
