@@ -80,7 +80,7 @@ fn run_match(
     let cfg = run.join("config.toml");
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
     io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
-    crate::match_cmd::run(&crate::match_cmd::MatchArgs {
+    crate::commands::matching::run_with(&crate::commands::matching::MatchArgs {
         source,
         target,
         signals: (None, None),
@@ -244,7 +244,7 @@ pub fn atlas_digits(a: &DigitsArgs<'_>, subjects: usize) -> Result<()> {
     let cfg = run.join("config.toml");
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
     io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
-    crate::atlas_cmd::run(&crate::atlas_cmd::AtlasArgs {
+    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
         subjects: &[],
         list: Some(&list_path),
         template: Some(&template_path),
@@ -321,7 +321,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
                   # by less than 1e-3 over 5 iterations.\n\n";
     io::write_atomic(&cfg, format!("{header}{}", config.to_toml()).as_bytes(), false)?;
     eprintln!("atlas-spheres: {} subjects shot from an ellipsoid of {n} vertices -> {}", subjects.len(), run.display());
-    crate::atlas_cmd::run(&crate::atlas_cmd::AtlasArgs {
+    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
         subjects: &[],
         list: Some(&list_path),
         template: Some(&start),
@@ -330,7 +330,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
         resume: false,
         stop_after: None,
         signal_name: None,
-        view: (30.0, 20.0),
+        view: crate::args::DEFAULT_CAMERA.pair(),
         stage_templates: &[],
     })?;
     // The estimate against the truth, and the bound.
@@ -362,7 +362,8 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
         "quality": got,
     });
     io::write_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&report)?.as_bytes(), false)?;
-    let view = crate::render::View::fit(&[&truth, &estimate, &sphere], 30.0, 20.0);
+    let (azimuth, elevation) = crate::args::DEFAULT_CAMERA.pair();
+    let view = crate::render::View::fit(&[&truth, &estimate, &sphere], azimuth, elevation);
     for (name, shape) in [("truth.png", &truth), ("estimate.png", &estimate)] {
         io::write_atomic(&dir.join(name), &crate::render::picture(shape, &view)?, false)?;
     }

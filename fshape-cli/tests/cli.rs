@@ -343,7 +343,9 @@ fn shoot_refuses_bad_input_and_writes_nothing() {
         all.extend(args);
         let r = fshape(&all);
         let err = String::from_utf8_lossy(&r.stderr);
-        assert_eq!(r.status.code(), Some(1), "{all:?}: {err}");
+        // A value out of range is a usage error (clap's, exit 2); bad files are bad input (1).
+        let code = if needle == "--times" { 2 } else { 1 };
+        assert_eq!(r.status.code(), Some(code), "{all:?}: {err}");
         assert!(err.contains(needle), "{all:?}: {err}");
         assert!(!out.exists(), "{all:?}: output written despite the error");
     }
@@ -1144,7 +1146,7 @@ fn batch_refuses_a_bad_table_and_a_bad_shard() {
     };
     for shard in ["2/2", "x/2", "1"] {
         let o = run(&["--shard", shard]);
-        assert_eq!(o.status.code(), Some(1));
+        assert_eq!(o.status.code(), Some(2), "a usage error");
         assert!(String::from_utf8_lossy(&o.stderr).contains("--shard"), "{shard}");
     }
     std::fs::write(&pairs, "source,target,weight\na.ply,b.ply,1\n").unwrap();

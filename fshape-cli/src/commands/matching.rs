@@ -4,7 +4,7 @@
 //! iteration, so a run killed at any point resumes (`--resume`) to the
 //! result an uninterrupted run gives, bit for bit.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -17,7 +17,63 @@ use fshape_shoot::{ModelKind, ShootError};
 use fshape_varifold::VarifoldError;
 use serde::Serialize;
 
-/// The command's arguments.
+/// `fshape match`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The template mesh (its signal, if any, is f_0; else 0).
+    pub source: PathBuf,
+    /// The target mesh.
+    pub target: PathBuf,
+    /// Model, attachment, optimizer and schedule (TOML; see fshape_match::Config).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Output directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from OUT/checkpoint.bin.
+    #[arg(long)]
+    pub resume: bool,
+    /// Stop after this many iterations in this run, leaving the checkpoint.
+    #[arg(long)]
+    pub stop_after: Option<usize>,
+    #[command(flatten)]
+    pub times: crate::args::Times,
+    /// Vertex property of both meshes to read as the signal.
+    #[arg(long)]
+    pub signal_name: Option<String>,
+    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
+    #[arg(long, visible_alias = "signal")]
+    pub source_signal: Option<PathBuf>,
+    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
+    #[arg(long)]
+    pub target_signal: Option<PathBuf>,
+    #[command(flatten)]
+    pub view: crate::args::View,
+    /// Coarser versions of SOURCE (same surface, fewer vertices, with
+    /// its signal), one per stage before the last: the coarse stages
+    /// run on them and carry their momenta to the next.
+    #[arg(long, value_delimiter = ',')]
+    pub stage_templates: Vec<PathBuf>,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    run_with(&MatchArgs {
+        source: &a.source,
+        target: &a.target,
+        signals: (a.source_signal.as_deref(), a.target_signal.as_deref()),
+        config: &a.config,
+        out: &a.out,
+        resume: a.resume,
+        stop_after: a.stop_after,
+        signal_name: a.signal_name,
+        times: &a.times.times,
+        view: a.view.camera.pair(),
+        stage_templates: &a.stage_templates,
+    })
+}
+
+/// What a registration needs from the command line (the demos and
+/// `fshape batch` make it too).
 pub struct MatchArgs<'a> {
     pub source: &'a Path,
     pub target: &'a Path,
@@ -142,13 +198,6 @@ impl Observer for Progress {
 }
 
 /// Errors unless every time of `--times` is in [0, 1].
-pub(crate) fn check_times(times: &[f64]) -> Result<()> {
-    if let Some(t) = times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
-        bail!("--times: {t} is outside [0, 1]");
-    }
-    Ok(())
-}
-
 /// The library says "the target shape has no signal"; the user knows it by
 /// its file. (A source without a signal starts from f_0 = 0: only the
 /// target's signal is compared.)
@@ -164,19 +213,19 @@ fn name_the_target(e: MatchError, target: &Path) -> anyhow::Error {
     }
 }
 
-pub fn run(a: &MatchArgs<'_>) -> Result<()> {
+pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let config = Config::read(a.config)?;
-    check_times(a.times)?;
-    let source = crate::load(a.source, a.signal_name.clone(), a.signals.0)?;
-    let target = crate::load(a.target, a.signal_name.clone(), a.signals.1)?;
+    let source = crate::inputs::load(a.source, a.signal_name.clone(), a.signals.0)?;
+    let target = crate::inputs::load(a.target, a.signal_name.clone(), a.signals.1)?;
     let session = match Session::new(&source, &target, &config) {
         Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,
     };
-    let session = match crate::stage_templates(a.stage_templates, a.signal_name.clone(), session.plan().stages.len())? {
-        None => session,
-        Some(templates) => session.with_stage_templates(templates).context("--stage-templates")?,
-    };
+    let session =
+        match crate::inputs::stage_templates(a.stage_templates, a.signal_name.clone(), session.plan().stages.len())? {
+            None => session,
+            Some(templates) => session.with_stage_templates(templates).context("--stage-templates")?,
+        };
     let checkpoint_path = a.out.join("checkpoint.bin");
     let session = if a.resume { session.resume_from_file(&checkpoint_path).context("--resume")? } else { session };
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -195,7 +244,7 @@ pub fn run(a: &MatchArgs<'_>) -> Result<()> {
     let result = session.result()?;
     let (p0, pf, traj) = (&result.p0, &result.pf, &result.trajectory);
     let template = session.problem().template().clone();
-    let (mut outputs, mut files) = crate::trajectory_files(&template, traj, a.times, a.out)?;
+    let (mut outputs, mut files) = crate::outputs::trajectory_files(&template, traj, a.times, a.out)?;
     let dim = template.dim();
     let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
     // The configuration with the weights the model used, for `fshape shoot`.
@@ -325,7 +374,7 @@ fn register_plot_font() -> Result<()> {
         plotters::style::register_font(
             "sans-serif",
             plotters::style::FontStyle::Normal,
-            include_bytes!("../assets/DejaVuSansMono.ttf"),
+            include_bytes!("../../assets/DejaVuSansMono.ttf"),
         )
         .is_ok()
     });

@@ -16,6 +16,60 @@ use serde::Serialize;
 
 use crate::render::{self, SIZE, View};
 
+/// `fshape atlas`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The subjects' meshes (with a `signal` vertex property).
+    pub subjects: Vec<PathBuf>,
+    /// A list of subjects, one per line: `mesh[,signal file]`, paths
+    /// relative to the list (read before the positional ones).
+    #[arg(long = "subjects")]
+    pub list: Option<PathBuf>,
+    /// The initial template (default: the first subject). Without a
+    /// signal it takes the subjects' mean (vertex by vertex when they
+    /// share its vertices).
+    #[arg(long)]
+    pub template: Option<PathBuf>,
+    /// The configuration (TOML, as for `fshape match`).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from OUT/checkpoint.bin.
+    #[arg(long)]
+    pub resume: bool,
+    /// Stop after this many iterations in this run, leaving the checkpoint.
+    #[arg(long)]
+    pub stop_after: Option<usize>,
+    /// Vertex property of every mesh to read as the signal.
+    #[arg(long)]
+    pub signal_name: Option<String>,
+    #[command(flatten)]
+    pub view: crate::args::View,
+    /// Coarser versions of the initial template (same surface, fewer
+    /// vertices; without a signal they take the template's), one per
+    /// stage before the last: the coarse stages run on them and carry
+    /// the template and momenta to the next.
+    #[arg(long, value_delimiter = ',')]
+    pub stage_templates: Vec<PathBuf>,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    run_with(&AtlasArgs {
+        subjects: &a.subjects,
+        list: a.list.as_deref(),
+        template: a.template.as_deref(),
+        config: &a.config,
+        out: &a.out,
+        resume: a.resume,
+        stop_after: a.stop_after,
+        signal_name: a.signal_name,
+        view: a.view.camera.pair(),
+        stage_templates: &a.stage_templates,
+    })
+}
+
 /// The command's arguments.
 pub struct AtlasArgs<'a> {
     /// The subjects' mesh files (after those of `--subjects`).
@@ -123,7 +177,7 @@ fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<(PathBuf, Option<PathBuf>)>> {
     Ok(paths)
 }
 
-pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
+pub fn run_with(a: &AtlasArgs<'_>) -> Result<()> {
     #[cfg(feature = "mpi")]
     {
         if let Some((world, universe)) = crate::processes::init()? {
@@ -135,7 +189,7 @@ pub fn run(a: &AtlasArgs<'_>) -> Result<()> {
             return match run_on(a, Some(Box::new(world)), rank) {
                 Ok(()) => Ok(()),
                 Err(e) => {
-                    eprintln!("error (process {rank} of {size}): {}", crate::message(&e));
+                    eprintln!("error (process {rank} of {size}): {}", crate::inputs::message(&e));
                     crate::processes::abort(&universe)
                 }
             };
@@ -150,10 +204,10 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
     let paths = subject_paths(a)?;
     let subjects: Vec<FShape> = paths
         .iter()
-        .map(|(mesh, signal)| crate::load(mesh, a.signal_name.clone(), signal.as_deref()))
+        .map(|(mesh, signal)| crate::inputs::load(mesh, a.signal_name.clone(), signal.as_deref()))
         .collect::<Result<_>>()?;
     let (template_path, template) = match a.template {
-        Some(p) => (p.to_path_buf(), crate::load(p, a.signal_name.clone(), None)?),
+        Some(p) => (p.to_path_buf(), crate::inputs::load(p, a.signal_name.clone(), None)?),
         None => (paths[0].0.clone(), subjects[0].clone()),
     };
     let template = fshape_match::atlas::initial_template(template, &subjects)?;
@@ -161,10 +215,11 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         Err(e @ MatchError::Kinds(_)) => bail!("{}: {e}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
     };
-    let atlas = match crate::stage_templates(a.stage_templates, a.signal_name.clone(), atlas.plan().stages.len())? {
-        None => atlas,
-        Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
-    };
+    let atlas =
+        match crate::inputs::stage_templates(a.stage_templates, a.signal_name.clone(), atlas.plan().stages.len())? {
+            None => atlas,
+            Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
+        };
     let checkpoint_path = a.out.join("checkpoint.bin");
     let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };
     let atlas = match cluster {
@@ -172,12 +227,12 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => atlas,
     };
     let model = atlas.plan().model.clone();
-    let mut progress = crate::match_cmd::Progress::new(model.gamma_w(), a.stop_after);
+    let mut progress = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after);
     if rank > 0 {
         // Every process runs the same iterations (so --stop-after stops
         // them all at once); process 0 writes.
         let mut atlas = atlas;
-        let mut quiet = crate::match_cmd::Progress::new(model.gamma_w(), a.stop_after).hidden();
+        let mut quiet = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after).hidden();
         atlas.run(&mut quiet)?;
         return Ok(());
     }
@@ -303,7 +358,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         push("modes.png".into(), render::png_sized(&rgb, width, height)?);
     }
     let (svg, png) =
-        crate::match_cmd::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
+        crate::commands::matching::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
     push("energy.svg".into(), svg.into_bytes());
     push("energy.png".into(), png);
     let n = result.subjects.len() as f64;

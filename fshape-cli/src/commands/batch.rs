@@ -20,6 +20,59 @@ use anyhow::{Context, Result, bail};
 use fshape_mesh::io;
 use serde::Serialize;
 
+/// `fshape batch`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The pairs: a header naming the columns (source, target, and
+    /// optionally source_signal, target_signal, name), then one pair per
+    /// line; paths relative to the table, `#` comments.
+    pub pairs: PathBuf,
+    /// The configuration of every registration (as for `fshape match`).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Rows registered at once on this machine, the cores shared among
+    /// them (results are the same bits in any mode).
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// This task's share of the rows, I/N with 0 <= I < N (rows I,
+    /// I + N, ...): a cluster job array. Default: Slurm's
+    /// SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN of SLURM_ARRAY_TASK_COUNT
+    /// when set, else every row.
+    #[arg(long, value_parser = crate::args::shard)]
+    pub shard: Option<crate::args::Shard>,
+    /// Only write the index from the rows' directories.
+    #[arg(long)]
+    pub index_only: bool,
+    #[command(flatten)]
+    pub times: crate::args::Times,
+    /// Vertex property of every mesh to read as the signal.
+    #[arg(long)]
+    pub signal_name: Option<String>,
+    #[command(flatten)]
+    pub view: crate::args::View,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let shard = match a.shard {
+        Some(s) => Some((s.index, s.count)),
+        None => shard_from_env()?,
+    };
+    run_with(&BatchArgs {
+        pairs: &a.pairs,
+        config: &a.config,
+        out: &a.out,
+        jobs: a.jobs,
+        shard,
+        index_only: a.index_only,
+        signal_name: a.signal_name,
+        times: &a.times.times,
+        view: a.view.camera.pair(),
+    })
+}
+
 /// The command's arguments.
 pub struct BatchArgs<'a> {
     /// The table of pairs.
@@ -234,7 +287,7 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
         std::fs::remove_file(&error_file).with_context(|| format!("removing {}", error_file.display()))?;
     }
     let resume = dir.join("checkpoint.bin").exists();
-    let result = crate::match_cmd::run(&crate::match_cmd::MatchArgs {
+    let result = crate::commands::matching::run_with(&crate::commands::matching::MatchArgs {
         source: &row.source,
         target: &row.target,
         signals: (row.source_signal.as_deref(), row.target_signal.as_deref()),
@@ -248,7 +301,7 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
         stage_templates: &[],
     });
     if let Err(e) = &result {
-        let message = crate::message(e);
+        let message = crate::inputs::message(e);
         eprintln!("row {} ({}:{}) failed: {message}", row.name, a.pairs.display(), row.line);
         io::write_atomic(&error_file, format!("{message}\n").as_bytes(), false)?;
     }
@@ -281,17 +334,7 @@ pub fn shard_from_env() -> Result<Option<(usize, usize)>> {
 }
 
 /// Parses `I/N` (I from 0 to N − 1).
-pub fn parse_shard(s: &str) -> Result<(usize, usize)> {
-    let bad = || format!("--shard: expected I/N with 0 <= I < N, got `{s}`");
-    let (i, n) = s.split_once('/').with_context(bad)?;
-    let (i, n): (usize, usize) = (i.trim().parse().with_context(bad)?, n.trim().parse().with_context(bad)?);
-    if i >= n {
-        bail!(bad());
-    }
-    Ok((i, n))
-}
-
-pub fn run(a: &BatchArgs<'_>) -> Result<()> {
+pub fn run_with(a: &BatchArgs<'_>) -> Result<()> {
     #[cfg(feature = "mpi")]
     {
         if let Some((world, universe)) = crate::processes::init()? {
@@ -333,7 +376,6 @@ pub fn run(a: &BatchArgs<'_>) -> Result<()> {
 /// Registers this shard's rows that have not finished; an error when any
 /// of its rows failed.
 fn run_rows(a: &BatchArgs<'_>, rows: &[Row]) -> Result<()> {
-    crate::match_cmd::check_times(a.times)?;
     fshape_match::Config::read(a.config)?;
     let (shard, shards) = a.shard.unwrap_or((0, 1));
     let mine: Vec<&Row> = rows.iter().filter(|r| r.index % shards == shard).collect();

@@ -1,0 +1,110 @@
+//! Values that several commands take, parsed once by clap: the camera of
+//! the pictures, the times at which a geodesic is written, a job array's
+//! shard. A bad value is a usage error (exit status 2) naming the flag.
+
+use clap::Args;
+
+/// The camera of every picture unless `--view` says otherwise (the
+/// demos' too): azimuth 30°, elevation 20°.
+pub const DEFAULT_CAMERA: Camera = Camera { azimuth: 30.0, elevation: 20.0 };
+
+/// `--times`' default: five states from t = 0 to 1.
+const DEFAULT_TIMES: &str = "0,0.25,0.5,0.75,1";
+
+/// The camera of the pictures: azimuth (about z, from the −y side) and
+/// elevation (90 looks down z), in degrees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub azimuth: f64,
+    pub elevation: f64,
+}
+
+impl Camera {
+    /// (azimuth, elevation).
+    pub fn pair(self) -> (f64, f64) {
+        (self.azimuth, self.elevation)
+    }
+}
+
+impl std::fmt::Display for Camera {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{},{}", self.azimuth, self.elevation)
+    }
+}
+
+fn camera(s: &str) -> Result<Camera, String> {
+    let bad = || format!("expected azimuth,elevation (two finite degrees), got `{s}`");
+    let (a, e) = s.split_once(',').ok_or_else(bad)?;
+    let (azimuth, elevation): (f64, f64) = (a.trim().parse().map_err(|_| bad())?, e.trim().parse().map_err(|_| bad())?);
+    if !(azimuth.is_finite() && elevation.is_finite()) {
+        return Err(bad());
+    }
+    Ok(Camera { azimuth, elevation })
+}
+
+/// `--view AZIMUTH,ELEVATION`.
+#[derive(Args, Clone, Copy, Debug)]
+pub struct View {
+    /// Camera of the PNG pictures: azimuth,elevation in degrees (the
+    /// azimuth turns about z, from the −y side; elevation 90 looks down z).
+    #[arg(
+        long = "view",
+        value_name = "AZIMUTH,ELEVATION",
+        default_value_t = DEFAULT_CAMERA,
+        allow_hyphen_values = true,
+        value_parser = camera
+    )]
+    pub camera: Camera,
+}
+
+fn time(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(t) if (0.0..=1.0).contains(&t) => Ok(t),
+        Ok(t) => Err(format!("{t} is outside [0, 1]")),
+        Err(_) => Err(format!("`{s}` is not a number")),
+    }
+}
+
+/// `--times T,...`.
+#[derive(Args, Clone, Debug)]
+pub struct Times {
+    /// Times in [0, 1] at which to write the geodesic's states.
+    #[arg(long = "times", value_delimiter = ',', default_value = DEFAULT_TIMES, value_parser = time)]
+    pub times: Vec<f64>,
+}
+
+/// A job array's share of the rows: task `index` of `count`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+/// `I/N` with 0 ≤ I < N.
+pub fn shard(s: &str) -> Result<Shard, String> {
+    let bad = || format!("expected I/N with 0 <= I < N, got `{s}`");
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (index, count): (usize, usize) = (i.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+    if index >= count {
+        return Err(bad());
+    }
+    Ok(Shard { index, count })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_parse_or_say_why() {
+        assert_eq!(camera("-90,0"), Ok(Camera { azimuth: -90.0, elevation: 0.0 }));
+        assert!(camera("30").unwrap_err().contains("azimuth,elevation"));
+        assert!(camera("nan,0").is_err());
+        assert_eq!(time("0.5"), Ok(0.5));
+        assert!(time("2").unwrap_err().contains("outside [0, 1]"));
+        assert_eq!(shard("1/3"), Ok(Shard { index: 1, count: 3 }));
+        for bad in ["2/2", "x/2", "1"] {
+            assert!(shard(bad).is_err(), "{bad}");
+        }
+    }
+}

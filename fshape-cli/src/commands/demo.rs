@@ -1,0 +1,68 @@
+//! `fshape demo`: the paper's experiments on the repository's data (the
+//! experiments themselves are in `crate::demo`).
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+
+use crate::demo;
+
+/// The experiments `fshape demo` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Experiment {
+    Digits,
+    Bunny,
+    Cortex,
+    AtlasDigits,
+    AtlasSpheres,
+}
+
+/// `fshape demo`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// Which experiment: digits, bunny, cortex, atlas-digits (an atlas
+    /// of 64 writers' 3s) or atlas-spheres (an atlas with a known
+    /// answer); the atlases write `fshape atlas` outputs.
+    pub name: Experiment,
+    /// Output directory.
+    #[arg(long, default_value = "demo-output")]
+    pub out: PathBuf,
+    /// The repository's data directory.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Iteration limit per schedule stage.
+    #[arg(long, default_value_t = 100)]
+    pub max_iterations: usize,
+    /// Digits: the ratios γ_V/γ_f to run.
+    #[arg(long, value_delimiter = ',', default_value = "1,20,100")]
+    pub ratios: Vec<f64>,
+    /// Weight γ_W of the data attachment (scale-free: the demos
+    /// normalise lengths and signals).
+    #[arg(long, default_value_t = 1e3)]
+    pub gamma_w: f64,
+    /// Bunny: the 642-vertex sphere as template and the first three
+    /// stages on it (about a minute per norm) instead of the paper's
+    /// 10242 vertices.
+    #[arg(long)]
+    pub quick: bool,
+    /// atlas-digits: only the first N subjects (0: all 64).
+    #[arg(long, default_value_t = 0)]
+    pub subjects: usize,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    if a.quick && a.name != Experiment::Bunny {
+        bail!("--quick: only the bunny demo has a quick variant");
+    }
+    let data = a.data.unwrap_or_else(demo::default_data);
+    let (out, max_iterations, gamma_w, quick) = (&a.out, a.max_iterations, a.gamma_w, a.quick);
+    let run = demo::RunArgs { out, data: &data, max_iterations, gamma_w, quick };
+    let digits = demo::DigitsArgs { out, data: &data, ratios: &a.ratios, max_iterations, gamma_w };
+    match a.name {
+        Experiment::Bunny => demo::bunny(&run),
+        Experiment::Cortex => demo::cortex(&run),
+        Experiment::AtlasSpheres => demo::atlas_spheres(out, max_iterations, gamma_w),
+        Experiment::AtlasDigits => demo::atlas_digits(&digits, a.subjects),
+        Experiment::Digits => demo::digits(&digits),
+    }
+}

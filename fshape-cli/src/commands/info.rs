@@ -1,0 +1,142 @@
+//! `fshape info`: counts, extent, signal and the validation report of a mesh.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use fshape_mesh::{FShape, Finding, Severity};
+use serde::Serialize;
+
+use crate::inputs::load;
+
+/// `fshape info`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The mesh file.
+    pub file: PathBuf,
+    /// Vertex property to read as the signal (default: `signal` if present).
+    #[arg(long)]
+    pub signal_name: Option<String>,
+    /// Per-vertex signal file replacing the mesh's signal: a CSV column with a
+    /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness) or .mgh/.mgz.
+    #[arg(long)]
+    pub signal: Option<PathBuf>,
+    /// Print JSON for scripts.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    info(&a.file, a.signal_name, a.signal.as_deref(), a.json)
+}
+
+#[derive(Serialize)]
+struct ProblemGroup {
+    code: &'static str,
+    count: usize,
+    examples: Vec<String>,
+}
+
+#[derive(Serialize)]
+struct SignalSummary {
+    min: f64,
+    max: f64,
+    mean: f64,
+}
+
+#[derive(Serialize)]
+struct Info {
+    path: String,
+    dim: usize,
+    cell_kind: &'static str,
+    n_vertices: usize,
+    n_cells: usize,
+    bbox_min: Vec<f64>,
+    bbox_max: Vec<f64>,
+    bbox_diagonal: f64,
+    total_volume: f64,
+    signal: Option<SignalSummary>,
+    closed: bool,
+    boundary_loops: usize,
+    components: usize,
+    euler_characteristic: i64,
+    errors: Vec<ProblemGroup>,
+    warnings: Vec<ProblemGroup>,
+}
+
+fn group(problems: &[&Finding]) -> Vec<ProblemGroup> {
+    let mut out: Vec<ProblemGroup> = Vec::new();
+    for p in problems {
+        match out.iter_mut().find(|g| g.code == p.code()) {
+            Some(g) => {
+                g.count += 1;
+                if g.examples.len() < 5 {
+                    g.examples.push(p.to_string());
+                }
+            }
+            None => out.push(ProblemGroup { code: p.code(), count: 1, examples: vec![p.to_string()] }),
+        }
+    }
+    out
+}
+
+fn summary(path: &Path, s: &FShape) -> Info {
+    let topo = s.topology();
+    let bbox = s.bounding_box();
+    let report = s.validate();
+    let by = |sev| report.problems.iter().filter(|p| p.severity() == sev).collect::<Vec<_>>();
+    Info {
+        path: path.display().to_string(),
+        dim: s.dim(),
+        cell_kind: s.kind().name(),
+        n_vertices: s.n_vertices(),
+        n_cells: s.n_cells(),
+        bbox_diagonal: bbox.diagonal(),
+        bbox_min: bbox.min,
+        bbox_max: bbox.max,
+        total_volume: s.total_volume(),
+        signal: s.signal().filter(|f| !f.is_empty()).map(|f| SignalSummary {
+            min: f.iter().copied().fold(f64::INFINITY, f64::min),
+            max: f.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            mean: f.iter().sum::<f64>() / f.len() as f64,
+        }),
+        closed: topo.is_closed(),
+        boundary_loops: topo.n_boundary_loops,
+        components: topo.n_components,
+        euler_characteristic: topo.euler_characteristic(s.kind(), s.n_cells()),
+        errors: group(&by(Severity::Error)),
+        warnings: group(&by(Severity::Warning)),
+    }
+}
+
+fn info(path: &Path, signal_name: Option<String>, signal: Option<&Path>, json: bool) -> Result<()> {
+    let shape = load(path, signal_name, signal)?;
+    let i = summary(path, &shape);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&i)?);
+        return Ok(());
+    }
+    println!("{}", i.path);
+    println!("  {} mesh in R^{}: {} vertices, {} cells", i.cell_kind, i.dim, i.n_vertices, i.n_cells);
+    println!("  bounding box {:?} .. {:?} (diagonal {:.6})", i.bbox_min, i.bbox_max, i.bbox_diagonal);
+    println!("  total {}: {:.9}", if shape.kind().dim() == 1 { "length" } else { "area" }, i.total_volume);
+    match &i.signal {
+        Some(f) => println!("  signal: min {:.6}, max {:.6}, mean {:.6}", f.min, f.max, f.mean),
+        None => println!("  signal: none"),
+    }
+    println!(
+        "  {}, {} component(s), {} boundary loop(s), Euler characteristic {}",
+        if i.closed { "closed" } else { "open" },
+        i.components,
+        i.boundary_loops,
+        i.euler_characteristic
+    );
+    for (label, groups) in [("error", &i.errors), ("warning", &i.warnings)] {
+        for g in groups {
+            println!("  {label}: {} × {}: {}", g.count, g.code, g.examples.join("; "));
+        }
+    }
+    if i.errors.is_empty() && i.warnings.is_empty() {
+        println!("  no problems found");
+    }
+    Ok(())
+}

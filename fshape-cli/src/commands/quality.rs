@@ -1,0 +1,52 @@
+//! `fshape quality`: how close a shape is to a target.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use crate::inputs::load;
+
+/// `fshape quality`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The shape X (e.g. a registration's state at t = 1).
+    pub source: PathBuf,
+    /// The target Y.
+    pub target: PathBuf,
+    /// Vertex property to read as the signal of both files (default `signal`).
+    #[arg(long)]
+    pub signal_name: Option<String>,
+    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
+    #[arg(long)]
+    pub source_signal: Option<PathBuf>,
+    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
+    #[arg(long)]
+    pub target_signal: Option<PathBuf>,
+    /// Print JSON for scripts.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    quality(&a.source, &a.target, a.signal_name, (a.source_signal.as_deref(), a.target_signal.as_deref()), a.json)
+}
+
+/// `fshape quality`: the match quality of one file against another.
+fn quality(
+    source: &Path,
+    target: &Path,
+    signal_name: Option<String>,
+    signals: (Option<&Path>, Option<&Path>),
+    json: bool,
+) -> Result<()> {
+    let x = load(source, signal_name.clone(), signals.0)?;
+    let y = load(target, signal_name, signals.1)?;
+    let q = fshape_match::quality(&x, &y)
+        .with_context(|| format!("the quality of {} against {}", source.display(), target.display()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&q)?);
+    } else {
+        println!("{} against {}: {}", source.display(), target.display(), q.describe());
+    }
+    Ok(())
+}

@@ -1,0 +1,186 @@
+//! `fshape shoot`: a geodesic from a template and initial momenta.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use fshape_mesh::io;
+use serde::Serialize;
+
+use crate::inputs::load;
+use crate::outputs::trajectory_files;
+
+/// `fshape shoot`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The template mesh (its signal, if any, is f_0; else 0).
+    pub source: PathBuf,
+    /// Initial momenta p_0: CSV, a header line, then p_x,p_y (or p_x,p_y,p_z) per vertex.
+    #[arg(long)]
+    pub momentum: PathBuf,
+    /// Signal momentum p^f (one-column CSV; default 0). For the
+    /// tangential model, the signal residual ζ.
+    #[arg(long)]
+    pub signal_momentum: Option<PathBuf>,
+    /// Model configuration (TOML; see fshape_match::Config).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Output directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub times: crate::args::Times,
+    /// Vertex property of SOURCE to read as the signal.
+    #[arg(long)]
+    pub signal_name: Option<String>,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    shoot(&ShootArgs {
+        source: &a.source,
+        momentum: &a.momentum,
+        signal_momentum: a.signal_momentum.as_deref(),
+        config: &a.config,
+        out: &a.out,
+        times: &a.times.times,
+        signal_name: a.signal_name,
+    })
+}
+
+struct ShootArgs<'a> {
+    source: &'a Path,
+    momentum: &'a Path,
+    signal_momentum: Option<&'a Path>,
+    config: &'a Path,
+    out: &'a Path,
+    times: &'a [f64],
+    signal_name: Option<String>,
+}
+
+#[derive(Serialize)]
+struct ShootSummary {
+    source: String,
+    config: String,
+    model: String,
+    norm: &'static str,
+    integrator: String,
+    steps: usize,
+    /// H(z_k) at every step k = 0..N.
+    hamiltonian: Vec<f64>,
+    /// Relative drift max_k |H_k − H_0| / |H_0| (0 when H_0 = 0).
+    hamiltonian_drift: f64,
+    times: Vec<f64>,
+    files: Vec<String>,
+    final_state: FinalState,
+    seconds: Timing,
+}
+
+#[derive(Serialize)]
+struct FinalState {
+    /// Largest vertex displacement |x_1 − x_0|.
+    max_displacement: f64,
+    /// Root-mean-square displacement.
+    rms_displacement: f64,
+    /// ‖f_1 − f_0‖∞.
+    max_signal_change: f64,
+    /// Largest momentum norm |p_1|.
+    max_momentum: f64,
+}
+
+#[derive(Serialize)]
+struct Timing {
+    total: f64,
+    kernels: f64,
+    fem: f64,
+}
+
+fn shoot(a: &ShootArgs<'_>) -> Result<()> {
+    use fshape_match::Config;
+    use fshape_shoot::Problem;
+    let start = std::time::Instant::now();
+    let config = Config::read(a.config)?;
+    let model = config.model()?;
+    if config.model.normalize {
+        anyhow::bail!(
+            "{}: [model] normalize = true makes the weights relative to a registration's target, and shooting \
+             has none: set normalize = false (the weights are then taken as written), or shoot a registration's \
+             momenta with the shoot.toml that fshape match wrote next to them",
+            a.config.display()
+        );
+    }
+    if let Some(t) = a.times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
+        anyhow::bail!("--times: {t} is outside [0, 1]");
+    }
+    let shape = load(a.source, a.signal_name.clone(), None)?;
+    let (n, dim) = (shape.n_vertices(), shape.dim());
+    let p0 = io::csv::read_vectors(a.momentum, dim)?;
+    if p0.len() != n * dim {
+        anyhow::bail!("{}: {} rows, but {} has {n} vertices", a.momentum.display(), p0.len() / dim, a.source.display());
+    }
+    let pf = match a.signal_momentum {
+        Some(p) => {
+            let v = io::read_signal(p)?.values;
+            if v.len() != n {
+                anyhow::bail!("{}: {} values, but {} has {n} vertices", p.display(), v.len(), a.source.display());
+            }
+            v
+        }
+        None => vec![0.0; n],
+    };
+    let kind = model.kind().name().to_string();
+    let (norm, integrator, steps) = (model.norm().name(), model.integrator().name().to_string(), model.steps());
+    let problem = Problem::new(&shape, model).with_context(|| format!("setting up {}", a.source.display()))?;
+    let traj = problem.shoot(&p0, &pf).with_context(|| format!("shooting from {}", a.source.display()))?;
+    // Everything is computed before anything is written.
+    let template = problem.template().clone();
+    let (mut outputs, files) = trajectory_files(&template, &traj, a.times, a.out)?;
+    let h = traj.hamiltonian.clone();
+    let drift = traj.drift().0;
+    let (x0, x1) = (template.points(), traj.points(steps));
+    let disp: Vec<f64> = x0
+        .chunks_exact(dim)
+        .zip(x1.chunks_exact(dim))
+        .map(|(p, q)| p.iter().zip(q).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt())
+        .collect();
+    let norm_rows =
+        |v: &[f64]| v.chunks_exact(dim).map(|r| r.iter().map(|u| u * u).sum::<f64>().sqrt()).fold(0.0, f64::max);
+    let summary = ShootSummary {
+        source: a.source.display().to_string(),
+        config: a.config.display().to_string(),
+        model: kind,
+        norm,
+        integrator,
+        steps,
+        hamiltonian_drift: drift,
+        hamiltonian: h,
+        times: a.times.to_vec(),
+        files,
+        final_state: FinalState {
+            max_displacement: disp.iter().copied().fold(0.0, f64::max),
+            rms_displacement: (disp.iter().map(|d| d * d).sum::<f64>() / n.max(1) as f64).sqrt(),
+            max_signal_change: traj
+                .signal(steps)
+                .iter()
+                .zip(template.signal().unwrap_or(&[]))
+                .map(|(u, v)| (u - v).abs())
+                .fold(0.0, f64::max),
+            max_momentum: norm_rows(traj.momenta(steps)),
+        },
+        seconds: Timing { total: start.elapsed().as_secs_f64(), kernels: traj.timings.kernels, fem: traj.timings.fem },
+    };
+    outputs.push((a.out.join("summary.json"), serde_json::to_string_pretty(&summary)?.into_bytes()));
+    std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    for (path, bytes) in &outputs {
+        io::write_atomic(path, bytes, false)?;
+    }
+    println!(
+        "{}: {} steps, H from {:.6e} to {:.6e}, max displacement {:.4e}; wrote {} files to {}",
+        a.source.display(),
+        steps,
+        summary.hamiltonian[0],
+        summary.hamiltonian[steps],
+        summary.final_state.max_displacement,
+        outputs.len(),
+        a.out.display()
+    );
+    Ok(())
+}
