@@ -15,10 +15,29 @@ import numpy.typing as npt
 
 __version__: str
 
-Config = Union[Mapping[str, Any], str, "PathLike[str]"]
-"""A configuration: the TOML file's tables as nested dicts
-({"deformation": {"widths": [0.4]}, "attachment": {...}}), a path to a
-TOML file, or TOML text. See the README's configuration reference."""
+class Config:
+    """A checked configuration, as a `fshape match` TOML file holds it
+    (see the README's configuration reference). Errors name the key, and
+    the line or file."""
+
+    def __init__(self, tables: Mapping[str, Any]) -> None:
+        """From the TOML file's tables as nested dicts:
+        {"deformation": {"widths": [0.4]}, "attachment": {...}}."""
+    @staticmethod
+    def from_toml(text: str) -> "Config":
+        """From TOML text."""
+    @staticmethod
+    def read(path: Union[str, "PathLike[str]"]) -> "Config":
+        """From a TOML file."""
+    def to_toml(self) -> str:
+        """Every key, defaults included, as TOML text."""
+    def to_dict(self) -> dict[str, Any]:
+        """Every key, defaults included, as nested dicts."""
+
+ConfigLike = Union[Config, Mapping[str, Any], str, "PathLike[str]"]
+"""What `shoot`, `match` and `atlas` take as their configuration: a
+Config, the TOML tables as nested dicts, or a path to a TOML file (a
+string is always a path; TOML text goes through Config.from_toml)."""
 
 class FShapeError(ValueError):
     """Bad input or a failed computation; the message says what and where."""
@@ -212,7 +231,7 @@ def quality(shape: FShape, target: FShape) -> Quality:
     """How close shape is to target (the numbers every result reports)."""
 
 def shoot(
-    shape: FShape, p0: npt.ArrayLike, config: Config, pf: Optional[npt.ArrayLike] = None
+    shape: FShape, p0: npt.ArrayLike, config: ConfigLike, pf: Optional[npt.ArrayLike] = None
 ) -> Geodesic:
     """The geodesic from shape with momenta p0 (n x d) and pf (n) under the
     config's model (normalize must be false), at every time step."""
@@ -220,7 +239,7 @@ def shoot(
 def match(
     source: FShape,
     target: FShape,
-    config: Config,
+    config: ConfigLike,
     progress: Optional[Progress] = None,
     stage_templates: Optional[Sequence[FShape]] = None,
     times: Optional[Sequence[float]] = None,
@@ -240,7 +259,7 @@ def match(
 
 def atlas(
     subjects: Sequence[FShape],
-    config: Config,
+    config: ConfigLike,
     template: Optional[FShape] = None,
     progress: Optional[Progress] = None,
     stage_templates: Optional[Sequence[FShape]] = None,

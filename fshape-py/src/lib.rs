@@ -327,28 +327,81 @@ fn to_py<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py,
     pythonize::pythonize(py, v).map_err(|e| err(format!("converting a result: {e}")))
 }
 
-/// A configuration from a dict (the TOML file's tables as nested dicts), a
-/// path to a TOML file, or TOML text.
-fn config_of(obj: &Bound<'_, PyAny>) -> PyResult<Config> {
-    if let Ok(d) = obj.cast::<PyDict>() {
+/// A checked configuration, as a `fshape match` TOML file holds it:
+/// `Config(tables)` from the tables as nested dicts, `Config.from_toml(text)`
+/// from TOML text, `Config.read(path)` from a file.
+#[pyclass(name = "Config", module = "fshape", frozen)]
+struct PyConfig {
+    inner: Config,
+}
+
+#[pymethods]
+impl PyConfig {
+    #[new]
+    fn new(tables: &Bound<'_, PyDict>) -> PyResult<PyConfig> {
         let value: serde_json::Value =
-            pythonize::depythonize(d.as_any()).map_err(|e| err(format!("configuration: {e}")))?;
-        return serde_path_to_error::deserialize(value).map_err(|e| {
+            pythonize::depythonize(tables.as_any()).map_err(|e| err(format!("configuration: {e}")))?;
+        let inner = serde_path_to_error::deserialize(value).map_err(|e| {
             let key = e.path().to_string();
             err(MatchError::ConfigSyntax {
                 key: if key == "." { String::new() } else { key },
                 message: e.into_inner().to_string(),
             })
-        });
+        })?;
+        Ok(PyConfig { inner })
+    }
+
+    /// The configuration in TOML text (errors name the key and line).
+    #[staticmethod]
+    fn from_toml(text: &str) -> PyResult<PyConfig> {
+        Ok(PyConfig { inner: Config::parse(text).map_err(err)? })
+    }
+
+    /// The configuration in a TOML file (errors name the file).
+    #[staticmethod]
+    fn read(path: PathBuf) -> PyResult<PyConfig> {
+        Ok(PyConfig { inner: Config::read(&path).map_err(err)? })
+    }
+
+    /// Every key, defaults included, as TOML text.
+    fn to_toml(&self) -> String {
+        self.inner.to_toml()
+    }
+
+    /// Every key, defaults included, as nested dicts.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, &self.inner)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("fshape.Config.from_toml({:?})", self.inner.to_toml())
+    }
+}
+
+/// A configuration from a `Config`, a dict (the TOML file's tables as
+/// nested dicts) or a path to a TOML file. A string is always a path: TOML
+/// text goes through `Config.from_toml`, never guessed.
+fn config_of(obj: &Bound<'_, PyAny>) -> PyResult<Config> {
+    if let Ok(c) = obj.cast::<PyConfig>() {
+        return Ok(c.get().inner.clone());
+    }
+    if let Ok(d) = obj.cast::<PyDict>() {
+        return Ok(PyConfig::new(d)?.inner);
     }
     if let Ok(p) = obj.extract::<PathBuf>() {
-        let text = p.to_string_lossy();
-        if text.contains('\n') || text.contains('[') && text.contains('=') {
-            return Config::parse(&text).map_err(err);
+        if !p.exists() {
+            let text = p.to_string_lossy();
+            let hint = if text.contains('\n') || text.contains('[') {
+                "; TOML text goes through fshape.Config.from_toml(text)"
+            } else {
+                ""
+            };
+            let shown: String = text.chars().take(60).collect();
+            return Err(err(format!("config: no file {shown:?}{hint}")));
         }
         return Config::read(&p).map_err(err);
     }
-    Err(err("config: expected a dict, a path to a TOML file or TOML text"))
+    Err(err("config: expected a fshape.Config, a dict of the TOML tables or a path to a TOML file"))
 }
 
 /// The geodesic as arrays: points (T × n × d), signals (T × n) at `times`.
@@ -528,7 +581,7 @@ fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<O
 }
 
 /// Registers `source` onto `target` (both `FShape`) as `fshape match`
-/// does, with `config` a dict, a TOML path or TOML text. `progress`, if
+/// does, with `config` a `Config`, a dict of the TOML tables or a TOML path. `progress`, if
 /// given, is called with a dict per event (`event`: "stage", "iteration",
 /// "stage_finished"); returning True ends the run with its result so far
 /// (`stopped` True: the current momenta carried to the source and shot),
@@ -701,6 +754,7 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FShapeError", m.py().get_type::<FShapeError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<PyFShape>()?;
+    m.add_class::<PyConfig>()?;
     m.add_function(wrap_pyfunction!(read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(write_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(read_signal, m)?)?;

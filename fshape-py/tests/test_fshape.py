@@ -89,6 +89,26 @@ def test_bad_input_raises_fshape_error_naming_the_problem():
         fshape.attachment(src, tgt, "gauss:0.1", "binet")
 
 
+def test_a_config_comes_from_tables_toml_text_or_a_file_and_text_is_never_guessed(tmp_path):
+    from_tables = fshape.Config(CONFIG)
+    text = from_tables.to_toml()
+    from_text = fshape.Config.from_toml(text)
+    (tmp_path / "c.toml").write_text(text)
+    from_file = fshape.Config.read(tmp_path / "c.toml")
+    assert from_text.to_dict() == from_tables.to_dict() == from_file.to_dict()
+    assert from_tables.to_dict()["deformation"]["widths"] == CONFIG["deformation"]["widths"]
+    src, tgt = sphere_pair()
+    runs = [fshape.match(src, tgt, c) for c in (from_tables, CONFIG, tmp_path / "c.toml", str(tmp_path / "c.toml"))]
+    assert all(np.array_equal(r["p0"], runs[0]["p0"]) for r in runs)
+    # A string is a path: TOML text passed as one is refused with the way to pass it.
+    with pytest.raises(fshape.FShapeError, match=r"no file .*Config\.from_toml"):
+        fshape.match(src, tgt, text)
+    with pytest.raises(fshape.FShapeError, match="line 2"):
+        fshape.Config.from_toml("[model]\ngamma_w = \n")
+    with pytest.raises(fshape.FShapeError, match="missing.toml"):
+        fshape.Config.read(tmp_path / "missing.toml")
+
+
 def test_validation_reports_warnings_with_their_place():
     s = fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]], [[0, 1, 2]])
     v = s.validate()
