@@ -73,6 +73,42 @@ pub struct Times {
     pub times: Vec<f64>,
 }
 
+/// How a long run reports its progress on stderr.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Verbosity {
+    /// Nothing until the result.
+    Quiet,
+    /// A progress bar on a terminal; elsewhere (a batch system's log, a
+    /// file, a pipe) a line per stage and per iteration.
+    #[default]
+    Normal,
+    /// A line per stage and per iteration, even on a terminal.
+    Verbose,
+}
+
+/// `--quiet` / `--verbose`.
+#[derive(Args, Clone, Copy, Debug)]
+pub struct Report {
+    /// No progress on stderr (errors and the result only).
+    #[arg(long, conflicts_with = "verbose")]
+    pub quiet: bool,
+    /// A line per stage and per iteration (elapsed time, J and its parts,
+    /// step, evaluations) even on a terminal; elsewhere, e.g. under Slurm
+    /// or with stderr in a file, these lines are the default.
+    #[arg(long)]
+    pub verbose: bool,
+}
+
+impl Report {
+    pub fn verbosity(self) -> Verbosity {
+        match (self.quiet, self.verbose) {
+            (true, _) => Verbosity::Quiet,
+            (_, true) => Verbosity::Verbose,
+            _ => Verbosity::Normal,
+        }
+    }
+}
+
 /// A job array's share of the rows: task `index` of `count`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shard {

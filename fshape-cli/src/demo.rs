@@ -92,6 +92,8 @@ fn run_match(
         times: &[0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
         view,
         stage_templates,
+        verbosity: crate::args::Verbosity::Normal,
+        label: None,
     })
 }
 
@@ -255,6 +257,7 @@ pub fn atlas_digits(a: &DigitsArgs<'_>, subjects: usize) -> Result<()> {
         signal_name: None,
         view: (0.0, 90.0),
         stage_templates: &[],
+        verbosity: crate::args::Verbosity::Normal,
     })
 }
 
@@ -332,6 +335,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
         signal_name: None,
         view: crate::args::DEFAULT_CAMERA.pair(),
         stage_templates: &[],
+        verbosity: crate::args::Verbosity::Normal,
     })?;
     // The estimate against the truth, and the bound.
     let estimate = io::read_mesh(&run.join("template.ply"), &io::ReadOptions::default())?;

@@ -1437,3 +1437,33 @@ fn render_draws_meshes_from_one_camera_in_one_colour_range_and_refuses_bad_reque
         assert!(!fresh.exists(), "{args:?} wrote {fresh_s}");
     }
 }
+
+#[test]
+fn match_with_stderr_in_a_file_logs_a_line_per_iteration_and_quiet_logs_none() {
+    let (s, t, c) = match_inputs("match_log", 6);
+    let out = tmp("match_log_out");
+    let log = tmp("match_log.txt");
+    let status = Command::new(env!("CARGO_BIN_EXE_fshape"))
+        .args(["match", &s, &t, "--config", &c, "--out", &out.display().to_string()])
+        .stderr(std::fs::File::create(&log).unwrap())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let text = std::fs::read_to_string(&log).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let stages = summary["stages"].as_array().unwrap();
+    let iterations: usize = stages.iter().map(|s| s["iterations"].as_array().unwrap().len()).sum();
+    let lines: Vec<&str> = text.lines().filter(|l| l.contains("] stage ") && l.contains(": J ")).collect();
+    assert_eq!(lines.len(), iterations, "{text}");
+    assert!(iterations > stages.len(), "{text}");
+    // Each names its stage, the elapsed time, J and its parts.
+    assert!(lines[0].starts_with("[") && lines[0].contains(" s] stage 1/2 (gaussian:0.3) iteration 1: J "), "{text}");
+    assert!(lines.iter().all(|l| l.contains("= H ") && l.contains("γ_W·A") && l.contains("evaluations")), "{text}");
+    assert_eq!(text.lines().filter(|l| l.contains(" starts, at most ")).count(), stages.len(), "{text}");
+    // --quiet: the result only.
+    let o =
+        fshape(&["match", &s, &t, "--config", &c, "--out", &tmp("match_log_quiet").display().to_string(), "--quiet"]);
+    assert!(o.status.success());
+    assert!(!String::from_utf8_lossy(&o.stderr).contains(" iteration "), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -53,6 +53,8 @@ pub struct Args {
     /// the template and momenta to the next.
     #[arg(long, value_delimiter = ',')]
     pub stage_templates: Vec<PathBuf>,
+    #[command(flatten)]
+    pub report: crate::args::Report,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -67,6 +69,7 @@ pub fn run(a: Args) -> Result<()> {
         signal_name: a.signal_name,
         view: a.view.camera.pair(),
         stage_templates: &a.stage_templates,
+        verbosity: a.report.verbosity(),
     })
 }
 
@@ -87,6 +90,8 @@ pub struct AtlasArgs<'a> {
     pub view: (f64, f64),
     /// Coarser initial templates, one per stage before the last.
     pub stage_templates: &'a [PathBuf],
+    /// How the run reports its progress.
+    pub verbosity: crate::args::Verbosity,
 }
 
 #[derive(Serialize)]
@@ -227,12 +232,12 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => atlas,
     };
     let model = atlas.plan().model.clone();
-    let mut progress = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after);
+    let mut progress = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after, a.verbosity);
     if rank > 0 {
         // Every process runs the same iterations (so --stop-after stops
         // them all at once); process 0 writes.
         let mut atlas = atlas;
-        let mut quiet = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after).hidden();
+        let mut quiet = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after, a.verbosity).hidden();
         atlas.run(&mut quiet)?;
         return Ok(());
     }

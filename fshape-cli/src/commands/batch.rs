@@ -53,6 +53,8 @@ pub struct Args {
     pub signal_name: Option<String>,
     #[command(flatten)]
     pub view: crate::args::View,
+    #[command(flatten)]
+    pub report: crate::args::Report,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -70,6 +72,7 @@ pub fn run(a: Args) -> Result<()> {
         signal_name: a.signal_name,
         times: &a.times.times,
         view: a.view.camera.pair(),
+        verbosity: a.report.verbosity(),
     })
 }
 
@@ -88,6 +91,8 @@ pub struct BatchArgs<'a> {
     pub signal_name: Option<String>,
     pub times: &'a [f64],
     pub view: (f64, f64),
+    /// How each row reports its progress (its lines start with its name).
+    pub verbosity: crate::args::Verbosity,
 }
 
 /// One row of the table.
@@ -299,6 +304,8 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
         times: a.times,
         view: a.view,
         stage_templates: &[],
+        verbosity: a.verbosity,
+        label: Some(&row.name),
     });
     if let Err(e) = &result {
         let message = crate::inputs::message(e);

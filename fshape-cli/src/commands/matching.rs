@@ -49,6 +49,8 @@ pub struct Args {
     pub target_signal: Option<PathBuf>,
     #[command(flatten)]
     pub view: crate::args::View,
+    #[command(flatten)]
+    pub report: crate::args::Report,
     /// Coarser versions of SOURCE (same surface, fewer vertices, with
     /// its signal), one per stage before the last: the coarse stages
     /// run on them and carry their momenta to the next.
@@ -69,6 +71,8 @@ pub fn run(a: Args) -> Result<()> {
         times: &a.times.times,
         view: a.view.camera.pair(),
         stage_templates: &a.stage_templates,
+        verbosity: a.report.verbosity(),
+        label: None,
     })
 }
 
@@ -90,6 +94,10 @@ pub struct MatchArgs<'a> {
     /// Coarser templates of the stages before the last (empty: all stages
     /// on the source).
     pub stage_templates: &'a [std::path::PathBuf],
+    /// How the run reports its progress.
+    pub verbosity: crate::args::Verbosity,
+    /// What starts each progress line (a batch row's name), if anything.
+    pub label: Option<&'a str>,
 }
 
 #[derive(Serialize)]
@@ -127,25 +135,57 @@ struct Summary<'a> {
     files: Vec<String>,
 }
 
-/// The progress bar (drawn only on a terminal) and `--stop-after`.
+/// The progress bar on a terminal, a line per stage and iteration
+/// elsewhere (or with `--verbose`), and `--stop-after`.
 pub(crate) struct Progress {
     gamma_w: f64,
     /// Iterations this invocation may still make.
     budget: Option<usize>,
     bar: Option<indicatif::ProgressBar>,
-    /// Never draw (the other processes of an MPI run).
+    /// Never draw (the other processes of an MPI run, `--quiet`).
     hidden: bool,
+    /// Lines instead of a bar.
+    lines: bool,
+    /// What starts each line, e.g. "[row 3] ".
+    label: String,
+    /// The stage under way, as "stage k/n (kernel)".
+    stage: String,
+    start: Instant,
 }
 
 impl Progress {
-    /// For a model with weight γ_W, stopping after `budget` iterations.
-    pub(crate) fn new(gamma_w: f64, budget: Option<usize>) -> Progress {
-        Progress { gamma_w, budget, bar: None, hidden: false }
+    /// For a model with weight γ_W, stopping after `budget` iterations,
+    /// reporting as `verbosity` says.
+    pub(crate) fn new(gamma_w: f64, budget: Option<usize>, verbosity: crate::args::Verbosity) -> Progress {
+        use crate::args::Verbosity;
+        use std::io::IsTerminal;
+        let lines = match verbosity {
+            Verbosity::Quiet => false,
+            Verbosity::Normal => !std::io::stderr().is_terminal(),
+            Verbosity::Verbose => true,
+        };
+        Progress {
+            gamma_w,
+            budget,
+            bar: None,
+            hidden: verbosity == Verbosity::Quiet,
+            lines,
+            label: String::new(),
+            stage: String::new(),
+            start: Instant::now(),
+        }
     }
 
-    /// The same budget, no bar.
+    /// The same budget, nothing shown.
     pub(crate) fn hidden(mut self) -> Progress {
         self.hidden = true;
+        self.lines = false;
+        self
+    }
+
+    /// Each line starts with `[label] `.
+    pub(crate) fn labelled(mut self, label: Option<&str>) -> Progress {
+        self.label = label.map(|l| format!("[{l}] ")).unwrap_or_default();
         self
     }
 
@@ -155,11 +195,19 @@ impl Progress {
             bar.abandon_with_message(why);
         }
     }
+
+    fn line(&self, what: std::fmt::Arguments<'_>) {
+        eprintln!("{}[{:8.1} s] {} {what}", self.label, self.start.elapsed().as_secs_f64(), self.stage);
+    }
 }
 
 impl Observer for Progress {
     fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
-        let bar = if self.hidden {
+        self.stage = format!("stage {}/{stages} ({})", stage + 1, spec.label);
+        if self.lines {
+            self.line(format_args!("starts, at most {} iterations ({done} done)", spec.max_iterations));
+        }
+        let bar = if self.hidden || self.lines {
             indicatif::ProgressBar::hidden()
         } else {
             indicatif::ProgressBar::new(spec.max_iterations as u64)
@@ -169,35 +217,41 @@ impl Observer for Progress {
                 .expect("a valid template")
                 .progress_chars("=> "),
         );
-        bar.set_prefix(format!("stage {}/{stages} ({})", stage + 1, spec.label));
+        bar.set_prefix(self.stage.clone());
         bar.set_position(done as u64);
         self.bar = Some(bar);
         if self.budget == Some(0) { Control::Stop } else { Control::Continue }
     }
 
     fn iteration(&mut self, _stage: usize, it: &Iteration) -> Control {
+        let parts = format!(
+            "J {:.6e} = H {:.4e} + γ_W·A {:.4e}, step {:.2e}",
+            it.value,
+            it.energy,
+            self.gamma_w * it.attachment,
+            it.step
+        );
+        if self.lines {
+            self.line(format_args!("iteration {}: {parts}, {} evaluations", it.iteration, it.evaluations));
+        }
         if let Some(bar) = &self.bar {
             bar.set_position(it.iteration as u64);
-            bar.set_message(format!(
-                "J {:.4e} = H {:.3e} + γ_W·A {:.3e}, step {:.2e}",
-                it.value,
-                it.energy,
-                self.gamma_w * it.attachment,
-                it.step
-            ));
+            bar.set_message(parts);
         }
         self.budget = self.budget.map(|b| b.saturating_sub(1));
         if self.budget == Some(0) { Control::Stop } else { Control::Continue }
     }
 
     fn stage_finished(&mut self, _stage: usize, record: &StageRecord) {
+        if self.lines {
+            self.line(format_args!("ends: {} after {} iterations", record.reason, record.iterations.len()));
+        }
         if let Some(bar) = self.bar.take() {
             bar.finish_with_message(format!("{} after {} iterations", record.reason, record.iterations.len()));
         }
     }
 }
 
-/// Errors unless every time of `--times` is in [0, 1].
 /// The library says "the target shape has no signal"; the user knows it by
 /// its file. (A source without a signal starts from f_0 = 0: only the
 /// target's signal is compared.)
@@ -232,7 +286,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let mut session = session.with_checkpoint_file(&checkpoint_path);
     let model = session.plan().model.clone();
     let metrics = session.plan().metrics;
-    let mut progress = Progress::new(model.gamma_w(), a.stop_after);
+    let mut progress = Progress::new(model.gamma_w(), a.stop_after, a.verbosity).labelled(a.label);
     if session.run(&mut progress).map_err(|e| name_the_target(e, a.target))? == Outcome::Interrupted {
         progress.abandon("stopped by --stop-after; continue with --resume");
         eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());
