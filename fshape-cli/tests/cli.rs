@@ -1466,4 +1466,12 @@ fn match_with_stderr_in_a_file_logs_a_line_per_iteration_and_quiet_logs_none() {
         fshape(&["match", &s, &t, "--config", &c, "--out", &tmp("match_log_quiet").display().to_string(), "--quiet"]);
     assert!(o.status.success());
     assert!(!String::from_utf8_lossy(&o.stderr).contains(" iteration "), "{}", String::from_utf8_lossy(&o.stderr));
+    // The result in a few short lines: before -> after.
+    let result = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(result.lines().count(), 5, "{result}");
+    assert!(
+        result.contains("mean distance ") && result.contains("signal error ") && result.contains(" -> "),
+        "{result}"
+    );
+    assert!(result.lines().all(|l| l.chars().count() < 200), "{result}");
 }

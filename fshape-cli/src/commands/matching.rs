@@ -377,19 +377,42 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         io::write_atomic(path, bytes, false)?;
     }
     println!(
-        "{} -> {}: J {:.6e} (energy {:.4e}, attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files to {}",
+        "{} -> {}: J {:.4e} after {} iterations in {} stage(s), {:.0} s",
         a.source.display(),
         a.target.display(),
         e.value,
-        e.energy,
-        e.attachment,
         result.iterations,
         result.stages.len(),
-        outputs.len(),
-        a.out.display()
+        summary.seconds
     );
-    println!("  match: {} (template: {})", result.quality.describe(), result.initial_quality.describe());
+    for line in brief(&result.initial_quality, &result.quality) {
+        println!("  {line}");
+    }
+    println!("  wrote {} files to {} (every figure in summary.json)", outputs.len(), a.out.display());
     Ok(())
+}
+
+/// How close the template was and the matched shape is, in a few lines
+/// (`fshape quality` and summary.json have every figure).
+pub(crate) fn brief(before: &fshape_match::Quality, after: &fshape_match::Quality) -> Vec<String> {
+    let pct = |v: f64| format!("{:.3}%", 100.0 * v);
+    let mut lines = vec![
+        format!(
+            "mean distance {} -> {} of the diagonal (95th percentile {})",
+            pct(before.mean_distance),
+            pct(after.mean_distance),
+            pct(after.p95_distance)
+        ),
+        format!(
+            "within 1%     {:.1}% -> {:.1}% of the target",
+            100.0 * before.target_within_1pct,
+            100.0 * after.target_within_1pct
+        ),
+    ];
+    if let (Some(b), Some(e)) = (before.signal_rms, after.signal_rms) {
+        lines.push(format!("signal error  {:.2}% -> {:.2}% of its range (rms)", 100.0 * b, 100.0 * e));
+    }
+    lines
 }
 
 /// J, the energy and γ_W·A against the iteration number (log scale), all
