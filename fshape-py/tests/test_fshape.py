@@ -364,3 +364,39 @@ def test_the_nibabel_fixtures_read_back_through_the_package():
     s = fshape.read_mesh(NIBABEL / "surf_bigendian_gzipbase64.surf.gii", signal_name="thickness")
     assert np.array_equal(s.points, points) and np.array_equal(s.signal, thickness)
     assert np.array_equal(fshape.read_signal(NIBABEL / "lh.thickness")[1], thickness)
+
+
+def test_every_gifti_file_of_nibabel_s_tests_reads_as_nibabel_reads_it():
+    """nibabel's own GIfTI test files (in its wheel): the surfaces and signals
+    it reads, fshape reads to the same arrays; a file nibabel reads whose
+    triangles are not a valid mesh gets fshape's validation error; a signal
+    file of several arrays is refused by name."""
+    folder = Path(nib.__file__).parent / "gifti" / "tests" / "data"
+    files = sorted(folder.glob("*.gii*"))
+    assert len(files) >= 10, files
+    seen = {"surface": 0, "signal": 0, "invalid": 0, "several": 0}
+    for f in files:
+        arrays = nib.load(f).darrays
+        intents = [nib.nifti1.intent_codes.label[d.intent] for d in arrays]
+        if "pointset" in intents and "triangle" in intents:
+            points = arrays[intents.index("pointset")].data.astype(np.float64)
+            cells = arrays[intents.index("triangle")].data.astype(np.int64)
+            if cells.max() < len(points):
+                s = fshape.read_mesh(f)
+                assert np.array_equal(s.points, points) and np.array_equal(s.cells, cells), f
+                seen["surface"] += 1
+            else:
+                with pytest.raises(fshape.FShapeError, match="index_out_of_range"):
+                    fshape.read_mesh(f)
+                seen["invalid"] += 1
+        elif len(arrays) == 1:
+            name, values = fshape.read_signal(f)
+            assert np.array_equal(values, arrays[0].data.astype(np.float64).ravel()), f
+            seen["signal"] += 1
+        else:
+            with pytest.raises(fshape.FShapeError, match="several per-vertex arrays"):
+                fshape.read_signal(f)
+            seen["several"] += 1
+    # The folder as nibabel 5.4 ships it: external, bz2 and gz surfaces,
+    # GIFTI_ENDIAN_LITTLE, labels, shapes and a time series.
+    assert seen == {"surface": 4, "signal": 4, "invalid": 2, "several": 1}, seen

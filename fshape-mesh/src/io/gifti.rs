@@ -18,6 +18,7 @@
 
 use std::fmt::Write as _;
 use std::io::{self, Read, Write};
+use std::path::Path;
 
 use base64::Engine;
 use quick_xml::events::Event;
@@ -326,6 +327,8 @@ struct Header {
     big_endian: bool,
     meta: Vec<(String, String)>,
     start: usize,
+    /// `ExternalFileName` (empty when none) and `ExternalFileOffset`.
+    external: (String, u64),
 }
 
 fn bad(expected: &'static str, found: &str) -> ParseErrorKind {
@@ -356,13 +359,32 @@ fn header(e: &quick_xml::events::BytesStart, start: usize) -> Result<Header, Par
                 dimensionality =
                     Some(v.parse::<usize>().ok().filter(|d| (1..=6).contains(d)).ok_or_else(|| bad("1 to 6", v))?)
             }
-            "Encoding" => h.encoding = Some(v.to_string()),
+            // The standard's names, and the GIFTI_ENCODING_* and short
+            // names nibabel also reads and some writers use.
+            "Encoding" => {
+                h.encoding = Some(
+                    match v {
+                        "GIFTI_ENCODING_ASCII" => "ASCII",
+                        "B64BIN" | "GIFTI_ENCODING_B64BIN" => "Base64Binary",
+                        "B64GZ" | "GIFTI_ENCODING_B64GZ" => "GZipBase64Binary",
+                        "External" | "GIFTI_ENCODING_EXTBIN" => "ExternalFileBinary",
+                        other => other,
+                    }
+                    .to_string(),
+                )
+            }
             "Endian" => {
+                // The GIfTI standard's names, and the GIFTI_ENDIAN_* ones
+                // of some writers (nibabel reads both).
                 h.big_endian = match v {
-                    "BigEndian" => true,
-                    "LittleEndian" => false,
+                    "BigEndian" | "GIFTI_ENDIAN_BIG" => true,
+                    "LittleEndian" | "GIFTI_ENDIAN_LITTLE" => false,
                     _ => return Err(bad("BigEndian or LittleEndian", v)),
                 }
+            }
+            "ExternalFileName" => h.external.0 = v.to_string(),
+            "ExternalFileOffset" => {
+                h.external.1 = if v.is_empty() { 0 } else { v.parse().map_err(|_| bad("a byte offset", v))? }
             }
             k if k.len() == 4 && k.starts_with("Dim") && (b'0'..=b'5').contains(&k.as_bytes()[3]) => {
                 dims[usize::from(k.as_bytes()[3] - b'0')] =
@@ -385,8 +407,9 @@ fn header(e: &quick_xml::events::BytesStart, start: usize) -> Result<Header, Par
     Ok(h)
 }
 
-/// Decodes a `Data` element's text into row-major values.
-fn decode(h: &Header, text: &str) -> Result<Vec<f64>, ParseErrorKind> {
+/// Decodes a `Data` element's text (or the external file's bytes, found
+/// in `folder`) into row-major values.
+fn decode(h: &Header, text: &str, folder: Option<&Path>) -> Result<Vec<f64>, ParseErrorKind> {
     let data_type = h.data_type.expect("checked in header()");
     let n = h.dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).ok_or(ParseErrorKind::BadToken {
         expected: "dimensions whose product fits in memory",
@@ -451,14 +474,46 @@ fn decode(h: &Header, text: &str) -> Result<Vec<f64>, ParseErrorKind> {
             bytes.chunks_exact(data_type.size()).map(|c| data_type.decode(c, h.big_endian)).collect()
         }
         "ExternalFileBinary" => {
-            return Err(ParseErrorKind::Unsupported {
-                what: "GIfTI encoding (external data files)",
-                found: encoding.into(),
-            });
+            let want = n.checked_mul(data_type.size()).ok_or(mismatch(0))?;
+            let bytes = external(h, folder, want)?;
+            bytes.chunks_exact(data_type.size()).map(|c| data_type.decode(c, h.big_endian)).collect()
         }
         _ => return Err(ParseErrorKind::Unsupported { what: "GIfTI encoding", found: encoding.into() }),
     };
     Ok(if h.column_major { reorder(&values, &h.dims, true) } else { values })
+}
+
+/// The `want` raw bytes of an `ExternalFileBinary` array: from its
+/// `ExternalFileName`, relative to `folder` (the .gii's), at its
+/// `ExternalFileOffset`, as nibabel reads them.
+fn external(h: &Header, folder: Option<&Path>, want: usize) -> Result<Vec<u8>, ParseErrorKind> {
+    let (name, offset) = &h.external;
+    if name.is_empty() {
+        return Err(ParseErrorKind::Missing { what: "the ExternalFileName of an ExternalFileBinary array" });
+    }
+    let Some(folder) = folder else {
+        return Err(ParseErrorKind::Unsupported {
+            what: "external data file without the .gii's folder (read the .gii by its path)",
+            found: name.clone(),
+        });
+    };
+    let path = folder.join(name);
+    let unreadable = |e: std::io::Error| ParseErrorKind::BadToken {
+        expected: "a readable external data file",
+        found: format!("{}: {e}", path.display()),
+    };
+    let mut file = std::fs::File::open(&path).map_err(unreadable)?;
+    std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(*offset)).map_err(unreadable)?;
+    let mut bytes = Vec::with_capacity(want);
+    file.take(want as u64).read_to_end(&mut bytes).map_err(unreadable)?;
+    if bytes.len() != want {
+        return Err(ParseErrorKind::CountMismatch {
+            what: "bytes in the external data file from ExternalFileOffset against the Dim attributes times the type's size",
+            expected: want as u64,
+            found: bytes.len() as u64,
+        });
+    }
+    Ok(bytes)
 }
 
 /// Converts between column-major and row-major order (`to_row` says
@@ -497,8 +552,9 @@ fn reorder(values: &[f64], dims: &[usize], to_row: bool) -> Vec<f64> {
     out
 }
 
-/// Parses a GIfTI file. Errors name the line.
-pub fn parse(data: &[u8]) -> Result<Gifti, ParseError> {
+/// Parses a GIfTI file whose external data files, if any, are in
+/// `folder` (the .gii's). Errors name the line.
+pub fn parse_in(data: &[u8], folder: Option<&Path>) -> Result<Gifti, ParseError> {
     let xml = std::str::from_utf8(data).map_err(|e| {
         err_at(data, e.valid_up_to(), ParseErrorKind::BadToken { expected: "UTF-8 text", found: e.to_string() })
     })?;
@@ -542,7 +598,7 @@ pub fn parse(data: &[u8]) -> Result<Gifti, ParseError> {
                     data_text = None;
                     if empty {
                         let h = current.take().expect("just set");
-                        arrays.push(finish(data, h, None)?);
+                        arrays.push(finish(data, h, None, folder)?);
                     }
                 }
                 if !empty {
@@ -578,7 +634,7 @@ pub fn parse(data: &[u8]) -> Result<Gifti, ParseError> {
                     "Data" if current.is_some() => data_text = Some(std::mem::take(&mut text)),
                     "DataArray" => {
                         let h = current.take().expect("a DataArray end follows its start");
-                        arrays.push(finish(data, h, data_text.take())?);
+                        arrays.push(finish(data, h, data_text.take(), folder)?);
                     }
                     _ => {}
                 }
@@ -607,8 +663,13 @@ pub fn parse(data: &[u8]) -> Result<Gifti, ParseError> {
     Ok(Gifti { arrays })
 }
 
-fn finish(data: &[u8], h: Header, text: Option<String>) -> Result<DataArray, ParseError> {
-    let values = decode(&h, text.as_deref().unwrap_or("")).map_err(|k| err_at(data, h.start, k))?;
+/// Parses a GIfTI file without external data files. Errors name the line.
+pub fn parse(data: &[u8]) -> Result<Gifti, ParseError> {
+    parse_in(data, None)
+}
+
+fn finish(data: &[u8], h: Header, text: Option<String>, folder: Option<&Path>) -> Result<DataArray, ParseError> {
+    let values = decode(&h, text.as_deref().unwrap_or(""), folder).map_err(|k| err_at(data, h.start, k))?;
     Ok(DataArray {
         intent: h.intent.expect("checked in header()"),
         data_type: h.data_type.expect("checked in header()"),

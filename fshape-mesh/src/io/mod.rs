@@ -278,9 +278,11 @@ impl Format {
     /// `.gz`; also whether the path is gzip-compressed.
     pub fn from_path(path: &Path) -> Option<(Format, bool)> {
         let name = path.file_name()?.to_str()?.to_ascii_lowercase();
-        let (stem, gz) = match name.strip_suffix(".gz") {
-            Some(s) => (s.to_string(), true),
-            None => (name, false),
+        // `.bz2` is read (decompressed by `read_bytes`), never written.
+        let (stem, gz) = match (name.strip_suffix(".gz"), name.strip_suffix(".bz2")) {
+            (Some(s), _) => (s.to_string(), true),
+            (None, Some(s)) => (s.to_string(), false),
+            (None, None) => (name, false),
         };
         let ext = stem.rsplit_once('.')?.1;
         let f = match ext {
@@ -355,6 +357,11 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
         let mut out = Vec::new();
         flate2::read::MultiGzDecoder::new(&raw[..]).read_to_end(&mut out).map_err(io)?;
         Ok(out)
+    } else if raw.starts_with(b"BZh") && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bz2")) {
+        // bzip2, as nibabel reads it (`.gii.bz2`).
+        let mut out = Vec::new();
+        bzip2::read::MultiBzDecoder::new(&raw[..]).read_to_end(&mut out).map_err(io)?;
+        Ok(out)
     } else {
         Ok(raw)
     }
@@ -385,8 +392,9 @@ pub fn read_mesh(path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
     parse_mesh(&data, format, opts, path)
 }
 
-/// Parses mesh data already in memory (decompressed); `path` only names the
-/// source in error messages.
+/// Parses mesh data already in memory (decompressed); `path` names the
+/// source in error messages, and its folder holds a GIfTI file's external
+/// data files.
 pub fn parse_mesh(data: &[u8], format: Format, opts: &ReadOptions, path: &Path) -> Result<FShape, ReadError> {
     let name = opts.signal_name.as_deref().unwrap_or(DEFAULT_SIGNAL_NAME);
     let parse = |source| ReadError::Parse { path: path.into(), source };
@@ -394,10 +402,24 @@ pub fn parse_mesh(data: &[u8], format: Format, opts: &ReadOptions, path: &Path) 
         Format::Ply => ply::parse(data, name).map_err(parse)?,
         Format::Vtk => vtk::parse(data, name).map_err(parse)?,
         Format::Obj => obj::parse(data).map_err(parse)?,
-        Format::Gifti => gifti::to_raw(gifti::parse(data).map_err(parse)?, name).map_err(parse)?,
+        Format::Gifti => gifti::to_raw(gifti::parse_in(data, path.parent()).map_err(parse)?, name).map_err(parse)?,
         Format::FreeSurfer => freesurfer::parse_surface(data).map_err(parse)?,
     };
     raw.into_shape(path, opts)
+}
+
+/// `.bz2` files are read, not written.
+fn refuse_bz2(path: &Path) -> Result<(), WriteError> {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bz2")) {
+        return Err(WriteError::Io {
+            path: path.into(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                "bzip2 files are read but not written: use .gz to compress",
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// Writes a mesh in the format its extension names (`.ply`, `.obj`,
@@ -406,6 +428,7 @@ pub fn parse_mesh(data: &[u8], format: Format, opts: &ReadOptions, path: &Path) 
 /// signal; GIfTI and FreeSurfer store single precision.
 /// The write is atomic: a temporary file is renamed into place.
 pub fn write_mesh(path: &Path, shape: &FShape, encoding: Encoding) -> Result<(), WriteError> {
+    refuse_bz2(path)?;
     let (format, gz) = Format::from_path(path).ok_or_else(|| WriteError::UnknownFormat { path: path.into() })?;
     let mut bytes = Vec::new();
     write_to(&mut bytes, shape, format, encoding).map_err(|source| WriteError::Io { path: path.into(), source })?;
@@ -447,7 +470,7 @@ impl SignalFormat {
     /// per-vertex name (`lh.thickness`); anything else is CSV.
     pub fn from_path(path: &Path) -> SignalFormat {
         let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-        let stem = name.strip_suffix(".gz").unwrap_or(&name);
+        let stem = name.strip_suffix(".gz").or_else(|| name.strip_suffix(".bz2")).unwrap_or(&name);
         match stem.rsplit_once('.').map(|(_, e)| e) {
             Some("gii") => SignalFormat::Gifti,
             Some("mgh" | "mgz") => SignalFormat::Mgh,
@@ -497,7 +520,8 @@ pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
     let column = match SignalFormat::detect(&data, path) {
         SignalFormat::Csv => return csv::parse_signal(&data, false).map_err(parse),
         SignalFormat::Gifti => {
-            let (name, values) = gifti::signal(&gifti::parse(&data).map_err(parse)?).map_err(parse)?;
+            let (name, values) =
+                gifti::signal(&gifti::parse_in(&data, path.parent()).map_err(parse)?).map_err(parse)?;
             csv::SignalColumn { name, values }
         }
         SignalFormat::Curv => csv::SignalColumn { name: stem(), values: freesurfer::parse_curv(&data).map_err(parse)? },
@@ -514,6 +538,7 @@ pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
 /// precision), atomically. `faces` is the surface's triangle count, which
 /// a curv file records.
 pub fn write_signal(path: &Path, name: &str, values: &[f64], faces: usize) -> Result<(), WriteError> {
+    refuse_bz2(path)?;
     let io = |source| WriteError::Io { path: path.into(), source };
     let gz = path.extension().is_some_and(|e| e == "gz" || e == "mgz");
     let bytes = match SignalFormat::from_path(path) {

@@ -156,3 +156,89 @@ fn curves_are_refused_by_the_surface_only_formats() {
         assert!(!Path::new(&tmp(name)).exists(), "{name}: nothing is left behind");
     }
 }
+
+/// A scratch folder of its own for one test.
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fshape-mesh-gifti-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A one-triangle surface whose arrays are in `external.dat` next to the
+/// .gii (little-endian float32 points, then int32 triangles at byte 36),
+/// with the encoding and byte order spelled as `encoding` and `endian`.
+fn external_gii(dir: &Path, encoding: &str, endian: &str, dat: &[u8]) -> PathBuf {
+    std::fs::write(dir.join("external.dat"), dat).unwrap();
+    let array = |intent: &str, ty: &str, offset: usize| {
+        format!(
+            "<DataArray Intent=\"{intent}\" DataType=\"{ty}\" ArrayIndexingOrder=\"RowMajorOrder\" Dimensionality=\"2\" \
+             Dim0=\"{}\" Dim1=\"3\" Encoding=\"{encoding}\" Endian=\"{endian}\" ExternalFileName=\"external.dat\" \
+             ExternalFileOffset=\"{offset}\"><Data></Data></DataArray>",
+            if intent.ends_with("POINTSET") { 3 } else { 1 }
+        )
+    };
+    let gii = dir.join("external.gii");
+    std::fs::write(
+        &gii,
+        format!(
+            "<?xml version=\"1.0\"?>\n<GIFTI Version=\"1.0\" NumberOfDataArrays=\"2\">\n{}\n{}\n</GIFTI>\n",
+            array("NIFTI_INTENT_POINTSET", "NIFTI_TYPE_FLOAT32", 0),
+            array("NIFTI_INTENT_TRIANGLE", "NIFTI_TYPE_INT32", 36)
+        ),
+    )
+    .unwrap();
+    gii
+}
+
+fn triangle_bytes() -> Vec<u8> {
+    let points: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.5];
+    let mut b: Vec<u8> = points.iter().flat_map(|x| x.to_le_bytes()).collect();
+    b.extend([0i32, 1, 2].iter().flat_map(|i| i.to_le_bytes()));
+    b
+}
+
+#[test]
+fn external_data_files_and_the_gifti_enum_spellings_read_as_nibabel_reads_them() {
+    let dir = scratch("external");
+    for (encoding, endian) in [
+        ("ExternalFileBinary", "LittleEndian"),
+        ("GIFTI_ENCODING_EXTBIN", "GIFTI_ENDIAN_LITTLE"),
+        ("External", "LittleEndian"),
+    ] {
+        let gii = external_gii(&dir, encoding, endian, &triangle_bytes());
+        let s = io::read_mesh(&gii, &ReadOptions::default()).unwrap();
+        assert_eq!(s.points(), &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.5], "{encoding} {endian}");
+        assert_eq!(s.cells(), &[0, 1, 2]);
+    }
+    // A short external file, and a missing one, are errors naming them.
+    let gii = external_gii(&dir, "ExternalFileBinary", "LittleEndian", &triangle_bytes()[..40]);
+    let e = io::read_mesh(&gii, &ReadOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("external data file") && e.contains("expected 12") && e.contains("found 4"), "{e}");
+    std::fs::remove_file(dir.join("external.dat")).unwrap();
+    let e = io::read_mesh(&gii, &ReadOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("external.dat"), "{e}");
+    // Parsed from memory, there is no folder to look in.
+    let e = gifti::parse(&std::fs::read(&gii).unwrap()).unwrap_err().to_string();
+    assert!(e.contains("without the .gii's folder"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bzip2_files_are_read_and_never_written() {
+    use std::io::Write as _;
+    let dir = scratch("bz2");
+    let shape =
+        FShape::try_new(3, CellKind::Triangle, vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], vec![0, 1, 2], None)
+            .unwrap();
+    let plain = dir.join("t.gii");
+    io::write_mesh(&plain, &shape, Encoding::Ascii).unwrap();
+    let mut z = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::default());
+    z.write_all(&std::fs::read(&plain).unwrap()).unwrap();
+    let packed = dir.join("t.gii.bz2");
+    std::fs::write(&packed, z.finish().unwrap()).unwrap();
+    assert_eq!(io::read_mesh(&packed, &ReadOptions::default()).unwrap(), shape);
+    let e = io::write_mesh(&dir.join("u.ply.bz2"), &shape, Encoding::Binary).unwrap_err().to_string();
+    assert!(e.contains("use .gz"), "{e}");
+    assert!(!dir.join("u.ply.bz2").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
