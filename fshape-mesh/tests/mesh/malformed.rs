@@ -147,7 +147,7 @@ const SIGNAL_FILE_CASES: &[(&str, &[&str])] = &[
         &["line 3", "zlib-compressed data (GZipBase64Binary)", "incomplete deflate stream"],
     ),
     ("gii_unknown_encoding.shape.gii", &["line 3", "unsupported GIfTI encoding: `Base32Binary`"]),
-    ("gii_external.shape.gii", &["line 3", "external data files", "ExternalFileBinary"]),
+    ("gii_external.shape.gii", &["line 3", "missing the ExternalFileName", "ExternalFileBinary"]),
     ("gii_ascii_wrong_dim.shape.gii", &["line 3", "values in the Data element", "expected 4, found 3"]),
     ("gii_ascii_non_numeric.shape.gii", &["line 3", "expected a number, found `x`"]),
     ("gii_unknown_type.shape.gii", &["line 3", "expected a NIfTI data type, found `NIFTI_TYPE_FLOAT128`"]),
