@@ -378,11 +378,12 @@ impl TwoLevel {
         let d = self.dim;
         let n = self.fine.len() * d;
         let r = &v[..n];
-        let mut c = self.down(r, &self.weights);
+        let averaged = self.down(r, &self.weights);
+        // (I − S)ᵀ B (I − S) r, S = R Qᵀ.
+        let s = self.up(&averaged, &self.bary);
+        let mut c = averaged;
         self.coarse.apply(&mut c);
         let coarse = self.up(&c, &self.weights);
-        // (I − S)ᵀ B (I − S) r, S = R Qᵀ.
-        let s = self.up(&self.down(r, &self.weights), &self.bary);
         let b: Vec<f64> = r.iter().zip(&s).enumerate().map(|(i, (a, b))| self.fine[i / d] * (a - b)).collect();
         let back = self.up(&self.down(&b, &self.bary), &self.weights);
         for (i, o) in v[..n].iter_mut().enumerate() {

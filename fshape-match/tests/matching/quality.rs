@@ -282,12 +282,10 @@ fn oracle_triangle(p: [f64; 3], t: [[f64; 3]; 3]) -> f64 {
     if inside { (h.abs() * nn.sqrt()).min(edges) } else { edges }
 }
 
-#[test]
-fn the_closest_point_search_agrees_with_brute_force() {
-    let mut rng = fshape_mesh::generate::SplitMix64(17);
-    // Triangles in R³.
-    let s = perturbed_icosphere(2, 0.2, 8);
-    let cp = ClosestPoints::new(&s).unwrap();
+/// The search against the brute-force oracle at 400 random points of
+/// [-1.5, 1.5]³ around the triangle mesh `s`.
+fn agrees_on_triangles(s: &FShape, rng: &mut fshape_mesh::generate::SplitMix64) {
+    let cp = ClosestPoints::new(s).unwrap();
     let p3 = |v: usize| -> [f64; 3] { std::array::from_fn(|k| s.point(v)[k]) };
     for _ in 0..400 {
         let q = [rng.range(-1.5, 1.5), rng.range(-1.5, 1.5), rng.range(-1.5, 1.5)];
@@ -299,6 +297,14 @@ fn the_closest_point_search_agrees_with_brute_force() {
         let got = cp.closest(q).distance;
         assert!((got - brute).abs() <= 1e-12 * (1.0 + brute), "{q:?}: {got} against {brute}");
     }
+}
+
+#[test]
+fn the_closest_point_search_agrees_with_brute_force() {
+    let mut rng = fshape_mesh::generate::SplitMix64(17);
+    // Triangles in R³.
+    let s = perturbed_icosphere(2, 0.2, 8);
+    agrees_on_triangles(&s, &mut rng);
     // A soup of triangles whose sizes span three decades, with long
     // slivers among them (the search groups cells by size).
     let mut points = Vec::new();
@@ -312,18 +318,7 @@ fn the_closest_point_search_agrees_with_brute_force() {
         }
     }
     let soup = FShape::try_new(3, CellKind::Triangle, points, (0..900).collect(), None).unwrap();
-    let cp = ClosestPoints::new(&soup).unwrap();
-    let p3 = |v: usize| -> [f64; 3] { std::array::from_fn(|k| soup.point(v)[k]) };
-    for _ in 0..400 {
-        let q = [rng.range(-1.5, 1.5), rng.range(-1.5, 1.5), rng.range(-1.5, 1.5)];
-        let brute = soup
-            .cells()
-            .chunks_exact(3)
-            .map(|c| oracle_triangle(q, [p3(c[0]), p3(c[1]), p3(c[2])]))
-            .fold(f64::INFINITY, f64::min);
-        let got = cp.closest(q).distance;
-        assert!((got - brute).abs() <= 1e-12 * (1.0 + brute), "{q:?}: {got} against {brute}");
-    }
+    agrees_on_triangles(&soup, &mut rng);
     // Segments in the plane.
     let curve = random_curve(2, 30, 3);
     let cp = ClosestPoints::new(&curve).unwrap();
