@@ -40,7 +40,8 @@ pub mod optimize;
 pub mod precondition;
 pub mod quality;
 pub mod resolution;
-mod session;
+pub mod runner;
+pub mod session;
 pub mod unknowns;
 
 pub use atlas::{Atlas, AtlasResult, Cluster, Local, SubjectResult};
@@ -50,10 +51,11 @@ pub use config::{
     StageSpec, TemplateKind,
 };
 pub use quality::{Quality, quality};
-pub use session::{
-    CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, MatchResult, Observer, Outcome, Session, StageRecord,
-    StageSetup, fingerprint,
+pub use runner::{
+    CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Outcome, Runner, StageRecord, StageSetup,
+    Staged,
 };
+pub use session::{MatchResult, Session, fingerprint};
 pub use unknowns::{Metric, Metrics};
 
 /// Why a registration could not be set up or run.

@@ -140,12 +140,33 @@ pub struct State {
     pub stopped: Option<Stop>,
 }
 
-/// An objective: J and ∇J at x, or the caller's error.
+/// J and ∇J at a point, with whatever else the objective reports of it
+/// (matching: J's parts, [`fshape_shoot::Energies`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Evaluation<P> {
+    /// J(x).
+    pub value: f64,
+    /// ∇J(x).
+    pub grad: Vec<f64>,
+    /// What else the objective reports at x.
+    pub parts: P,
+}
+
+impl From<(f64, Vec<f64>)> for Evaluation<()> {
+    fn from((value, grad): (f64, Vec<f64>)) -> Self {
+        Evaluation { value, grad, parts: () }
+    }
+}
+
+/// An objective: J and ∇J at x (and its parts), or the caller's error.
 pub trait Objective {
     /// The caller's error (passed through unchanged).
     type Error;
-    /// (J(x), ∇J(x)).
-    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), Self::Error>;
+    /// What an evaluation reports besides J and ∇J, handed back with the
+    /// point the optimiser accepts ([`Step::Accepted`]); `()` for nothing.
+    type Parts: Clone;
+    /// J(x), ∇J(x) and the parts.
+    fn value_grad(&mut self, x: &[f64]) -> Result<Evaluation<Self::Parts>, Self::Error>;
     /// Where the unknowns split into blocks of different units: the start
     /// of every block but the first, increasing. Default: one block.
     fn blocks(&self) -> Vec<usize> {
@@ -162,9 +183,19 @@ pub trait Objective {
 
 impl<E, F: FnMut(&[f64]) -> Result<(f64, Vec<f64>), E>> Objective for F {
     type Error = E;
-    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), E> {
-        self(x)
+    type Parts = ();
+    fn value_grad(&mut self, x: &[f64]) -> Result<Evaluation<()>, E> {
+        self(x).map(Evaluation::from)
     }
+}
+
+/// What one iteration did.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Step<P> {
+    /// A point was accepted; the objective's parts at it.
+    Accepted(P),
+    /// A stopping rule holds (nothing changed).
+    Stopped(Stop),
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -180,11 +211,12 @@ fn finite(value: f64, grad: &[f64]) -> bool {
 }
 
 impl State {
-    /// Evaluates J at the starting point.
-    pub fn start<O: Objective>(x0: Vec<f64>, objective: &mut O) -> Result<State, O::Error> {
-        let (value, grad) = objective.value_grad(&x0)?;
+    /// Evaluates J at the starting point: the state, and the objective's
+    /// parts there.
+    pub fn start<O: Objective>(x0: Vec<f64>, objective: &mut O) -> Result<(State, O::Parts), O::Error> {
+        let Evaluation { value, grad, parts } = objective.value_grad(&x0)?;
         let ok = finite(value, &grad);
-        Ok(State {
+        let state = State {
             grad_norm0: norm(&grad),
             x: x0,
             value,
@@ -196,7 +228,8 @@ impl State {
             s: VecDeque::new(),
             y: VecDeque::new(),
             stopped: (!ok).then_some(Stop::NonFiniteStart),
-        })
+        };
+        Ok((state, parts))
     }
 
     /// The stopping rule that holds now, if any.
@@ -283,11 +316,16 @@ impl State {
     }
 
     /// One iteration: a direction, a line search, the update. Returns the
-    /// stop reason if the run is over (then nothing changed).
-    pub fn iterate<O: Objective>(&mut self, settings: &Settings, objective: &mut O) -> Result<Option<Stop>, O::Error> {
+    /// objective's parts at the accepted point, or the stop reason if the
+    /// run is over (then nothing changed).
+    pub fn iterate<O: Objective>(
+        &mut self,
+        settings: &Settings,
+        objective: &mut O,
+    ) -> Result<Step<O::Parts>, O::Error> {
         if let Some(stop) = self.check(settings) {
             self.stopped = Some(stop);
-            return Ok(Some(stop));
+            return Ok(Step::Stopped(stop));
         }
         let accepted = match settings.method {
             Method::Lbfgs { memory } => {
@@ -307,7 +345,7 @@ impl State {
                 // unit step.
                 let t0 = if self.s.is_empty() { self.first_step(&d) } else { 1.0 };
                 let found = wolfe_search(self, &d, slope, t0, settings, objective)?;
-                if let Some((t, _, _, grad)) = &found {
+                if let Some((t, _, _, grad, _)) = &found {
                     let s: Vec<f64> = d.iter().map(|v| t * v).collect();
                     let y: Vec<f64> = grad.iter().zip(&self.grad).map(|(a, b)| a - b).collect();
                     // Keep the pair only with positive curvature (always
@@ -333,18 +371,18 @@ impl State {
             }
         };
         match accepted {
-            Some((t, x, value, grad)) => {
+            Some((t, x, value, grad, parts)) => {
                 self.x = x;
                 self.value = value;
                 self.grad = grad;
                 self.step = t;
                 self.iteration += 1;
                 self.values.push(value);
-                Ok(None)
+                Ok(Step::Accepted(parts))
             }
             None => {
                 self.stopped = Some(Stop::LineSearch);
-                Ok(Some(Stop::LineSearch))
+                Ok(Step::Stopped(Stop::LineSearch))
             }
         }
     }
@@ -358,31 +396,36 @@ impl State {
         mut each: impl FnMut(&State),
     ) -> Result<Stop, O::Error> {
         loop {
-            if let Some(stop) = self.iterate(settings, objective)? {
-                return Ok(stop);
+            match self.iterate(settings, objective)? {
+                Step::Stopped(stop) => return Ok(stop),
+                Step::Accepted(_) => each(self),
             }
-            each(self);
         }
     }
 }
 
-/// An accepted step: (t, x + t·d, J, ∇J).
-type Accepted = Option<(f64, Vec<f64>, f64, Vec<f64>)>;
+/// An accepted step: (t, x + t·d, J, ∇J, the objective's parts).
+type Accepted<P> = Option<(f64, Vec<f64>, f64, Vec<f64>, P)>;
 
-/// J, ∇J, φ'(t) and the point x + t d.
-type Probe = (f64, Vec<f64>, f64, Vec<f64>);
+/// J, ∇J, φ'(t), the point x + t d and the objective's parts.
+type Probe<P> = (f64, Vec<f64>, f64, Vec<f64>, P);
 
-/// Evaluates φ(t) = J(x + t d): (J, ∇J, φ'(t), the point), with non-finite
-/// values reported as `None` (treated as "too far").
-fn probe<O: Objective>(state: &mut State, d: &[f64], t: f64, objective: &mut O) -> Result<Option<Probe>, O::Error> {
+/// Evaluates φ(t) = J(x + t d): (J, ∇J, φ'(t), the point, the parts), with
+/// non-finite values reported as `None` (treated as "too far").
+fn probe<O: Objective>(
+    state: &mut State,
+    d: &[f64],
+    t: f64,
+    objective: &mut O,
+) -> Result<Option<Probe<O::Parts>>, O::Error> {
     let x: Vec<f64> = state.x.iter().zip(d).map(|(a, b)| a + t * b).collect();
     state.evaluations += 1;
-    let (value, grad) = objective.value_grad(&x)?;
+    let Evaluation { value, grad, parts } = objective.value_grad(&x)?;
     if !finite(value, &grad) {
         return Ok(None);
     }
     let slope = dot(&grad, d);
-    Ok(Some((value, grad, slope, x)))
+    Ok(Some((value, grad, slope, x, parts)))
 }
 
 const C1: f64 = 1e-4;
@@ -397,7 +440,7 @@ fn wolfe_search<O: Objective>(
     t0: f64,
     settings: &Settings,
     objective: &mut O,
-) -> Result<Accepted, O::Error> {
+) -> Result<Accepted<O::Parts>, O::Error> {
     let (f0, g0) = (state.value, slope);
     let mut budget = settings.max_evaluations_per_search;
     // Bracketing (N&W Algorithm 3.5). (t, φ, φ') of the previous trial.
@@ -406,7 +449,7 @@ fn wolfe_search<O: Objective>(
     let mut first = true;
     while budget > 0 {
         budget -= 1;
-        let Some((f, grad, g, x)) = probe(state, d, t, objective)? else {
+        let Some((f, grad, g, x, parts)) = probe(state, d, t, objective)? else {
             // Non-finite: the step went too far; shrink towards prev.
             t = 0.5 * (prev.0 + t);
             first = false;
@@ -416,7 +459,7 @@ fn wolfe_search<O: Objective>(
             return zoom(state, d, (f0, g0), prev, (t, f, g), budget, objective);
         }
         if g.abs() <= -C2 * g0 {
-            return Ok(Some((t, x, f, grad)));
+            return Ok(Some((t, x, f, grad, parts)));
         }
         if g >= 0.0 {
             return zoom(state, d, (f0, g0), (t, f, g), prev, budget, objective);
@@ -439,16 +482,16 @@ fn zoom<O: Objective>(
     mut hi: (f64, f64, f64),
     mut budget: usize,
     objective: &mut O,
-) -> Result<Accepted, O::Error> {
-    // The point and gradient of `lo` once a probe here has set it.
-    let mut lo_point: Option<(Vec<f64>, Vec<f64>)> = None;
+) -> Result<Accepted<O::Parts>, O::Error> {
+    // The point, gradient and parts of `lo` once a probe here has set it.
+    let mut lo_point: Option<(Vec<f64>, Vec<f64>, O::Parts)> = None;
     while budget > 0 {
         budget -= 1;
         let t = cubic_min(lo, hi);
         if (t - lo.0).abs() <= f64::EPSILON * lo.0.abs().max(1e-300) {
             break;
         }
-        let Some((f, grad, g, x)) = probe(state, d, t, objective)? else {
+        let Some((f, grad, g, x, parts)) = probe(state, d, t, objective)? else {
             hi = (t, f64::INFINITY, 0.0);
             continue;
         };
@@ -456,23 +499,23 @@ fn zoom<O: Objective>(
             hi = (t, f, g);
         } else {
             if g.abs() <= -C2 * g0 {
-                return Ok(Some((t, x, f, grad)));
+                return Ok(Some((t, x, f, grad, parts)));
             }
             if g * (hi.0 - lo.0) >= 0.0 {
                 hi = lo;
             }
             lo = (t, f, g);
-            lo_point = Some((x, grad));
+            lo_point = Some((x, grad, parts));
         }
     }
     // Out of evaluations: accept the best point if it decreased J enough.
     if lo.0 > 0.0 && lo.1 <= f0 + C1 * lo.0 * g0 {
         // Re-evaluated only if `lo` came from the bracketing phase.
-        if let Some((x, grad)) = lo_point {
-            return Ok(Some((lo.0, x, lo.1, grad)));
+        if let Some((x, grad, parts)) = lo_point {
+            return Ok(Some((lo.0, x, lo.1, grad, parts)));
         }
-        let Some((f, grad, _, x)) = probe(state, d, lo.0, objective)? else { return Ok(None) };
-        return Ok(Some((lo.0, x, f, grad)));
+        let Some((f, grad, _, x, parts)) = probe(state, d, lo.0, objective)? else { return Ok(None) };
+        return Ok(Some((lo.0, x, f, grad, parts)));
     }
     Ok(None)
 }
@@ -505,14 +548,14 @@ fn armijo_search<O: Objective>(
     t0: f64,
     settings: &Settings,
     objective: &mut O,
-) -> Result<Accepted, O::Error> {
+) -> Result<Accepted<O::Parts>, O::Error> {
     let f0 = state.value;
     let mut t = t0;
     for _ in 0..settings.max_evaluations_per_search {
-        if let Some((f, grad, _, x)) = probe(state, d, t, objective)?
+        if let Some((f, grad, _, x, parts)) = probe(state, d, t, objective)?
             && f <= f0 + C1 * t * slope
         {
-            return Ok(Some((t, x, f, grad)));
+            return Ok(Some((t, x, f, grad, parts)));
         }
         t *= 0.5;
     }

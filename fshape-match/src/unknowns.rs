@@ -1,5 +1,5 @@
-//! The unknowns of matching and their metrics: J of fshape-shoot as an
-//! objective of [`crate::optimize`].
+//! The unknowns of matching and their metrics: how (p_0, p^f) are packed
+//! into the optimiser's vector and in which metric it steps.
 //!
 //! The optimiser sees one flat vector of unknowns: p_0 (P × n), then, when
 //! the signal has a control (metamorphosis: p^f; tangential: ζ), P more
@@ -26,9 +26,8 @@
 //! two apart on a graded mesh.)
 
 use fshape_fem::{Norm, SignalNorm};
-use fshape_shoot::{Energies, ModelKind, Problem, ShootError};
+use fshape_shoot::{ModelKind, Problem, ShootError};
 
-use crate::optimize::{Settings, State, Stop};
 use crate::precondition::{MomentumMetric, NormMatrix};
 
 /// The metric in which one block of unknowns is optimised (configuration
@@ -211,6 +210,12 @@ impl Unknowns {
         grad
     }
 
+    /// Where the signal's block starts (after p_0), when there is one:
+    /// [`crate::optimize::Objective::blocks`].
+    pub fn blocks(&self) -> Vec<usize> {
+        if self.scale.is_empty() { Vec::new() } else { vec![self.pn] }
+    }
+
     /// Applies the initial Hessian's shape of the energy metrics (if any)
     /// to `v`, one problem's unknowns.
     pub(crate) fn precondition(&self, v: &mut [f64]) {
@@ -221,112 +226,4 @@ impl Unknowns {
             m.apply(v);
         }
     }
-}
-
-/// J and its gradient in the unknowns; the last evaluation's parts are
-/// kept for reports.
-pub struct MatchObjective<'p> {
-    problem: &'p Problem,
-    unknowns: Unknowns,
-    /// The parts of J at the last evaluation.
-    pub last: Option<Energies>,
-    /// The parts of every evaluation since [`MatchObjective::parts_of`]
-    /// last found one (a line search evaluates several points and may
-    /// accept one before the last).
-    recent: Vec<Energies>,
-    /// Evaluations so far (the first one's errors are always reported).
-    evaluations: usize,
-}
-
-impl<'p> MatchObjective<'p> {
-    /// J of `problem` in `unknowns`.
-    pub fn new(problem: &'p Problem, unknowns: Unknowns) -> Self {
-        MatchObjective { problem, unknowns, last: None, recent: Vec::new(), evaluations: 0 }
-    }
-
-    /// J's parts at the evaluated point whose J is `value` (bit for bit:
-    /// the accepted point of a line search, whose value the optimiser's
-    /// state holds), searched among the evaluations since the last call,
-    /// which are then forgotten.
-    pub fn parts_of(&mut self, value: f64) -> Option<Energies> {
-        crate::session::take_parts(&mut self.recent, value)
-    }
-
-    /// The packing.
-    pub fn unknowns(&self) -> &Unknowns {
-        &self.unknowns
-    }
-}
-
-impl crate::session::StageObjective for MatchObjective<'_> {
-    fn parts_of(&mut self, value: f64) -> Option<Energies> {
-        MatchObjective::parts_of(self, value)
-    }
-}
-
-impl crate::optimize::Objective for MatchObjective<'_> {
-    type Error = ShootError;
-
-    /// p_0, then the signal's control (when there is one).
-    fn blocks(&self) -> Vec<usize> {
-        if self.unknowns.scale.is_empty() { Vec::new() } else { vec![self.unknowns.pn] }
-    }
-
-    fn precondition(&self, v: &mut [f64]) {
-        self.unknowns.precondition(v);
-    }
-
-    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ShootError> {
-        let (p0, pf) = self.unknowns.unpack(x);
-        self.evaluations += 1;
-        let g = match self.problem.objective_grad(&p0, &pf) {
-            Ok(g) => g,
-            // After the first point, a shooting that diverges, or folds the
-            // mesh until a cell has no area, is a step that went too far:
-            // the line search steps back (a non-finite value), the run goes
-            // on. At the first point, and for errors of the setup itself,
-            // the error is the answer.
-            Err(e)
-                if self.evaluations > 1
-                    && !matches!(
-                        e,
-                        ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget
-                    ) =>
-            {
-                return Ok((f64::NAN, vec![f64::NAN; x.len()]));
-            }
-            Err(e) => return Err(e),
-        };
-        self.last = Some(g.objective);
-        self.recent.push(g.objective);
-        Ok((g.objective.value, self.unknowns.pack_grad(&g.p0, &g.pf)))
-    }
-}
-
-/// Minimises J from (p_0, p^f) with `settings`, in one stage and in
-/// memory (a [`crate::Session`] adds stages, checkpoints and resume);
-/// `each` sees the optimiser state and J's parts after every accepted
-/// step. Returns the final state (its `x` unpacks with
-/// [`Unknowns::unpack`]) and why it stopped.
-pub fn minimize(
-    problem: &Problem,
-    metric: impl Into<Metrics>,
-    p0: &[f64],
-    pf: &[f64],
-    settings: &Settings,
-    mut each: impl FnMut(&State, &Energies),
-) -> Result<(State, Stop, Unknowns), crate::MatchError> {
-    let unknowns = Unknowns::new(problem, metric)?;
-    let mut objective = MatchObjective::new(problem, unknowns.clone());
-    let mut state = State::start(unknowns.pack(p0, pf), &mut objective)?;
-    let stop = loop {
-        if let Some(stop) = state.iterate(settings, &mut objective)? {
-            break stop;
-        }
-        // The accepted point's parts (not always the last evaluated).
-        if let Some(parts) = objective.parts_of(state.value) {
-            each(&state, &parts);
-        }
-    };
-    Ok((state, stop, unknowns))
 }

@@ -3,7 +3,7 @@
 //! configuration's optimiser and schedule sections are checked by name.
 
 use fshape_match::optimize::{Method, Settings};
-use fshape_match::unknowns::minimize;
+use fshape_match::session::minimize;
 use fshape_match::{Config, Metric, Metrics};
 use fshape_mesh::test_support::perturbed_icosphere;
 use fshape_shoot::Problem;
@@ -145,7 +145,8 @@ fn optimizer_and_schedule_errors_name_their_key() {
 #[test]
 fn a_diverging_trial_point_is_a_step_too_far_but_a_diverging_start_is_an_error() {
     use fshape_match::optimize::Objective;
-    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    use fshape_match::session::MatchObjective;
+    use fshape_match::unknowns::Unknowns;
     let shape = perturbed_icosphere(1, 0.05, 3).with_signal(Some(vec![0.0; 42])).unwrap();
     let problem = Problem::new(&shape, model("", "", "rk4", 5)).unwrap().with_target(&shape, kernel(0.4)).unwrap();
     let unknowns = Unknowns::new(&problem, Metrics::default()).unwrap();
@@ -157,9 +158,10 @@ fn a_diverging_trial_point_is_a_step_too_far_but_a_diverging_start_is_an_error()
     // As a trial point after a good start: a non-finite value the line
     // search steps back from.
     let mut objective = MatchObjective::new(&problem, unknowns.clone());
-    let (j0, _) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+    let j0 = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap().value;
     assert!(j0.is_finite());
-    let (j, g) = objective.value_grad(&huge).unwrap();
+    let e = objective.value_grad(&huge).unwrap();
+    let (j, g) = (e.value, e.grad);
     assert!(j.is_nan() && g.iter().all(|v| v.is_nan()));
 }
 
@@ -177,7 +179,8 @@ fn graded_square(n: usize, seed: u64) -> fshape_mesh::FShape {
 fn the_first_signal_step_is_the_same_function_on_a_graded_mesh_in_the_l2_metric() {
     use fshape_match::optimize::Objective;
     use fshape_match::quality::ClosestPoints;
-    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    use fshape_match::session::MatchObjective;
+    use fshape_match::unknowns::Unknowns;
     let target = fshape_mesh::generate::square(2500, 7);
     let f: Vec<f64> = target.points().chunks_exact(2).map(|p| 0.5 * (2.0 * p[0]).sin() + 0.3 * p[1]).collect();
     let target = target.with_signal(Some(f)).unwrap();
@@ -200,7 +203,7 @@ fn the_first_signal_step_is_the_same_function_on_a_graded_mesh_in_the_l2_metric(
             .unwrap();
         let unknowns = Unknowns::new(&problem, Metrics { momentum: Metric::Euclidean, signal: metric }).unwrap();
         let mut objective = MatchObjective::new(&problem, unknowns.clone());
-        let (_, gq) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+        let gq = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap().grad;
         let dq: Vec<f64> = gq.iter().map(|g| -g).collect();
         let (_, dpf) = unknowns.unpack(&dq);
         match step {
@@ -243,7 +246,8 @@ fn the_first_signal_step_is_the_same_function_on_a_graded_mesh_in_the_l2_metric(
 #[test]
 fn the_first_momentum_step_moves_space_alike_on_a_graded_mesh_in_the_l2_metric() {
     use fshape_match::optimize::Objective;
-    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    use fshape_match::session::MatchObjective;
+    use fshape_match::unknowns::Unknowns;
     // The target: the square stretched along x, signal 0 like the templates.
     let target = fshape_mesh::generate::square(2500, 7);
     let pts: Vec<f64> = target.points().chunks_exact(2).flat_map(|p| [1.15 * p[0], p[1]]).collect();
@@ -259,7 +263,7 @@ fn the_first_momentum_step_moves_space_alike_on_a_graded_mesh_in_the_l2_metric()
         let problem = Problem::new(template, model).unwrap().with_target(&target, kernel.clone()).unwrap();
         let unknowns = Unknowns::new(&problem, Metrics { momentum: metric, signal: Metric::L2 }).unwrap();
         let mut objective = MatchObjective::new(&problem, unknowns.clone());
-        let (_, gq) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+        let gq = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap().grad;
         let dq: Vec<f64> = gq.iter().map(|g| -g).collect();
         let (dp0, _) = unknowns.unpack(&dq);
         let sums = fshape_kernels::KernelSums::try_new(&deformation, template.points(), 2).unwrap();
@@ -280,7 +284,8 @@ fn the_first_momentum_step_moves_space_alike_on_a_graded_mesh_in_the_l2_metric()
 fn the_first_energy_metric_steps_are_the_same_fields_on_a_graded_mesh() {
     use fshape_match::optimize::Objective;
     use fshape_match::quality::ClosestPoints;
-    use fshape_match::unknowns::{MatchObjective, Unknowns};
+    use fshape_match::session::MatchObjective;
+    use fshape_match::unknowns::Unknowns;
     // A target that differs in geometry (stretched along x) and signal.
     let target = fshape_mesh::generate::square(2500, 7);
     let pts: Vec<f64> = target.points().chunks_exact(2).flat_map(|p| [1.15 * p[0], p[1]]).collect();
@@ -301,7 +306,7 @@ fn the_first_energy_metric_steps_are_the_same_fields_on_a_graded_mesh() {
         let unknowns = Unknowns::new(&problem, Metrics { momentum: metric, signal: metric }).unwrap();
         assert_eq!(unknowns.kernel_metric(), metric == Metric::Energy);
         let mut objective = MatchObjective::new(&problem, unknowns.clone());
-        let (_, mut dq) = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap();
+        let mut dq = objective.value_grad(&vec![0.0; unknowns.len()]).unwrap().grad;
         objective.precondition(&mut dq);
         dq.iter_mut().for_each(|v| *v = -*v);
         let (dp0, dpf) = unknowns.unpack(&dq);

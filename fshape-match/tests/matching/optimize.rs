@@ -2,7 +2,7 @@
 //! and Rosenbrock's function; the strong Wolfe conditions at every accepted
 //! step; non-finite values; the objective's errors; checkpoint and resume.
 
-use fshape_match::optimize::{Method, Settings, State, Stop};
+use fshape_match::optimize::{Evaluation, Method, Objective, Settings, State, Step, Stop};
 
 /// J and ∇J, or a test's error.
 type Eval = Result<(f64, Vec<f64>), ()>;
@@ -64,7 +64,7 @@ fn lbfgs_and_gradient_descent_find_the_minimiser_of_a_quadratic() {
     // on values: near the minimum J changes by less than its rounding.)
     for method in [Method::Lbfgs { memory: 10 }, Method::GradientDescent { increase: 1.2 }] {
         let (mut f, xstar) = quadratic(8);
-        let mut state = State::start(vec![0.0; 8], &mut f).unwrap();
+        let mut state = State::start(vec![0.0; 8], &mut f).unwrap().0;
         let settings = Settings { gradient_tolerance: 1e-8, ..strict(method) };
         let stop = state.run(&settings, &mut f, |_| {}).unwrap();
         let err = state.x.iter().zip(&xstar).map(|(u, v)| (u - v).abs()).fold(0.0, f64::max);
@@ -109,13 +109,14 @@ impl TwoScales {
     }
 }
 
-impl fshape_match::optimize::Objective for TwoScales {
+impl Objective for TwoScales {
     type Error = ();
-    fn value_grad(&mut self, x: &[f64]) -> Eval {
+    type Parts = ();
+    fn value_grad(&mut self, x: &[f64]) -> Result<Evaluation<()>, ()> {
         let n = Self::N;
         let ax: Vec<f64> = (0..n).map(|i| (0..n).map(|j| Self::a(i, j) * x[j]).sum()).collect();
         let value = (0..n).map(|i| 0.5 * x[i] * ax[i] - Self::b(i) * x[i]).sum();
-        Ok((value, (0..n).map(|i| ax[i] - Self::b(i)).collect()))
+        Ok((value, (0..n).map(|i| ax[i] - Self::b(i)).collect()).into())
     }
     fn blocks(&self) -> Vec<usize> {
         vec![10]
@@ -128,7 +129,7 @@ fn block_scaled_lbfgs_reaches_the_minimiser_of_a_two_scale_quadratic_in_fewer_it
     let mut runs = Vec::new();
     for block_scaling in [true, false] {
         let settings = Settings { block_scaling, gradient_tolerance: 1e-10, ..strict(Method::Lbfgs { memory: 5 }) };
-        let mut state = State::start(vec![0.0; TwoScales::N], &mut TwoScales).unwrap();
+        let mut state = State::start(vec![0.0; TwoScales::N], &mut TwoScales).unwrap().0;
         let stop = state.run(&settings, &mut TwoScales, |_| {}).unwrap();
         // Relative error per block: the second block's values are O(1) too
         // (b and A both scaled by 1e-4).
@@ -156,7 +157,7 @@ fn lbfgs_minimises_rosenbrock_and_every_step_meets_the_strong_wolfe_conditions()
         let mut x0 = vec![-1.2; n];
         x0.iter_mut().skip(1).step_by(2).for_each(|v| *v = 1.0);
         let mut f = rosenbrock;
-        let mut state = State::start(x0, &mut f).unwrap();
+        let mut state = State::start(x0, &mut f).unwrap().0;
         let mut prev = state.clone();
         let settings = strict(Method::Lbfgs { memory: 7 });
         let stop = state
@@ -181,20 +182,20 @@ fn lbfgs_minimises_rosenbrock_and_every_step_meets_the_strong_wolfe_conditions()
 fn the_stopping_rules_fire_and_say_why() {
     let (mut f, _) = quadratic(5);
     let gradient = Settings { gradient_tolerance: 1e-3, decrease_tolerance: 0.0, ..Settings::default() };
-    let mut s = State::start(vec![0.0; 5], &mut f).unwrap();
+    let mut s = State::start(vec![0.0; 5], &mut f).unwrap().0;
     assert_eq!(s.run(&gradient, &mut f, |_| {}).unwrap(), Stop::Gradient);
     let g = s.grad.iter().map(|v| v * v).sum::<f64>().sqrt();
     assert!(g <= 1e-3 * s.grad_norm0);
 
     let iterations = Settings { max_iterations: 3, ..strict(Method::Lbfgs { memory: 5 }) };
-    let mut s = State::start(vec![0.0; 5], &mut f).unwrap();
+    let mut s = State::start(vec![0.0; 5], &mut f).unwrap().0;
     assert_eq!(s.run(&iterations, &mut f, |_| {}).unwrap(), Stop::Iterations);
     assert_eq!((s.iteration, s.values.len()), (3, 4));
 
     // A relative decrease of 1e300 over one iteration can never be met
     // (from x = 3·1, where J > 0).
     let decrease = Settings { decrease_tolerance: 1e300, decrease_window: 1, ..strict(Method::Lbfgs { memory: 5 }) };
-    let mut s = State::start(vec![3.0; 5], &mut f).unwrap();
+    let mut s = State::start(vec![3.0; 5], &mut f).unwrap().0;
     assert!(s.value > 0.0);
     assert_eq!(s.run(&decrease, &mut f, |_| {}).unwrap(), Stop::Decrease);
     assert_eq!(s.iteration, 1);
@@ -204,7 +205,7 @@ fn the_stopping_rules_fire_and_say_why() {
 fn non_finite_values_are_reported_or_stepped_back_from_and_errors_pass_through() {
     // NaN at the start: reported, no iteration.
     let mut nan = |_: &[f64]| -> Result<(f64, Vec<f64>), ()> { Ok((f64::NAN, vec![0.0])) };
-    let mut s = State::start(vec![1.0], &mut nan).unwrap();
+    let mut s = State::start(vec![1.0], &mut nan).unwrap().0;
     assert_eq!(s.run(&Settings::default(), &mut nan, |_| {}).unwrap(), Stop::NonFiniteStart);
     assert_eq!(s.iteration, 0);
 
@@ -215,7 +216,7 @@ fn non_finite_values_are_reported_or_stepped_back_from_and_errors_pass_through()
         if x[0] > 2.5 { Ok((f64::NAN, vec![f64::NAN])) } else { Ok(((x[0] - 3.0).powi(2), vec![2.0 * (x[0] - 3.0)])) }
     };
     for method in [Method::Lbfgs { memory: 5 }, Method::GradientDescent { increase: 2.0 }] {
-        let mut s = State::start(vec![0.0], &mut walled).unwrap();
+        let mut s = State::start(vec![0.0], &mut walled).unwrap().0;
         let settings = Settings { max_iterations: 50, ..Settings::default() };
         s.run(&settings, &mut walled, |st| assert!(st.value.is_finite() && st.x[0] <= 2.5)).unwrap();
         assert!(s.x[0] > 2.0 && s.x[0] <= 2.5, "{method:?}: {}", s.x[0]);
@@ -227,7 +228,7 @@ fn non_finite_values_are_reported_or_stepped_back_from_and_errors_pass_through()
         calls += 1;
         if calls > 5 { Err("shooting diverged at step 4".into()) } else { Ok(rosenbrock(x).unwrap()) }
     };
-    let mut s = State::start(vec![-1.2, 1.0], &mut failing).unwrap();
+    let mut s = State::start(vec![-1.2, 1.0], &mut failing).unwrap().0;
     assert_eq!(s.run(&Settings::default(), &mut failing, |_| {}), Err("shooting diverged at step 4".to_string()));
 }
 
@@ -236,11 +237,11 @@ fn a_run_resumed_from_a_checkpoint_is_bitwise_the_uninterrupted_run() {
     let settings = strict(Method::Lbfgs { memory: 4 });
     let x0: Vec<f64> = (0..6).map(|i| if i % 2 == 0 { -1.2 } else { 1.0 }).collect();
     let mut f = rosenbrock;
-    let mut whole = State::start(x0.clone(), &mut f).unwrap();
+    let mut whole = State::start(x0.clone(), &mut f).unwrap().0;
     for _ in 0..25 {
         whole.iterate(&settings, &mut f).unwrap();
     }
-    let mut part = State::start(x0, &mut f).unwrap();
+    let mut part = State::start(x0, &mut f).unwrap().0;
     for _ in 0..11 {
         part.iterate(&settings, &mut f).unwrap();
     }
@@ -256,4 +257,45 @@ fn a_run_resumed_from_a_checkpoint_is_bitwise_the_uninterrupted_run() {
         whole.x.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
     );
     assert_eq!(resumed, whole);
+}
+
+/// Rosenbrock's function reporting, as its parts, the point it was
+/// evaluated at and its value, so that a test can tell whose parts the
+/// optimiser hands back.
+struct Reporting;
+
+impl Objective for Reporting {
+    type Error = ();
+    type Parts = (Vec<f64>, f64);
+    fn value_grad(&mut self, x: &[f64]) -> Result<Evaluation<(Vec<f64>, f64)>, ()> {
+        let (value, grad) = rosenbrock(x)?;
+        Ok(Evaluation { value, grad, parts: (x.to_vec(), value) })
+    }
+}
+
+#[test]
+fn the_parts_handed_back_are_those_of_the_accepted_point() {
+    // Rosenbrock from (−1.2, 1, …) makes both line searches bracket, zoom
+    // and sometimes reject their last trial: the accepted point is not
+    // always the last evaluated.
+    let x0: Vec<f64> = (0..4).map(|i| if i % 2 == 0 { -1.2 } else { 1.0 }).collect();
+    for method in [Method::Lbfgs { memory: 5 }, Method::GradientDescent { increase: 2.0 }] {
+        let settings = Settings { max_iterations: 60, ..strict(method) };
+        let (mut state, (at, value)) = State::start(x0.clone(), &mut Reporting).unwrap();
+        assert_eq!((&at, value.to_bits()), (&x0, state.value.to_bits()), "{method:?}: the start's parts");
+        let (mut accepted, mut evaluations) = (0, state.evaluations);
+        loop {
+            match state.iterate(&settings, &mut Reporting).unwrap() {
+                Step::Stopped(_) => break,
+                Step::Accepted((at, value)) => {
+                    assert_eq!(at, state.x, "{method:?}, iteration {}: the parts' point", state.iteration);
+                    assert_eq!(value.to_bits(), state.value.to_bits());
+                    accepted += 1;
+                }
+            }
+            evaluations = state.evaluations;
+        }
+        assert_eq!(accepted, state.iteration);
+        assert!(evaluations > accepted + 1, "{method:?}: the searches evaluated more points than they accepted");
+    }
 }

@@ -2,7 +2,7 @@
 //! out, and what it does to the optimiser on an ill-conditioned quadratic.
 
 use fshape_kernels::Kernel;
-use fshape_match::optimize::{Method, Objective, Settings, State, Stop};
+use fshape_match::optimize::{Evaluation, Method, Objective, Settings, State, Stop};
 use fshape_match::precondition::{KernelFactor, RIDGE};
 use fshape_mesh::test_support::random_vector_field;
 
@@ -120,11 +120,12 @@ impl Gram {
 
 impl Objective for Gram {
     type Error = ();
-    fn value_grad(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>), ()> {
+    type Parts = ();
+    fn value_grad(&mut self, x: &[f64]) -> Result<Evaluation<()>, ()> {
         let n = Self::N;
         let ax: Vec<f64> = (0..n).map(|i| (0..n).map(|j| self.a[i * n + j] * x[j]).sum()).collect();
         let value = (0..n).map(|i| 0.5 * x[i] * ax[i] - Self::b(i) * x[i]).sum();
-        Ok((value, (0..n).map(|i| ax[i] - Self::b(i)).collect()))
+        Ok((value, (0..n).map(|i| ax[i] - Self::b(i)).collect()).into())
     }
     fn precondition(&self, v: &mut [f64]) {
         if let Some(m) = &self.ainv {
@@ -148,7 +149,7 @@ fn a_preconditioner_close_to_the_inverse_hessian_makes_an_ill_conditioned_quadra
     let mut runs = Vec::new();
     for preconditioned in [true, false] {
         let mut f = Gram::new(preconditioned);
-        let mut state = State::start(vec![0.0; Gram::N], &mut f).unwrap();
+        let mut state = State::start(vec![0.0; Gram::N], &mut f).unwrap().0;
         let stop = state.run(&settings, &mut f, |_| {}).unwrap();
         runs.push((stop, state.iteration));
     }

@@ -1,0 +1,191 @@
+//! Principal component analysis of an atlas's initial momenta (tangent
+//! PCA), with a small symmetric eigen-solver for the population's Gram
+//! matrix.
+
+use fshape_fem::SignalNorm;
+use fshape_mesh::FShape;
+use fshape_shoot::{ModelKind, Problem, ShootError};
+
+use super::{AtlasResult, Population};
+use crate::{MatchError, Runner};
+
+/// The eigenvalues (in decreasing order) and unit eigenvectors (the columns
+/// of a row-major n × n matrix, in the same order) of the symmetric n × n
+/// matrix `a` (row-major), by cyclic Jacobi rotations: a small, serial,
+/// deterministic solver for the Gram matrices of a population (n = the
+/// number of subjects).
+pub fn symmetric_eigen(a: &[f64], n: usize) -> (Vec<f64>, Vec<f64>) {
+    assert_eq!(a.len(), n * n, "an n × n matrix");
+    let mut a = a.to_vec();
+    let mut v = vec![0.0; n * n];
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    let scale: f64 = a.iter().map(|x| x * x).sum();
+    for _sweep in 0..100 {
+        let off: f64 = (0..n)
+            .flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q)))
+            .map(|(p, q)| a[p * n + q].powi(2))
+            .sum();
+        if off <= 1e-30 * scale || off == 0.0 {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = a[p * n + q];
+                if apq == 0.0 {
+                    continue;
+                }
+                // The rotation that zeroes a_pq (Numerical Recipes, 11.1).
+                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for k in 0..n {
+                    let (akp, akq) = (a[k * n + p], a[k * n + q]);
+                    a[k * n + p] = c * akp - s * akq;
+                    a[k * n + q] = s * akp + c * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[p * n + k], a[q * n + k]);
+                    a[p * n + k] = c * apk - s * aqk;
+                    a[q * n + k] = s * apk + c * aqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
+                    v[k * n + p] = c * vkp - s * vkq;
+                    v[k * n + q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&i, &j| a[j * n + j].total_cmp(&a[i * n + i]).then(i.cmp(&j)));
+    let values = order.iter().map(|&i| a[i * n + i]).collect();
+    let mut vectors = vec![0.0; n * n];
+    for (col, &i) in order.iter().enumerate() {
+        for k in 0..n {
+            vectors[k * n + col] = v[k * n + i];
+        }
+    }
+    (values, vectors)
+}
+
+/// One principal mode of the population's initial momenta.
+#[derive(Clone, Debug)]
+pub struct Mode {
+    /// Its standard deviation over the population (in the metric's units:
+    /// √(2 × energy)).
+    pub sd: f64,
+    /// Its share of the total variance.
+    pub share: f64,
+    /// The unit direction (p_0, p^f or ζ) on the template's vertices.
+    pub p0: Vec<f64>,
+    /// Its signal part.
+    pub pf: Vec<f64>,
+}
+
+/// Principal component analysis of an atlas's initial momenta.
+#[derive(Clone, Debug)]
+pub struct Modes {
+    /// The subjects' mean momenta.
+    pub mean_p0: Vec<f64>,
+    /// Their mean signal momentum.
+    pub mean_pf: Vec<f64>,
+    /// The modes, largest variance first.
+    pub modes: Vec<Mode>,
+    /// Per subject, its coordinate along each mode.
+    pub scores: Vec<Vec<f64>>,
+}
+
+impl Runner<Population> {
+    /// The principal modes of the subjects' initial momenta (at most
+    /// `count`), in the metric of the geodesic energy at the template:
+    /// ⟨m, m'⟩ = ⟨p_0, K p_0'⟩/γ_V + ⟨p^f, D_s⁻¹ p^f'⟩/γ_f (metamorphosis;
+    /// LDDMM without the second term; tangential with γ_f⟨ζ, D_s ζ'⟩), so
+    /// that a mode's variance is an energy, independent of the mesh (the
+    /// momenta are densities). The Gram matrix of the centred momenta is
+    /// diagonalised (Deformetrica's and Vaillant et al.'s tangent PCA); a
+    /// mode is the combination of the subjects' momenta along its
+    /// eigenvector, of unit norm.
+    pub fn principal_modes(&self, result: &AtlasResult, count: usize) -> Result<Modes, MatchError> {
+        let subjects = &result.subjects;
+        let n = subjects.len();
+        let (pn, p) = (result.template.n_vertices() * result.template.dim(), result.template.n_vertices());
+        let plan = self.plan();
+        let kind = plan.model.kind();
+        // Each subject's momenta paired with the metric: (K p_0/γ_V, the signal's).
+        let tangential = if kind == ModelKind::Tangential {
+            let fem = SignalNorm::try_new(&result.template, plan.model.norm()).map_err(ShootError::from)?;
+            let g = plan.model.gamma_f();
+            Some(
+                subjects
+                    .iter()
+                    .map(|s| Ok(fem.matvec(result.template.points(), &s.pf)?.iter().map(|v| g * v).collect()))
+                    .collect::<Result<Vec<Vec<f64>>, ShootError>>()?,
+            )
+        } else {
+            None
+        };
+        let paired = |i: usize| -> (&[f64], &[f64]) {
+            let (vx, vf) = subjects[i].trajectory.velocity(0);
+            match &tangential {
+                Some(t) => (vx, &t[i]),
+                None => (vx, vf),
+            }
+        };
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let mut gram = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                let (vx, vf) = paired(j);
+                gram[i * n + j] = dot(&subjects[i].p0, vx) + dot(&subjects[i].pf, vf);
+            }
+        }
+        // Symmetric up to rounding; centred: C G C with C = I − 11ᵀ/n.
+        let sym: Vec<f64> = (0..n * n).map(|k| 0.5 * (gram[k] + gram[(k % n) * n + k / n])).collect();
+        let row_mean: Vec<f64> = (0..n).map(|i| sym[i * n..(i + 1) * n].iter().sum::<f64>() / n as f64).collect();
+        let all_mean = row_mean.iter().sum::<f64>() / n as f64;
+        let centred: Vec<f64> = (0..n * n).map(|k| sym[k] - row_mean[k / n] - row_mean[k % n] + all_mean).collect();
+        let (values, vectors) = symmetric_eigen(&centred, n);
+        let total: f64 = values.iter().filter(|v| **v > 0.0).sum();
+        let mean_p0: Vec<f64> = (0..pn).map(|k| subjects.iter().map(|s| s.p0[k]).sum::<f64>() / n as f64).collect();
+        let mean_pf: Vec<f64> = (0..p).map(|k| subjects.iter().map(|s| s.pf[k]).sum::<f64>() / n as f64).collect();
+        let mut modes = Vec::new();
+        let dof = n.saturating_sub(1).max(1) as f64;
+        for (k, &lambda) in values.iter().enumerate().take(count.min(n.saturating_sub(1))) {
+            if lambda.is_nan() || lambda <= 1e-12 * total {
+                break;
+            }
+            let root = lambda.sqrt();
+            let weight = |i: usize| vectors[i * n + k] / root;
+            let p0 = (0..pn).map(|c| (0..n).map(|i| weight(i) * (subjects[i].p0[c] - mean_p0[c])).sum()).collect();
+            let pf = (0..p).map(|c| (0..n).map(|i| weight(i) * (subjects[i].pf[c] - mean_pf[c])).sum()).collect();
+            modes.push(Mode { sd: (lambda / dof).sqrt(), share: lambda / total, p0, pf });
+        }
+        let scores =
+            (0..n).map(|i| (0..modes.len()).map(|k| values[k].sqrt() * vectors[i * n + k]).collect()).collect();
+        Ok(Modes { mean_p0, mean_pf, modes, scores })
+    }
+
+    /// The template of `result` shot by momenta (p_0, p^f): the shape at
+    /// t = 1 (to see a mode at ±2 standard deviations).
+    pub fn shoot_template(&mut self, result: &AtlasResult, p0: &[f64], pf: &[f64]) -> Result<FShape, MatchError> {
+        let population = &mut self.staged;
+        let model = population.plan.model.clone();
+        let level = population.ensure_level(population.plan.stages.len() - 1)?;
+        let t = &result.template;
+        let mut spare;
+        let problem = match level.problems.first_mut() {
+            Some(p) => p,
+            None => {
+                spare = Problem::new(&level.template, model)?;
+                &mut spare
+            }
+        };
+        problem.set_template(t.points(), t.signal())?;
+        let traj = problem.shoot(p0, pf)?;
+        let k = traj.steps();
+        Ok(t.clone().with_points(traj.points(k).to_vec())?.with_signal(Some(traj.signal(k).to_vec()))?)
+    }
+}
