@@ -1,0 +1,191 @@
+//! Registration and atlas estimation: `match` and `atlas`.
+
+use std::path::PathBuf;
+
+use fshape_match::{MatchError, Outcome};
+use fshape_mesh::FShape;
+use numpy::PyArray1;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::config::config_of;
+use crate::conversions::{rows, shape_of, to_py};
+use crate::err;
+use crate::progress::Progress;
+use crate::shape::PyFShape;
+use crate::shoot::{geodesic, node_times};
+
+pub(crate) fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<Option<FShape>>>> {
+    let Some(list) = list else { return Ok(None) };
+    let mut t = list.iter().map(|s| shape_of(s).map(Some)).collect::<PyResult<Vec<_>>>()?;
+    t.push(None);
+    Ok(Some(t))
+}
+
+/// Registers `source` onto `target` (both `FShape`) as `fshape match`
+/// does, with `config` a `Config`, a dict of the TOML tables or a TOML path. `progress`, if
+/// given, is called with a dict per event (`event`: "stage", "iteration",
+/// "stage_finished"); returning True ends the run with its result so far
+/// (`stopped` True: the current momenta carried to the source and shot),
+/// raising ends it and re-raises.
+/// `stage_templates` are coarser templates for the stages before the last.
+/// `checkpoint`, a path, is written after every accepted iteration; when
+/// the file exists the run resumes from it (to the bits of a run never
+/// stopped), so the same call continues a run stopped by the callback,
+/// Ctrl-C or a kill; on a finished run it returns the result without
+/// iterating. A checkpoint of other inputs or configuration is refused.
+///
+/// Returns a dict: `stopped` (whether the callback ended the run before
+/// its end), `p0` (n × d), `pf` (n), `energies`, `quality` and
+/// `initial_quality` (how close the matched shape and the template are to
+/// the target), `stages` (every iteration's J), `iterations`,
+/// `evaluations`, `seconds`, `geodesic` (`times`, `points` T × n × d,
+/// `signals` T × n, `hamiltonian`), `matched` (the FShape at t = 1), and
+/// `config` (the configuration with the weights used, for `shoot`).
+#[pyfunction(name = "match")]
+#[pyo3(signature = (source, target, config, progress = None, stage_templates = None, times = None, checkpoint = None))]
+#[expect(clippy::too_many_arguments, reason = "one per keyword argument of the Python call")]
+pub(crate) fn match_shapes<'py>(
+    py: Python<'py>,
+    source: &Bound<'py, PyAny>,
+    target: &Bound<'py, PyAny>,
+    config: &Bound<'py, PyAny>,
+    progress: Option<Py<PyAny>>,
+    stage_templates: Option<Vec<Bound<'py, PyAny>>>,
+    times: Option<Vec<f64>>,
+    checkpoint: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (x, y) = (shape_of(source)?, shape_of(target)?);
+    let config = config_of(config)?;
+    let templates = self::stage_templates(stage_templates)?;
+    let times = times.unwrap_or_else(|| vec![0.0, 0.25, 0.5, 0.75, 1.0]);
+    if let Some(t) = times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
+        return Err(err(format!("times: {t} is outside [0, 1]")));
+    }
+    let mut observer = Progress::new(progress);
+    let run = py.detach(|| -> Result<_, MatchError> {
+        let mut session = fshape_match::Session::new(&x, &y, &config)?;
+        if let Some(t) = templates {
+            session = session.with_stage_templates(t)?;
+        }
+        if let Some(path) = &checkpoint {
+            // The same call continues a stopped run.
+            if path.exists() {
+                session = session.resume_from_file(path)?;
+            }
+            session = session.with_checkpoint_file(path);
+        }
+        let outcome = session.run(&mut observer)?;
+        // A callback that returned True ends the run with its result so
+        // far; one that raised (or Ctrl-C) gets no result.
+        let result = match outcome {
+            Outcome::Finished => Some(session.result()?),
+            Outcome::Interrupted if observer.error.is_none() => session.result_so_far()?,
+            Outcome::Interrupted => None,
+        };
+        let used = config.resolved(session.plan().scales);
+        let template = session.problem().template().clone();
+        Ok((result, used, template))
+    });
+    let (result, used, template) = run.map_err(err)?;
+    observer.raised()?;
+    let Some(r) = result else {
+        return Err(err("stopped by the progress callback before the first iteration: there is no result yet"));
+    };
+    let d = PyDict::new(py);
+    d.set_item("stopped", !r.finished)?;
+    let dim = template.dim();
+    d.set_item("p0", rows(py, r.p0.clone(), dim))?;
+    d.set_item("pf", PyArray1::from_slice(py, &r.pf))?;
+    d.set_item("energies", to_py(py, &r.energies)?)?;
+    d.set_item("quality", to_py(py, &r.quality)?)?;
+    d.set_item("initial_quality", to_py(py, &r.initial_quality)?)?;
+    d.set_item("stages", to_py(py, &r.stages)?)?;
+    d.set_item("iterations", r.iterations)?;
+    d.set_item("evaluations", r.evaluations)?;
+    d.set_item("seconds", r.seconds)?;
+    d.set_item("geodesic", geodesic(py, &r.trajectory, dim, &times)?)?;
+    let (x1, f1) = r.trajectory.at(1.0);
+    let matched = template.with_points(x1).and_then(|s| s.with_signal(Some(f1))).map_err(err)?;
+    d.set_item("matched", PyFShape { inner: matched })?;
+    d.set_item("config", to_py(py, &used)?)?;
+    Ok(d)
+}
+
+/// Estimates a metamorphosis atlas of `subjects` (FShapes) as `fshape
+/// atlas` does: `template` is the initial template (default: the first
+/// subject; without a signal it takes the subjects' mean), `config` a
+/// dict, TOML path or text, `progress` and `checkpoint` as for `match`.
+///
+/// Returns a dict: `template` (the estimated FShape), `template_momenta`
+/// (hypertemplate model, else None), `subjects` (per subject: `p0`, `pf`,
+/// `energies`, `quality`, `template_quality`, `initial_attachment`,
+/// `geodesic`), `energies` (means), `stages`, `iterations`, `evaluations`,
+/// `seconds`.
+#[pyfunction]
+#[pyo3(signature = (subjects, config, template = None, progress = None, stage_templates = None, checkpoint = None))]
+pub(crate) fn atlas<'py>(
+    py: Python<'py>,
+    subjects: Vec<Bound<'py, PyAny>>,
+    config: &Bound<'py, PyAny>,
+    template: Option<&Bound<'py, PyAny>>,
+    progress: Option<Py<PyAny>>,
+    stage_templates: Option<Vec<Bound<'py, PyAny>>>,
+    checkpoint: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let subjects: Vec<FShape> = subjects.iter().map(shape_of).collect::<PyResult<_>>()?;
+    if subjects.is_empty() {
+        return Err(err("atlas: no subjects"));
+    }
+    let start = match template {
+        Some(t) => shape_of(t)?,
+        None => subjects[0].clone(),
+    };
+    let config = config_of(config)?;
+    let templates = self::stage_templates(stage_templates)?;
+    let mut observer = Progress::new(progress);
+    let run = py.detach(|| -> Result<_, MatchError> {
+        let start = fshape_match::atlas::initial_template(start, &subjects)?;
+        let mut atlas = fshape_match::Atlas::new(&start, &subjects, &config)?;
+        if let Some(t) = templates {
+            atlas = atlas.with_stage_templates(t)?;
+        }
+        if let Some(path) = &checkpoint {
+            // The same call continues a stopped run.
+            if path.exists() {
+                atlas = atlas.resume_from_file(path)?;
+            }
+            atlas = atlas.with_checkpoint_file(path);
+        }
+        let outcome = atlas.run(&mut observer)?;
+        let result = if outcome == Outcome::Finished { Some(atlas.result()?) } else { None };
+        let steps = atlas.plan().model.steps();
+        Ok((outcome, result, steps))
+    });
+    let (outcome, result, steps) = run.map_err(err)?;
+    observer.finish(outcome, checkpoint.as_deref())?;
+    let r = result.expect("a finished run has a result");
+    let dim = r.template.dim();
+    let d = PyDict::new(py);
+    d.set_item("template", PyFShape { inner: r.template.clone() })?;
+    d.set_item("template_momenta", r.template_momenta.as_ref().map(|p| rows(py, p.clone(), dim)))?;
+    let list = PyList::empty(py);
+    for s in &r.subjects {
+        let e = PyDict::new(py);
+        e.set_item("p0", rows(py, s.p0.clone(), dim))?;
+        e.set_item("pf", PyArray1::from_slice(py, &s.pf))?;
+        e.set_item("energies", to_py(py, &s.energies)?)?;
+        e.set_item("quality", to_py(py, &s.quality)?)?;
+        e.set_item("template_quality", to_py(py, &s.template_quality)?)?;
+        e.set_item("initial_attachment", s.initial_attachment)?;
+        e.set_item("geodesic", geodesic(py, &s.trajectory, dim, &node_times(steps))?)?;
+        list.append(e)?;
+    }
+    d.set_item("subjects", list)?;
+    d.set_item("energies", to_py(py, &r.energies)?)?;
+    d.set_item("stages", to_py(py, &r.stages)?)?;
+    d.set_item("iterations", r.iterations)?;
+    d.set_item("evaluations", r.evaluations)?;
+    d.set_item("seconds", r.seconds)?;
+    Ok(d)
+}

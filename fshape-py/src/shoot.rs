@@ -1,0 +1,81 @@
+//! Shooting a geodesic from momenta, and a geodesic as arrays.
+
+use numpy::ndarray::{Array2, Array3};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyArrayLike2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::config::config_of;
+use crate::conversions::shape_of;
+use crate::err;
+
+/// The geodesic as arrays: points (T × n × d), signals (T × n) at `times`.
+pub(crate) fn geodesic<'py>(
+    py: Python<'py>,
+    traj: &fshape_shoot::Trajectory,
+    dim: usize,
+    times: &[f64],
+) -> PyResult<Bound<'py, PyDict>> {
+    let mut points = Vec::new();
+    let mut signals = Vec::new();
+    let mut n = 0;
+    for &t in times {
+        let (x, f) = traj.at(t);
+        n = f.len();
+        points.extend(x);
+        signals.extend(f);
+    }
+    let d = PyDict::new(py);
+    d.set_item("times", PyArray1::from_slice(py, times))?;
+    d.set_item("points", Array3::from_shape_vec((times.len(), n, dim), points).map_err(err)?.into_pyarray(py))?;
+    d.set_item("signals", Array2::from_shape_vec((times.len(), n), signals).map_err(err)?.into_pyarray(py))?;
+    d.set_item("hamiltonian", PyArray1::from_slice(py, &traj.hamiltonian))?;
+    Ok(d)
+}
+
+pub(crate) fn node_times(steps: usize) -> Vec<f64> {
+    (0..=steps).map(|k| k as f64 / steps as f64).collect()
+}
+
+/// Shoots the geodesic from `shape` with momenta `p0` (n × d) and `pf` (n;
+/// zeros if None) under the model of `config` (a dict, a TOML path or
+/// text; `normalize` must be false, as for `fshape shoot`). Returns the
+/// states at every time step.
+#[pyfunction]
+#[pyo3(signature = (shape, p0, config, pf = None))]
+pub(crate) fn shoot<'py>(
+    py: Python<'py>,
+    shape: &Bound<'py, PyAny>,
+    p0: PyArrayLike2<'py, f64, AllowTypeChange>,
+    config: &Bound<'py, PyAny>,
+    pf: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let s = shape_of(shape)?;
+    let config = config_of(config)?;
+    if config.model.normalize {
+        return Err(err(
+            "config: [model] normalize = true makes the weights relative to a registration's target, and shooting has \
+             none: set normalize = false, or shoot with the weights a registration used (its result's config)",
+        ));
+    }
+    let (n, dim) = (s.n_vertices(), s.dim());
+    let p0a = p0.as_array();
+    if p0a.shape() != [n, dim] {
+        return Err(err(format!("p0: shape {:?}, but the shape has {n} vertices in {dim}-D", p0a.shape())));
+    }
+    let p0: Vec<f64> = p0a.iter().copied().collect();
+    let pf: Vec<f64> = match pf {
+        Some(a) => {
+            let v: Vec<f64> = a.as_array().iter().copied().collect();
+            if v.len() != n {
+                return Err(err(format!("pf: {} values, but the shape has {n} vertices", v.len())));
+            }
+            v
+        }
+        None => vec![0.0; n],
+    };
+    let model = config.model().map_err(err)?;
+    let steps = model.steps();
+    let traj = py.detach(|| fshape_shoot::Problem::new(&s, model).and_then(|p| p.shoot(&p0, &pf))).map_err(err)?;
+    geodesic(py, &traj, dim, &node_times(steps))
+}
