@@ -1,6 +1,10 @@
-//! Values that several commands take, parsed once by clap: the camera of
-//! the pictures, the times at which a geodesic is written, a job array's
-//! shard. A bad value is a usage error (exit status 2) naming the flag.
+//! Values and flag groups that several commands take, parsed once by
+//! clap: the camera of the pictures, the times at which a geodesic is
+//! written, a job array's shard, a long run's configuration, output and
+//! resume flags, the signal files of a pair. A bad value is a usage error
+//! (exit status 2) naming the flag.
+
+use std::path::PathBuf;
 
 use clap::Args;
 
@@ -106,6 +110,46 @@ impl Report {
             (_, true) => Verbosity::Verbose,
             _ => Verbosity::Normal,
         }
+    }
+}
+
+/// A long run's configuration, output folder and checkpoint flags
+/// (`fshape match`, `fshape atlas`).
+#[derive(Args, Clone, Debug)]
+pub struct Run {
+    /// Model, attachment, optimizer and schedule (TOML; see fshape_match::Config).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Output directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from OUT/checkpoint.bin.
+    #[arg(long)]
+    pub resume: bool,
+    /// Stop after this many iterations in this run, leaving the checkpoint.
+    #[arg(long)]
+    pub stop_after: Option<usize>,
+}
+
+/// Where a pair of shapes' signals come from (`fshape match`, `distance`,
+/// `quality`).
+#[derive(Args, Clone, Debug)]
+pub struct Signals {
+    /// Vertex property of both meshes to read as the signal (default `signal`).
+    #[arg(long)]
+    pub signal_name: Option<String>,
+    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
+    #[arg(long, visible_alias = "signal")]
+    pub source_signal: Option<PathBuf>,
+    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
+    #[arg(long)]
+    pub target_signal: Option<PathBuf>,
+}
+
+impl Signals {
+    /// The source's and the target's signal files.
+    pub fn files(&self) -> (Option<&std::path::Path>, Option<&std::path::Path>) {
+        (self.source_signal.as_deref(), self.target_signal.as_deref())
     }
 }
 

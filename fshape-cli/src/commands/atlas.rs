@@ -30,18 +30,8 @@ pub struct Args {
     /// share its vertices).
     #[arg(long)]
     pub template: Option<PathBuf>,
-    /// The configuration (TOML, as for `fshape match`).
-    #[arg(long)]
-    pub config: PathBuf,
-    /// Output directory.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Continue from OUT/checkpoint.bin.
-    #[arg(long)]
-    pub resume: bool,
-    /// Stop after this many iterations in this run, leaving the checkpoint.
-    #[arg(long)]
-    pub stop_after: Option<usize>,
+    #[command(flatten)]
+    pub run: crate::args::Run,
     /// Vertex property of every mesh to read as the signal.
     #[arg(long)]
     pub signal_name: Option<String>,
@@ -62,10 +52,10 @@ pub fn run(a: Args) -> Result<()> {
         subjects: &a.subjects,
         list: a.list.as_deref(),
         template: a.template.as_deref(),
-        config: &a.config,
-        out: &a.out,
-        resume: a.resume,
-        stop_after: a.stop_after,
+        config: &a.run.config,
+        out: &a.run.out,
+        resume: a.run.resume,
+        stop_after: a.run.stop_after,
         signal_name: a.signal_name,
         view: a.view.camera.pair(),
         stage_templates: &a.stage_templates,

@@ -30,15 +30,8 @@ pub struct Args {
     /// product by at most τ·k(0)·mass(X)·mass(Y)); exact by default.
     #[arg(long)]
     pub tolerance: Option<f64>,
-    /// Vertex property to read as the signal of both files (default `signal`).
-    #[arg(long)]
-    pub signal_name: Option<String>,
-    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
-    #[arg(long)]
-    pub source_signal: Option<PathBuf>,
-    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
-    #[arg(long)]
-    pub target_signal: Option<PathBuf>,
+    #[command(flatten)]
+    pub signals: crate::args::Signals,
     /// Print JSON for scripts.
     #[arg(long)]
     pub json: bool,
@@ -50,8 +43,8 @@ pub fn run(a: Args) -> Result<()> {
         target: &a.target,
         kernel: (&a.kernel_geom, a.kernel_signal.as_deref(), &a.kernel_grass),
         tolerance: a.tolerance,
-        signal_name: a.signal_name,
-        signals: (a.source_signal.as_deref(), a.target_signal.as_deref()),
+        signal_name: a.signals.signal_name.clone(),
+        signals: a.signals.files(),
         json: a.json,
     })
 }

@@ -24,29 +24,12 @@ pub struct Args {
     pub source: PathBuf,
     /// The target mesh.
     pub target: PathBuf,
-    /// Model, attachment, optimizer and schedule (TOML; see fshape_match::Config).
-    #[arg(long)]
-    pub config: PathBuf,
-    /// Output directory (created if needed).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Continue from OUT/checkpoint.bin.
-    #[arg(long)]
-    pub resume: bool,
-    /// Stop after this many iterations in this run, leaving the checkpoint.
-    #[arg(long)]
-    pub stop_after: Option<usize>,
+    #[command(flatten)]
+    pub run: crate::args::Run,
     #[command(flatten)]
     pub times: crate::args::Times,
-    /// Vertex property of both meshes to read as the signal.
-    #[arg(long)]
-    pub signal_name: Option<String>,
-    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
-    #[arg(long, visible_alias = "signal")]
-    pub source_signal: Option<PathBuf>,
-    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
-    #[arg(long)]
-    pub target_signal: Option<PathBuf>,
+    #[command(flatten)]
+    pub signals: crate::args::Signals,
     #[command(flatten)]
     pub view: crate::args::View,
     #[command(flatten)]
@@ -62,12 +45,12 @@ pub fn run(a: Args) -> Result<()> {
     run_with(&MatchArgs {
         source: &a.source,
         target: &a.target,
-        signals: (a.source_signal.as_deref(), a.target_signal.as_deref()),
-        config: &a.config,
-        out: &a.out,
-        resume: a.resume,
-        stop_after: a.stop_after,
-        signal_name: a.signal_name,
+        signals: a.signals.files(),
+        config: &a.run.config,
+        out: &a.run.out,
+        resume: a.run.resume,
+        stop_after: a.run.stop_after,
+        signal_name: a.signals.signal_name.clone(),
         times: &a.times.times,
         view: a.view.camera.pair(),
         stage_templates: &a.stage_templates,

@@ -13,22 +13,15 @@ pub struct Args {
     pub source: PathBuf,
     /// The target Y.
     pub target: PathBuf,
-    /// Vertex property to read as the signal of both files (default `signal`).
-    #[arg(long)]
-    pub signal_name: Option<String>,
-    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
-    #[arg(long)]
-    pub source_signal: Option<PathBuf>,
-    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
-    #[arg(long)]
-    pub target_signal: Option<PathBuf>,
+    #[command(flatten)]
+    pub signals: crate::args::Signals,
     /// Print JSON for scripts.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    quality(&a.source, &a.target, a.signal_name, (a.source_signal.as_deref(), a.target_signal.as_deref()), a.json)
+    quality(&a.source, &a.target, a.signals.signal_name.clone(), a.signals.files(), a.json)
 }
 
 /// `fshape quality`: the match quality of one file against another.

@@ -1,0 +1,149 @@
+//! The cortex (paper section 5.2): a left hemisphere's thickness onto the right one's.
+
+use anyhow::{Context, Result};
+use fshape_match::{Config, NormKind};
+use fshape_mesh::io::{self, Encoding, write_mesh};
+use fshape_shoot::ModelKind;
+
+use super::{BUNNY_DECREASE, RunArgs, attachment, run_match, schedule, write_inputs};
+
+/// The right hemisphere mirrored onto the left: x → −x, and each
+/// triangle's last two corners swapped so that normals still point out
+/// (a reflection reverses orientation).
+pub fn mirror_x(shape: &fshape_mesh::FShape) -> Result<fshape_mesh::FShape> {
+    let dim = shape.dim();
+    let points: Vec<f64> = shape
+        .points()
+        .chunks_exact(dim)
+        .flat_map(|p| p.iter().enumerate().map(|(k, &c)| if k == 0 { -c } else { c }))
+        .collect();
+    let k = shape.kind().n_corners();
+    let mut cells = shape.cells().to_vec();
+    if k >= 2 {
+        for c in cells.chunks_exact_mut(k) {
+            c.swap(k - 2, k - 1);
+        }
+    }
+    Ok(fshape_mesh::FShape::try_new(dim, shape.kind(), points, cells, shape.signal().map(<[f64]>::to_vec))?)
+}
+
+/// The H¹ length scale of the cortex runs, in millimetres: thickness
+/// variations over less than ~2πℓ ≈ 30 mm (a few gyri) cost more through
+/// their gradient than through their size.
+pub const CORTEX_LENGTH_MM: f64 = 5.0;
+
+/// Cortex (the paper's thickness maps, section 5.2, on fsaverage5): the left
+/// pial surface with its thickness onto the right one mirrored (x → −x,
+/// faces reoriented) with its thickness, in millimetres; H¹ tangential
+/// model against H¹ metamorphosis, scale-free default weights (γ_W =
+/// `gamma_w`), p_0 in the energy metric, and four stages: k_p 20 mm on
+/// fsaverage3 (the source's first 642 vertices), 10 and 5 mm on fsaverage4
+/// (2562), 5 mm on the source, each ending on [`BUNNY_DECREASE`] (limits
+/// 4, 4, 2 and 2 times `max_iterations`: the last stage starts from a J
+/// ten times the coarse stages' end, the prolongation's cost on a folded
+/// surface, and needs about 50 iterations to recover).
+pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
+    let dir = a.out.join("cortex");
+    let fs5 = a.data.join("fsaverage5");
+    let source = io::read_mesh(&fs5.join("lh.pial.thick.ply.gz"), &io::ReadOptions::default())?;
+    let right = io::read_mesh(&fs5.join("rh.pial.ply.gz"), &io::ReadOptions::default())?;
+    let thick = io::csv::read_signal(&fs5.join("rh.thick.csv.gz"), false)?;
+    anyhow::ensure!(
+        thick.values.len() == right.n_vertices(),
+        "{}: {} values for {} vertices",
+        fs5.join("rh.thick.csv.gz").display(),
+        thick.values.len(),
+        right.n_vertices()
+    );
+    let target = mirror_x(&right.with_signal(Some(thick.values))?)?;
+    let (sp, tp) = write_inputs(&dir, &source, &target)?;
+    eprintln!(
+        "cortex: left pial ({} vertices) onto the mirrored right pial ({} vertices), thickness in mm",
+        source.n_vertices(),
+        target.n_vertices()
+    );
+    // fsaverage5 is an icosahedral subdivision: its first 2562 and 642
+    // vertices are fsaverage4's and fsaverage3's, the coarse stages'
+    // templates.
+    let level4 = source.coarsened().context("fsaverage5's fsaverage4")?;
+    let level3 = level4.coarsened().context("fsaverage5's fsaverage3")?;
+    let mut coarse = Vec::new();
+    for (name, shape) in [("source_coarse2.ply", &level3), ("source_coarse1.ply", &level4)] {
+        let path = dir.join(name);
+        write_mesh(&path, shape, Encoding::Binary)?;
+        coarse.push(path);
+    }
+    let templates = [coarse[0].clone(), coarse[1].clone(), coarse[1].clone()];
+    let n = a.max_iterations;
+    for kind in [ModelKind::Tangential, ModelKind::Metamorphosis] {
+        let run = dir.join(kind.name());
+        let mut config = Config::new(vec![20.0, 10.0]);
+        config.model.kind = kind;
+        config.model.norm = NormKind::H1;
+        config.model.length = CORTEX_LENGTH_MM;
+        config.model.gamma_w = a.gamma_w;
+        config.deformation.tolerance = Some(1e-6);
+        config.attachment = Some(attachment(5.0, 1.0, Some(1e-6))?);
+        config.optimizer.momentum_metric = fshape_match::Metric::Energy;
+        let limits = vec![4 * n, 4 * n, 2 * n, 2 * n];
+        config.schedule = Some(schedule(&[20.0, 10.0, 5.0, 5.0], vec![BUNNY_DECREASE.0; 4], limits)?);
+        let header = format!(
+            "fshape demo cortex: {}, H1 with length {CORTEX_LENGTH_MM} mm, scale-free weights\n\
+             (gamma_w {}, gamma_f 0.1), p_0 in the energy metric. Everything is in mm\n\
+             (fsaverage5, FreeSurfer surface RAS); widths use exp(-u/(2 s^2)). Stages: k_p 20 mm\n\
+             on fsaverage3 (source_coarse2.ply), 10 and 5 mm on fsaverage4 (source_coarse1.ply),\n\
+             5 mm on the source (--stage-templates), each ending when J fell by less than {}\n\
+             over {} iterations.",
+            kind.name(),
+            a.gamma_w,
+            BUNNY_DECREASE.0,
+            BUNNY_DECREASE.1
+        );
+        eprintln!("cortex: {} -> {}", kind.name(), run.display());
+        // Seen from −x: the lateral side of a left hemisphere, anterior to the left.
+        run_match(&sp, &tp, &header, &config, &run, (-90.0, 0.0), &templates)
+            .with_context(|| format!("cortex, {}", kind.name()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fshape_mesh::generate::icosphere;
+
+    /// Σ det(a, b, c)/6 over the triangles: the enclosed volume, positive
+    /// when the faces are counter-clockwise seen from outside.
+    fn signed_volume(points: &[f64], cells: &[usize]) -> f64 {
+        let p = |i: usize| &points[3 * i..3 * i + 3];
+        cells
+            .chunks_exact(3)
+            .map(|c| {
+                let (a, b, d) = (p(c[0]), p(c[1]), p(c[2]));
+                (a[0] * (b[1] * d[2] - b[2] * d[1]) - a[1] * (b[0] * d[2] - b[2] * d[0])
+                    + a[2] * (b[0] * d[1] - b[1] * d[0]))
+                    / 6.0
+            })
+            .sum()
+    }
+
+    #[test]
+    fn mirroring_negates_x_keeps_the_signal_and_keeps_the_normals_outward() {
+        let sphere = icosphere(2, 1.0);
+        let pts: Vec<f64> =
+            sphere.points().chunks_exact(3).flat_map(|p| [p[0] + 3.0, p[1] - 1.0, p[2] + 2.0]).collect();
+        let signal: Vec<f64> = pts.chunks_exact(3).map(|p| p[0] * p[1]).collect();
+        let shape = sphere.with_points(pts.clone()).unwrap().with_signal(Some(signal.clone())).unwrap();
+        let m = mirror_x(&shape).unwrap();
+        for (a, b) in m.points().chunks_exact(3).zip(pts.chunks_exact(3)) {
+            assert_eq!(a, [-b[0], b[1], b[2]]);
+        }
+        assert_eq!(m.signal().unwrap(), &signal[..]);
+        let v = signed_volume(&pts, shape.cells());
+        // Inscribed in the unit sphere: a little below 4π/3.
+        assert!(v > 3.5 && v < 4.0 * std::f64::consts::PI / 3.0, "{v}");
+        assert!((signed_volume(m.points(), m.cells()) - v).abs() < 1e-12 * v);
+        // The reflection alone turns the faces inside out.
+        assert!((signed_volume(m.points(), shape.cells()) + v).abs() < 1e-12 * v);
+    }
+}
