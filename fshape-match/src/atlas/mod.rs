@@ -18,7 +18,7 @@
 //! The unknowns, in order: the template's positions (divided by the length
 //! scale L when the weights are normalised), its signal (divided by the
 //! signal scale S), then each subject's momenta packed as in matching
-//! ([`Unknowns`]). L-BFGS's initial Hessian is block-diagonal
+//! ([`crate::unknowns::Unknowns`]). L-BFGS's initial Hessian is block-diagonal
 //! ([`crate::optimize::Objective::precondition`]): on the positions the
 //! deformation kernel K(x̄) (the Sobolev gradient: a step moves the template
 //! by a velocity field of V, as fshapesTk smooths its template gradient),

@@ -2,7 +2,7 @@
 //! function of the template's unknowns and every subject's momenta, its
 //! gradient, and the initial Hessian's shape ([`super`]'s docs). Each
 //! process evaluates its subjects and gathers every subject's record
-//! ([`Record`]) in subject order.
+//! (a status, its parts and gradients) in subject order.
 
 use fshape_fem::{Norm, SignalNorm};
 use fshape_kernels::{Kernel, KernelSums};

@@ -98,7 +98,7 @@ pub struct Current {
 pub struct Checkpoint {
     /// [`CHECKPOINT_FORMAT`] of the version that wrote it.
     pub format: u32,
-    /// [`fingerprint`] of the inputs: a checkpoint of other inputs is
+    /// [`crate::fingerprint`] of the inputs: a checkpoint of other inputs is
     /// refused.
     pub fingerprint: String,
     /// Finished stages.
