@@ -134,9 +134,11 @@ fn fem_summary_and_matrix_market_export() {
     let v = json(&fshape(&["fem", &mesh, "--norm", "l2", "--json"]));
     assert!((v["trace"].as_f64().unwrap() - area / 2.0).abs() <= 1e-12 * area);
     // A bad norm name or length is a clear error.
+    // An unknown norm is a usage error naming the flag and the choices.
     let r = fshape(&["fem", &mesh, "--norm", "h2"]);
-    assert_eq!(r.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&r.stderr).contains("unknown signal norm `h2`"));
+    assert_eq!(r.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&r.stderr);
+    assert!(e.contains("'h2'") && e.contains("--norm") && e.contains("l2-lumped"), "{e}");
     let r = fshape(&["fem", &mesh, "--norm", "h1", "--length=-1"]);
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("length scale must be positive"));

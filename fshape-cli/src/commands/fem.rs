@@ -14,9 +14,9 @@ use crate::inputs::load;
 pub struct Args {
     /// The mesh file.
     pub file: PathBuf,
-    /// Which norm: l2-lumped, l2 or h1.
-    #[arg(long, default_value = "h1")]
-    pub norm: String,
+    /// Which norm.
+    #[arg(long, value_enum, default_value_t = NormName::H1)]
+    pub norm: NormName,
     /// Length scale ℓ of the H1 gradient term, in the mesh's units
     /// (the paper uses 1; choose a length of the data's scale, e.g. a few
     /// mm on a cortex).
@@ -30,8 +30,30 @@ pub struct Args {
     pub json: bool,
 }
 
+/// The signal norms by their names on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum NormName {
+    /// Lumped L² (diagonal mass).
+    #[value(name = "l2-lumped")]
+    L2Lumped,
+    /// L² with the P1 mass matrix.
+    L2,
+    /// H¹: P1 mass + ℓ² × P1 stiffness.
+    H1,
+}
+
+impl NormName {
+    fn norm(self, length: f64) -> Norm {
+        match self {
+            NormName::L2Lumped => Norm::L2Lumped,
+            NormName::L2 => Norm::L2,
+            NormName::H1 => Norm::H1 { length },
+        }
+    }
+}
+
 pub fn run(a: Args) -> Result<()> {
-    fem(&a.file, &a.norm, a.length, a.out.as_deref(), a.json)
+    fem(&a.file, a.norm.norm(a.length), a.out.as_deref(), a.json)
 }
 
 #[derive(Serialize)]
@@ -46,9 +68,8 @@ struct FemSummary {
     total_area: f64,
 }
 
-fn fem(path: &Path, norm: &str, length: f64, out: Option<&Path>, json: bool) -> Result<()> {
+fn fem(path: &Path, norm: Norm, out: Option<&Path>, json: bool) -> Result<()> {
     let shape = load(path, None, None)?;
-    let norm = Norm::parse(norm, length)?;
     let d = SignalNorm::try_new(&shape, norm)?;
     let values = d.assemble(shape.points()).with_context(|| format!("assembling D for {}", path.display()))?;
     let (col_ptr, row_idx) = d.pattern();
@@ -64,7 +85,10 @@ fn fem(path: &Path, norm: &str, length: f64, out: Option<&Path>, json: bool) -> 
     let summary = FemSummary {
         path: path.display().to_string(),
         norm: norm.name(),
-        length: matches!(norm, Norm::H1 { .. }).then_some(length),
+        length: match norm {
+            Norm::H1 { length } => Some(length),
+            _ => None,
+        },
         n,
         nnz: 2 * values.len() - n,
         nnz_lower: values.len(),
