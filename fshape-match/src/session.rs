@@ -7,9 +7,9 @@ use fshape_mesh::FShape;
 use fshape_shoot::{Energies, Problem, ShootError, Trajectory};
 
 use crate::optimize::{Evaluation, Settings, State, Step, Stop};
-use crate::runner::{Fnv, Runner, StageRecord, StageSetup, StageTemplates, Staged};
+use crate::runner::{Fnv, Runner, StageRecord, StageSetup, Staged, Stages};
 use crate::unknowns::{Metrics, Unknowns};
-use crate::{Config, MatchError, Plan};
+use crate::{Config, MatchError};
 
 /// The registration's result.
 #[derive(Clone, Debug)]
@@ -54,15 +54,13 @@ pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String 
 /// the current stage runs on, and the packing of its unknowns. Built by
 /// [`Session::new`](Runner::new) and run by the [`Runner`].
 pub struct Pair {
-    plan: Plan,
+    /// The plan, the source (the stages' start) and the stage templates.
+    stages: Stages,
     problem: Problem,
-    source: FShape,
     target: FShape,
     unknowns: Unknowns,
     /// The stage whose data term the problem holds.
     staged: Option<usize>,
-    /// A coarser template per stage, or none.
-    templates: StageTemplates,
     /// A coarser target per stage (`None`: the target), empty for none.
     stage_targets: Vec<Option<FShape>>,
     /// The template the problem holds: its key in `templates` (`None`:
@@ -80,38 +78,33 @@ pub struct Pair {
 pub type Session = Runner<Pair>;
 
 impl Pair {
-    /// The template of stage k and its key.
-    fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
-        self.templates.of(k, &self.source)
-    }
-
     /// The number of unknowns of stage k.
     fn unknowns_len(&self, k: usize) -> usize {
-        let t = self.template_of(k).1;
-        let signal = if self.plan.model.kind() == fshape_shoot::ModelKind::Lddmm { 0 } else { t.n_vertices() };
+        let t = self.stages.template_of(k).1;
+        let signal = if self.stages.plan.model.kind() == fshape_shoot::ModelKind::Lddmm { 0 } else { t.n_vertices() };
         t.n_vertices() * t.dim() + signal
     }
 
     /// The packing of stage k's unknowns.
     fn unknowns_of(&self, k: usize) -> Result<Unknowns, MatchError> {
-        let t = self.template_of(k).1;
-        Ok(Unknowns::for_template(t, self.plan.model.kind(), self.plan.metrics, self.plan.scales)?)
+        let t = self.stages.template_of(k).1;
+        Ok(Unknowns::for_template(t, self.stages.plan.model.kind(), self.stages.plan.metrics, self.stages.plan.scales)?)
     }
 
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
-        let (key, template) = self.template_of(k);
+        let (key, template) = self.stages.template_of(k);
         if key != self.on_template {
-            self.problem = Problem::new(template, self.plan.model.clone())?.with_parallel(self.parallel);
+            self.problem = Problem::new(template, self.stages.plan.model.clone())?.with_parallel(self.parallel);
             self.on_template = key;
             self.staged = None;
             self.metric_built = false;
         }
         if !self.metric_built {
-            self.unknowns = Unknowns::scaled(&self.problem, self.plan.metrics, self.plan.scales)?;
+            self.unknowns = Unknowns::scaled(&self.problem, self.stages.plan.metrics, self.stages.plan.scales)?;
             self.metric_built = true;
         }
         if self.staged != Some(k) {
-            let stage = &self.plan.stages[k];
+            let stage = &self.stages.plan.stages[k];
             let target = self.stage_targets.get(k).and_then(Option::as_ref).unwrap_or(&self.target);
             self.problem.set_target(target, stage.kernel.clone())?;
             self.problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
@@ -126,13 +119,14 @@ impl Pair {
     /// starts from zero (the first) or from the last stage's end as it is.
     fn carried(&self, k: usize, warm: Option<&[f64]>) -> Result<Option<Vec<f64>>, MatchError> {
         let Some(w) = warm else { return Ok(None) };
-        if k == 0 || self.template_of(k - 1).0 == self.template_of(k).0 {
+        if k == 0 || self.stages.template_of(k - 1).0 == self.stages.template_of(k).0 {
             return Ok(None);
         }
         let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
-        let (coarse, fine) = (self.template_of(k - 1).1, self.template_of(k).1);
-        let kind = self.plan.model.kind();
-        let (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, self.plan.model.kernel())?;
+        let (coarse, fine) = (self.stages.template_of(k - 1).1, self.stages.template_of(k).1);
+        let kind = self.stages.plan.model.kind();
+        let (p0, pf) =
+            crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, self.stages.plan.model.kernel())?;
         Ok(Some(self.unknowns_of(k)?.pack(&p0, &pf)))
     }
 }
@@ -142,16 +136,12 @@ impl Staged for Pair {
     const START: &'static str = "source";
     const INPUTS: &'static str = "source, target or configuration";
 
-    fn plan(&self) -> &Plan {
-        &self.plan
+    fn stages(&self) -> &Stages {
+        &self.stages
     }
 
-    fn start_shape(&self) -> &FShape {
-        &self.source
-    }
-
-    fn stage_templates_mut(&mut self) -> &mut StageTemplates {
-        &mut self.templates
+    fn stages_mut(&mut self) -> &mut Stages {
+        &mut self.stages
     }
 
     fn len_at(&self, k: usize) -> usize {
@@ -173,7 +163,7 @@ impl Staged for Pair {
             template_vertices: self.problem.template().n_vertices(),
             target_vertices: self.stage_targets.get(k).and_then(Option::as_ref).unwrap_or(&self.target).n_vertices(),
             deformation: self.problem.model().kernel().path().to_string(),
-            attachment: self.plan.stages[k].kernel.position().path().to_string(),
+            attachment: self.stages.plan.stages[k].kernel.position().path().to_string(),
         })
     }
 
@@ -213,13 +203,11 @@ impl Runner<Pair> {
         // stage on the source: it may run on a stage template first.
         let unknowns = Unknowns::for_template(source, plan.model.kind(), plan.metrics, plan.scales)?;
         let pair = Pair {
-            plan,
+            stages: Stages::new(plan, source.clone()),
             problem,
-            source: source.clone(),
             target: target.clone(),
             unknowns,
             staged: None,
-            templates: StageTemplates::default(),
             stage_targets: targets,
             on_template: None,
             metric_built: false,
@@ -229,7 +217,7 @@ impl Runner<Pair> {
         let mut session = if auto { session.set_stage_templates(templates)? } else { session };
         // The problem holds stage 0's template: say so, or the first stage
         // would set it up again.
-        session.staged.on_template = session.staged.template_of(0).0;
+        session.staged.on_template = session.staged.stages.template_of(0).0;
         Ok(session)
     }
 
@@ -283,11 +271,11 @@ impl Runner<Pair> {
             (None, None) => return Ok(None),
         };
         let pair = &self.staged;
-        let last = pair.plan.stages.len() - 1;
+        let last = pair.stages.plan.stages.len() - 1;
         let (mut p0, mut pf) = pair.unknowns_of(k)?.unpack(&x);
-        if pair.template_of(k).0 != pair.template_of(last).0 {
-            let (coarse, fine) = (pair.template_of(k).1, pair.template_of(last).1);
-            let model = &pair.plan.model;
+        if pair.stages.template_of(k).0 != pair.stages.template_of(last).0 {
+            let (coarse, fine) = (pair.stages.template_of(k).1, pair.stages.template_of(last).1);
+            let model = &pair.stages.plan.model;
             (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, model.kind(), model.kernel())?;
         }
         self.shot(p0, pf, false).map(Some)
@@ -297,7 +285,7 @@ impl Runner<Pair> {
     /// measures where they end.
     fn shot(&mut self, p0: Vec<f64>, pf: Vec<f64>, finished: bool) -> Result<MatchResult, MatchError> {
         let pair = &mut self.staged;
-        pair.stage_target(pair.plan.stages.len() - 1)?;
+        pair.stage_target(pair.stages.plan.stages.len() - 1)?;
         let (energies, trajectory) = pair.problem.objective(&p0, &pf)?;
         let template = pair.problem.template();
         let last = trajectory.steps();

@@ -1,8 +1,8 @@
 //! Registration and atlas estimation: `match` and `atlas`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use fshape_match::{MatchError, Outcome};
+use fshape_match::{MatchError, Outcome, Runner, Staged};
 use fshape_mesh::FShape;
 use numpy::PyArray1;
 use pyo3::prelude::*;
@@ -20,6 +20,23 @@ pub(crate) fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<O
     let mut t = list.iter().map(|s| shape_of(s).map(Some)).collect::<PyResult<Vec<_>>>()?;
     t.push(None);
     Ok(Some(t))
+}
+
+/// A run with its stage templates, continuing from its checkpoint file
+/// when that exists (the same call continues a stopped run).
+fn prepared<S: Staged>(
+    runner: Runner<S>,
+    templates: Option<Vec<Option<FShape>>>,
+    checkpoint: Option<&Path>,
+) -> Result<Runner<S>, MatchError> {
+    let runner = match templates {
+        Some(t) => runner.with_stage_templates(t)?,
+        None => runner,
+    };
+    match checkpoint {
+        Some(path) => runner.continuing_from(path),
+        None => Ok(runner),
+    }
 }
 
 /// Registers `source` onto `target` (both `FShape`) as `fshape match`
@@ -64,17 +81,7 @@ pub(crate) fn match_shapes<'py>(
     }
     let mut observer = Progress::new(progress);
     let run = py.detach(|| -> Result<_, MatchError> {
-        let mut session = fshape_match::Session::new(&x, &y, &config)?;
-        if let Some(t) = templates {
-            session = session.with_stage_templates(t)?;
-        }
-        if let Some(path) = &checkpoint {
-            // The same call continues a stopped run.
-            if path.exists() {
-                session = session.resume_from_file(path)?;
-            }
-            session = session.with_checkpoint_file(path);
-        }
+        let mut session = prepared(fshape_match::Session::new(&x, &y, &config)?, templates, checkpoint.as_deref())?;
         let outcome = session.run(&mut observer)?;
         // A callback that returned True ends the run with its result so
         // far; one that raised (or Ctrl-C) gets no result.
@@ -146,17 +153,8 @@ pub(crate) fn atlas<'py>(
     let mut observer = Progress::new(progress);
     let run = py.detach(|| -> Result<_, MatchError> {
         let start = fshape_match::atlas::initial_template(start, &subjects)?;
-        let mut atlas = fshape_match::Atlas::new(&start, &subjects, &config)?;
-        if let Some(t) = templates {
-            atlas = atlas.with_stage_templates(t)?;
-        }
-        if let Some(path) = &checkpoint {
-            // The same call continues a stopped run.
-            if path.exists() {
-                atlas = atlas.resume_from_file(path)?;
-            }
-            atlas = atlas.with_checkpoint_file(path);
-        }
+        let mut atlas =
+            prepared(fshape_match::Atlas::new(&start, &subjects, &config)?, templates, checkpoint.as_deref())?;
         let outcome = atlas.run(&mut observer)?;
         let result = if outcome == Outcome::Finished { Some(atlas.result()?) } else { None };
         let steps = atlas.plan().model.steps();

@@ -119,13 +119,13 @@ impl Population {
     /// Makes stage k's template the working level (this process's
     /// subjects only) and returns it.
     pub(super) fn ensure_level(&mut self, k: usize) -> Result<&mut Level, MatchError> {
-        let key = self.template_of(k).0;
+        let key = self.stages.template_of(k).0;
         if self.level.is_none() || key != self.on {
             let mine = self.cluster.subjects(self.cluster.rank(), self.subjects.len());
             // The old level goes first: two levels' problems are not held at once.
             self.level = None;
-            let template = self.template_of(k).1;
-            let level = Level::new(template, mine, &self.plan, self.hyper_model.as_ref())?;
+            let template = self.stages.template_of(k).1;
+            let level = Level::new(template, mine, &self.stages.plan, self.hyper_model.as_ref())?;
             self.level = Some(level);
             self.on = key;
             self.staged = None;
@@ -154,7 +154,7 @@ impl Population {
         let level = self.level.as_ref().expect("ensured");
         let fine0 = &level.template;
         let (n, dim) = (fine0.n_vertices(), fine0.dim());
-        let kind = self.plan.model.kind();
+        let kind = self.stages.plan.model.kind();
         // The template's displacement and signal change, one pass of
         // closest points: dim + 1 values a vertex.
         let (now, was) = (&coarse.template, &coarse.initial);
@@ -192,7 +192,7 @@ impl Population {
         x.extend(signal.iter().map(|v| v / level.metric.signal));
         let fine = fine0.clone().with_points(points)?;
         // One factor on the (moved) fine template for every subject.
-        let fit = VelocityFit::new(&fine, self.plan.model.kernel())?;
+        let fit = VelocityFit::new(&fine, self.stages.plan.model.kernel())?;
         for (p0, pf) in &coarse.momenta {
             let (q0, qf) = fit.carry(&coarse.template, p0, pf, kind)?;
             x.extend(level.unknowns.pack(&q0, &qf));
@@ -207,7 +207,7 @@ impl Population {
     pub(super) fn prolongate_unknowns(&mut self, from: usize, x: &[f64], to: usize) -> Result<Vec<f64>, MatchError> {
         self.check_len(from, x)?;
         self.check_stage(to)?;
-        if self.template_of(from).0 == self.template_of(to).0 {
+        if self.stages.template_of(from).0 == self.stages.template_of(to).0 {
             return Ok(x.to_vec());
         }
         let coarse = self.solution(from, x)?;

@@ -64,8 +64,8 @@ use levels::Level;
 pub use objective::AtlasObjective;
 pub use pca::{Mode, Modes, symmetric_eigen};
 
-use crate::runner::{Fnv, Runner, StageSetup, StageTemplates, Staged};
-use crate::{Config, MatchError, Plan, StageRecord};
+use crate::runner::{Fnv, Runner, StageSetup, Staged, Stages};
+use crate::{Config, MatchError, StageRecord};
 
 /// The initial template as the CLI and the Python package take it: a
 /// template without a signal gets the subjects' mean signal, vertex by
@@ -135,12 +135,10 @@ pub struct AtlasResult {
 /// working level and the processes the subjects are shared among. Built by
 /// [`Atlas::new`](Runner::new) and run by the [`Runner`].
 pub struct Population {
-    plan: Plan,
-    /// The initial template at full resolution (with a signal).
-    source: FShape,
+    /// The plan, the initial template at full resolution (with a signal:
+    /// the stages' start) and the stage templates.
+    stages: Stages,
     subjects: Vec<FShape>,
-    /// Per stage, its coarser initial template or none (the source).
-    templates: StageTemplates,
     /// Per stage, the subjects simplified for it (`[schedule] vertices`
     /// with coarse targets) or `None` (the subjects themselves).
     stage_subjects: Vec<Option<Vec<FShape>>>,
@@ -182,17 +180,12 @@ fn subject_len(n: usize, dim: usize, kind: ModelKind) -> usize {
 }
 
 impl Population {
-    /// The initial template of stage k and its key.
-    fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
-        self.templates.of(k, &self.source)
-    }
-
     /// The number of unknowns of stage `stage`: its template's positions
     /// and signal, then every subject's momenta.
     fn len_at(&self, stage: usize) -> usize {
-        let t = self.template_of(stage).1;
+        let t = self.stages.template_of(stage).1;
         let n = t.n_vertices();
-        n * (t.dim() + 1) + self.subjects.len() * subject_len(n, t.dim(), self.plan.model.kind())
+        n * (t.dim() + 1) + self.subjects.len() * subject_len(n, t.dim(), self.stages.plan.model.kind())
     }
 
     /// The starting unknowns of stage `stage`'s template
@@ -208,7 +201,7 @@ impl Population {
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
         self.ensure_level(k)?;
         if self.staged != Some(k) {
-            let stage = &self.plan.stages[k];
+            let stage = &self.stages.plan.stages[k];
             let subjects = self.stage_subjects.get(k).and_then(Option::as_ref).unwrap_or(&self.subjects);
             let level = self.level.as_mut().expect("ensured");
             for (problem, subject) in level.problems.iter_mut().zip(&subjects[level.mine.clone()]) {
@@ -222,8 +215,8 @@ impl Population {
 
     /// Errors unless `stage` is in the schedule.
     fn check_stage(&self, stage: usize) -> Result<(), MatchError> {
-        if stage >= self.plan.stages.len() {
-            return Err(MatchError::NoSuchStage { stage, stages: self.plan.stages.len() });
+        if stage >= self.stages.plan.stages.len() {
+            return Err(MatchError::NoSuchStage { stage, stages: self.stages.plan.stages.len() });
         }
         Ok(())
     }
@@ -245,12 +238,12 @@ impl Staged for Population {
     const START: &'static str = "initial template";
     const INPUTS: &'static str = "template, subjects or configuration";
 
-    fn plan(&self) -> &Plan {
-        &self.plan
+    fn stages(&self) -> &Stages {
+        &self.stages
     }
 
-    fn start_shape(&self) -> &FShape {
-        &self.source
+    fn stages_mut(&mut self) -> &mut Stages {
+        &mut self.stages
     }
 
     /// A stage template without a signal takes the initial template's,
@@ -259,13 +252,9 @@ impl Staged for Population {
         if template.signal().is_some() {
             return Ok(template);
         }
-        let source = &self.source;
+        let source = &self.stages.start;
         let signal = crate::resolution::sample(source, &template, source.signal().expect("set in new"), 1)?;
         Ok(template.with_signal(Some(signal))?)
-    }
-
-    fn stage_templates_mut(&mut self) -> &mut StageTemplates {
-        &mut self.templates
     }
 
     fn len_at(&self, k: usize) -> usize {
@@ -288,7 +277,7 @@ impl Staged for Population {
             template_vertices: level.template.n_vertices(),
             target_vertices: first[0].n_vertices(),
             deformation: level.deformation.clone(),
-            attachment: self.plan.stages[k].kernel.position().path().to_string(),
+            attachment: self.stages.plan.stages[k].kernel.position().path().to_string(),
         })
     }
 
@@ -366,10 +355,8 @@ impl Runner<Population> {
         let stages = plan.stages.len();
         let fingerprint = atlas_fingerprint(&source, subjects, config);
         let population = Population {
-            plan,
-            source,
+            stages: Stages::new(plan, source),
             subjects: subjects.to_vec(),
-            templates: StageTemplates::default(),
             stage_subjects,
             hyper_model,
             level: None,
@@ -396,7 +383,7 @@ impl Runner<Population> {
 
     /// The initial template (with a zero signal if it had none).
     pub fn initial_template(&self) -> &FShape {
-        &self.staged.source
+        &self.staged.stages.start
     }
 
     /// The number of unknowns of stage `stage`: its template's positions
@@ -460,10 +447,10 @@ impl Runner<Population> {
         let (iterations, evaluations) = self.checkpoint().totals();
         let (stages, seconds) = (self.checkpoint().done.clone(), self.checkpoint().seconds);
         let population = &mut self.staged;
-        let last_stage = population.plan.stages.len() - 1;
+        let last_stage = population.stages.plan.stages.len() - 1;
         population.stage_target(last_stage)?;
-        let stage = &population.plan.stages[last_stage];
-        let model = population.plan.model.clone();
+        let stage = &population.stages.plan.stages[last_stage];
+        let model = population.stages.plan.model.clone();
         let level = population.level.as_mut().expect("ensured");
         let (template, template_momenta, hyper_energy) = level.template_at(&x)?;
         let len = level.unknowns.len();
@@ -471,7 +458,7 @@ impl Runner<Population> {
         let n = population.subjects.len() as f64;
         let mut energies = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
         let mut subjects = Vec::with_capacity(population.subjects.len());
-        let start = &population.source;
+        let start = &population.stages.start;
         let zeros = (vec![0.0; start.n_vertices() * start.dim()], vec![0.0; start.n_vertices()]);
         for (i, subject) in population.subjects.iter().enumerate() {
             // This process's subjects are set up; the others (on process 0

@@ -172,8 +172,8 @@ impl Runner<Population> {
     /// t = 1 (to see a mode at ±2 standard deviations).
     pub fn shoot_template(&mut self, result: &AtlasResult, p0: &[f64], pf: &[f64]) -> Result<FShape, MatchError> {
         let population = &mut self.staged;
-        let model = population.plan.model.clone();
-        let level = population.ensure_level(population.plan.stages.len() - 1)?;
+        let model = population.stages.plan.model.clone();
+        let level = population.ensure_level(population.stages.plan.stages.len() - 1)?;
         let t = &result.template;
         let mut spare;
         let problem = match level.problems.first_mut() {

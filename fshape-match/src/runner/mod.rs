@@ -83,17 +83,15 @@ pub trait Staged {
     /// What the checkpoint's fingerprint covers, for the message refusing
     /// another run's checkpoint.
     const INPUTS: &'static str;
-    /// The checked plan.
-    fn plan(&self) -> &Plan;
-    /// The shape the last stage runs on.
-    fn start_shape(&self) -> &FShape;
+    /// The plan, the shape the stages start from and the stage templates.
+    fn stages(&self) -> &Stages;
+    /// The same, to set the stage templates.
+    fn stages_mut(&mut self) -> &mut Stages;
     /// A hand-made or simplified stage template as the stages run on it
     /// (default: as given).
     fn stage_template(&self, template: FShape) -> Result<FShape, MatchError> {
         Ok(template)
     }
-    /// The stage templates, to replace.
-    fn stage_templates_mut(&mut self) -> &mut StageTemplates;
     /// The number of unknowns of stage `k`.
     fn len_at(&self, k: usize) -> usize;
     /// Where a fresh stage `k` starts: from scratch for the first,
@@ -105,6 +103,26 @@ pub trait Staged {
     fn prepare(&mut self, k: usize) -> Result<StageSetup, MatchError>;
     /// Stage `k`'s objective, after [`Staged::prepare`].
     fn objective(&mut self, k: usize) -> Self::Objective<'_>;
+}
+
+/// What a staged problem is run from: the checked plan, the shape the
+/// stages start from (the last stage runs on it) and the stage templates.
+pub struct Stages {
+    pub(crate) plan: Plan,
+    pub(crate) start: FShape,
+    pub(crate) templates: StageTemplates,
+}
+
+impl Stages {
+    /// `plan` starting from `start`, without stage templates.
+    pub(crate) fn new(plan: Plan, start: FShape) -> Stages {
+        Stages { plan, start, templates: StageTemplates::default() }
+    }
+
+    /// The template of stage k and its key ([`StageTemplates::of`]).
+    pub(crate) fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
+        self.templates.of(k, &self.start)
+    }
 }
 
 /// The stage templates of a schedule: per stage a coarser version of the
@@ -133,7 +151,7 @@ impl StageTemplates {
     /// `None`, each a non-empty mesh of the start shape's kind and
     /// dimension), completes them ([`Staged::stage_template`]) and keys them.
     fn checked<S: Staged>(staged: &S, templates: Vec<Option<FShape>>) -> Result<StageTemplates, MatchError> {
-        let (n, start, what) = (staged.plan().stages.len(), staged.start_shape(), S::START);
+        let (n, start, what) = (staged.stages().plan.stages.len(), &staged.stages().start, S::START);
         if templates.len() != n {
             return Err(MatchError::StageTemplates(format!(
                 "{} given for a schedule of {n} stages (one per stage, the last None)",
@@ -228,7 +246,7 @@ impl<S: Staged> Runner<S> {
     /// checkpoint's fingerprint: call this before [`Runner::resume`]. An
     /// error where the schedule's `vertices` make the templates already.
     pub fn with_stage_templates(self, templates: Vec<Option<FShape>>) -> Result<Self, MatchError> {
-        if self.staged.plan().stages.iter().any(|s| s.vertices.is_some()) {
+        if self.plan().stages.iter().any(|s| s.vertices.is_some()) {
             return Err(MatchError::StageTemplatesTwice);
         }
         self.set_stage_templates(templates)
@@ -238,7 +256,7 @@ impl<S: Staged> Runner<S> {
     pub(crate) fn set_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Self, MatchError> {
         let templates = StageTemplates::checked(&self.staged, templates)?;
         self.checkpoint.fingerprint = templates.fingerprint(&self.checkpoint.fingerprint);
-        *self.staged.stage_templates_mut() = templates;
+        self.staged.stages_mut().templates = templates;
         Ok(self)
     }
 
@@ -258,7 +276,7 @@ impl<S: Staged> Runner<S> {
                 S::INPUTS
             )));
         }
-        checkpoint::validate_arrays(&checkpoint, self.staged.plan().stages.len(), |k| self.staged.len_at(k))?;
+        checkpoint::validate_arrays(&checkpoint, self.plan().stages.len(), |k| self.staged.len_at(k))?;
         self.checkpoint = checkpoint;
         Ok(self)
     }
@@ -270,9 +288,20 @@ impl<S: Staged> Runner<S> {
         self.resume(checkpoint).map_err(|e| e.in_file(path))
     }
 
+    /// Writes the checkpoint to `path` ([`Runner::with_checkpoint_file`]),
+    /// first continuing from it when the file exists
+    /// ([`Runner::resume_from_file`]): the same call starts a run or
+    /// continues a stopped one (the Python package's policy; the program
+    /// asks for `--resume` instead). A checkpoint of other inputs is an
+    /// error, never overwritten.
+    pub fn continuing_from(self, path: &Path) -> Result<Self, MatchError> {
+        let runner = if path.exists() { self.resume_from_file(path)? } else { self };
+        Ok(runner.with_checkpoint_file(path))
+    }
+
     /// The checked plan.
     pub fn plan(&self) -> &Plan {
-        self.staged.plan()
+        &self.staged.stages().plan
     }
 
     /// The checkpoint as of now.
@@ -282,7 +311,7 @@ impl<S: Staged> Runner<S> {
 
     /// Whether every stage has run.
     pub fn is_finished(&self) -> bool {
-        self.checkpoint.done.len() == self.staged.plan().stages.len()
+        self.checkpoint.done.len() == self.plan().stages.len()
     }
 
     /// Runs the remaining stages (all of them on a new run) until each
@@ -291,7 +320,7 @@ impl<S: Staged> Runner<S> {
         let start = Instant::now();
         let earlier = self.checkpoint.seconds;
         let clock = move || earlier + start.elapsed().as_secs_f64();
-        let stages = self.staged.plan().stages.len();
+        let stages = self.plan().stages.len();
         while self.checkpoint.done.len() < stages {
             let k = self.checkpoint.done.len();
             let begin = match self.checkpoint.current.take() {
@@ -299,12 +328,12 @@ impl<S: Staged> Runner<S> {
                 None => StageStart::At(self.staged.start(k, self.checkpoint.warm.as_deref())?),
             };
             let setup = self.staged.prepare(k)?;
-            let spec = self.staged.plan().stages[k].clone();
+            let spec = self.plan().stages[k].clone();
             let settings = Settings {
                 max_iterations: spec.max_iterations,
                 decrease_tolerance: spec.decrease.0,
                 decrease_window: spec.decrease.1,
-                ..self.staged.plan().settings
+                ..self.plan().settings
             };
             let mut stage = Stage {
                 k,
