@@ -12,8 +12,10 @@ mod commands;
 mod demo;
 mod inputs;
 mod outputs;
+mod plots;
 #[cfg(feature = "mpi")]
 mod processes;
+mod progress;
 mod render;
 
 #[derive(Parser)]

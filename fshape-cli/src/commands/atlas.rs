@@ -222,12 +222,12 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => atlas,
     };
     let model = atlas.plan().model.clone();
-    let mut progress = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after, a.verbosity);
+    let mut progress = crate::progress::Progress::new(model.gamma_w(), a.stop_after, a.verbosity);
     if rank > 0 {
         // Every process runs the same iterations (so --stop-after stops
         // them all at once); process 0 writes.
         let mut atlas = atlas;
-        let mut quiet = crate::commands::matching::Progress::new(model.gamma_w(), a.stop_after, a.verbosity).hidden();
+        let mut quiet = crate::progress::Progress::new(model.gamma_w(), a.stop_after, a.verbosity).hidden();
         atlas.run(&mut quiet)?;
         return Ok(());
     }
@@ -352,8 +352,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         let (rgb, width, height) = mode_grid(&pairs, &view);
         push("modes.png".into(), render::png_sized(&rgb, width, height)?);
     }
-    let (svg, png) =
-        crate::commands::matching::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
+    let (svg, png) = crate::plots::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
     push("energy.svg".into(), svg.into_bytes());
     push("energy.png".into(), png);
     let n = result.subjects.len() as f64;

@@ -8,14 +8,15 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use fshape_match::{
-    Config, Control, Iteration, MatchError, Metrics, Observer, Outcome, Session, StageRecord, StageSpec,
-};
+use fshape_match::{Config, MatchError, Metrics, Outcome, Session, StageRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io;
 use fshape_shoot::{ModelKind, ShootError};
 use fshape_varifold::VarifoldError;
 use serde::Serialize;
+
+use crate::plots::energy_plot;
+use crate::progress::Progress;
 
 /// `fshape match`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -116,123 +117,6 @@ struct Summary<'a> {
     evaluations: usize,
     seconds: f64,
     files: Vec<String>,
-}
-
-/// The progress bar on a terminal, a line per stage and iteration
-/// elsewhere (or with `--verbose`), and `--stop-after`.
-pub(crate) struct Progress {
-    gamma_w: f64,
-    /// Iterations this invocation may still make.
-    budget: Option<usize>,
-    bar: Option<indicatif::ProgressBar>,
-    /// Never draw (the other processes of an MPI run, `--quiet`).
-    hidden: bool,
-    /// Lines instead of a bar.
-    lines: bool,
-    /// What starts each line, e.g. "[row 3] ".
-    label: String,
-    /// The stage under way, as "stage k/n (kernel)".
-    stage: String,
-    start: Instant,
-}
-
-impl Progress {
-    /// For a model with weight γ_W, stopping after `budget` iterations,
-    /// reporting as `verbosity` says.
-    pub(crate) fn new(gamma_w: f64, budget: Option<usize>, verbosity: crate::args::Verbosity) -> Progress {
-        use crate::args::Verbosity;
-        use std::io::IsTerminal;
-        let lines = match verbosity {
-            Verbosity::Quiet => false,
-            Verbosity::Normal => !std::io::stderr().is_terminal(),
-            Verbosity::Verbose => true,
-        };
-        Progress {
-            gamma_w,
-            budget,
-            bar: None,
-            hidden: verbosity == Verbosity::Quiet,
-            lines,
-            label: String::new(),
-            stage: String::new(),
-            start: Instant::now(),
-        }
-    }
-
-    /// The same budget, nothing shown.
-    pub(crate) fn hidden(mut self) -> Progress {
-        self.hidden = true;
-        self.lines = false;
-        self
-    }
-
-    /// Each line starts with `[label] `.
-    pub(crate) fn labelled(mut self, label: Option<&str>) -> Progress {
-        self.label = label.map(|l| format!("[{l}] ")).unwrap_or_default();
-        self
-    }
-
-    /// Leaves the bar where it stopped, with `why`.
-    pub(crate) fn abandon(&mut self, why: &'static str) {
-        if let Some(bar) = self.bar.take() {
-            bar.abandon_with_message(why);
-        }
-    }
-
-    fn line(&self, what: std::fmt::Arguments<'_>) {
-        eprintln!("{}[{:8.1} s] {} {what}", self.label, self.start.elapsed().as_secs_f64(), self.stage);
-    }
-}
-
-impl Observer for Progress {
-    fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
-        self.stage = format!("stage {}/{stages} ({})", stage + 1, spec.label);
-        if self.lines {
-            self.line(format_args!("starts, at most {} iterations ({done} done)", spec.max_iterations));
-        }
-        let bar = if self.hidden || self.lines {
-            indicatif::ProgressBar::hidden()
-        } else {
-            indicatif::ProgressBar::new(spec.max_iterations as u64)
-        };
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} it, ETA {eta} | {msg}")
-                .expect("a valid template")
-                .progress_chars("=> "),
-        );
-        bar.set_prefix(self.stage.clone());
-        bar.set_position(done as u64);
-        self.bar = Some(bar);
-        if self.budget == Some(0) { Control::Stop } else { Control::Continue }
-    }
-
-    fn iteration(&mut self, _stage: usize, it: &Iteration) -> Control {
-        let parts = format!(
-            "J {:.6e} = H {:.4e} + γ_W·A {:.4e}, step {:.2e}",
-            it.value,
-            it.energy,
-            self.gamma_w * it.attachment,
-            it.step
-        );
-        if self.lines {
-            self.line(format_args!("iteration {}: {parts}, {} evaluations", it.iteration, it.evaluations));
-        }
-        if let Some(bar) = &self.bar {
-            bar.set_position(it.iteration as u64);
-            bar.set_message(parts);
-        }
-        self.budget = self.budget.map(|b| b.saturating_sub(1));
-        if self.budget == Some(0) { Control::Stop } else { Control::Continue }
-    }
-
-    fn stage_finished(&mut self, _stage: usize, record: &StageRecord) {
-        if self.lines {
-            self.line(format_args!("ends: {} after {} iterations", record.reason, record.iterations.len()));
-        }
-        if let Some(bar) = self.bar.take() {
-            bar.finish_with_message(format!("{} after {} iterations", record.reason, record.iterations.len()));
-        }
-    }
 }
 
 /// The library says "the target shape has no signal"; the user knows it by
@@ -396,98 +280,4 @@ pub(crate) fn brief(before: &fshape_match::Quality, after: &fshape_match::Qualit
         lines.push(format!("signal error  {:.2}% -> {:.2}% of its range (rms)", 100.0 * b, 100.0 * e));
     }
     lines
-}
-
-/// J, the energy and γ_W·A against the iteration number (log scale), all
-/// stages one after the other, as (SVG text, PNG bytes).
-pub(crate) fn energy_plot(stages: &[StageRecord], gamma_w: f64, title: &str) -> Result<(String, Vec<u8>)> {
-    use plotters::prelude::*;
-    let mut series: [Vec<(f64, f64)>; 3] = Default::default();
-    let mut n = 0usize;
-    for s in stages {
-        for it in std::iter::once(&s.initial).chain(&s.iterations) {
-            for (k, v) in [it.value, it.energy, gamma_w * it.attachment].into_iter().enumerate() {
-                if v > 0.0 && v.is_finite() {
-                    series[k].push((n as f64, v));
-                }
-            }
-            n += 1;
-        }
-    }
-    register_plot_font()?;
-    let mut svg = String::new();
-    draw_energy(SVGBackend::with_string(&mut svg, PLOT_SIZE).into_drawing_area(), &series, n, title)?;
-    let mut rgb = vec![0u8; (PLOT_SIZE.0 * PLOT_SIZE.1 * 3) as usize];
-    draw_energy(BitMapBackend::with_buffer(&mut rgb, PLOT_SIZE).into_drawing_area(), &series, n, title)?;
-    let png = crate::render::png_sized(&rgb, PLOT_SIZE.0, PLOT_SIZE.1)?;
-    Ok((svg, png))
-}
-
-const PLOT_SIZE: (u32, u32) = (720, 420);
-
-/// The bitmap backend draws text with ab_glyph from a font registered at run
-/// time; the font is embedded (assets/, DejaVu licence) so that a headless
-/// machine without system fonts still labels its plots.
-fn register_plot_font() -> Result<()> {
-    static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    let ok = DONE.get_or_init(|| {
-        plotters::style::register_font(
-            "sans-serif",
-            plotters::style::FontStyle::Normal,
-            include_bytes!("../../assets/DejaVuSansMono.ttf"),
-        )
-        .is_ok()
-    });
-    anyhow::ensure!(*ok, "plot: the embedded font assets/DejaVuSansMono.ttf did not load");
-    Ok(())
-}
-
-fn draw_energy<DB: plotters::prelude::DrawingBackend>(
-    root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
-    series: &[Vec<(f64, f64)>; 3],
-    n: usize,
-    title: &str,
-) -> Result<()> {
-    use plotters::prelude::*;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("plot: {e}");
-    let all = series.iter().flatten().map(|p| p.1);
-    let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    let (lo, hi) = if lo.is_finite() { (lo / 2.0, hi * 2.0) } else { (1e-3, 1.0) };
-    root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(64)
-        .caption(title, ("sans-serif", 18))
-        .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, (lo..hi).log_scale())
-        .map_err(err)?;
-    // Iterations are whole numbers: label them so, at most 10 ticks.
-    chart
-        .configure_mesh()
-        .x_desc("iteration")
-        .x_labels(n.clamp(2, 11))
-        .x_label_formatter(&|x| format!("{}", x.round() as i64))
-        .draw()
-        .map_err(err)?;
-    // Lines and legend swatches two pixels wide, so that each swatch shows
-    // its colour (a one-pixel blue swatch reads as black).
-    for (k, (name, color)) in [("J", BLACK), ("energy H", BLUE), ("γ_W·A", RED)].into_iter().enumerate() {
-        chart
-            .draw_series(LineSeries::new(series[k].clone(), color.stroke_width(2)))
-            .map_err(err)?
-            .label(name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)));
-    }
-    // Upper right: the curves start high on the left and fall (the y
-    // range reaches twice their largest value), so the legend's default
-    // middle-right place is where they run at the end.
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE)
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)?;
-    Ok(())
 }

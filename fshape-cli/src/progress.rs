@@ -1,0 +1,125 @@
+//! How a long run reports its progress on stderr: a progress bar on a
+//! terminal, a line per stage and iteration elsewhere (a batch system's
+//! log, a file, a pipe) or with `--verbose`, nothing with `--quiet`; and
+//! `--stop-after`.
+
+use std::time::Instant;
+
+use fshape_match::{Control, Iteration, Observer, StageRecord, StageSpec};
+
+/// The progress bar on a terminal, a line per stage and iteration
+/// elsewhere (or with `--verbose`), and `--stop-after`.
+pub struct Progress {
+    gamma_w: f64,
+    /// Iterations this invocation may still make.
+    budget: Option<usize>,
+    bar: Option<indicatif::ProgressBar>,
+    /// Never draw (the other processes of an MPI run, `--quiet`).
+    hidden: bool,
+    /// Lines instead of a bar.
+    lines: bool,
+    /// What starts each line, e.g. "[row 3] ".
+    label: String,
+    /// The stage under way, as "stage k/n (kernel)".
+    stage: String,
+    start: Instant,
+}
+
+impl Progress {
+    /// For a model with weight γ_W, stopping after `budget` iterations,
+    /// reporting as `verbosity` says.
+    pub(crate) fn new(gamma_w: f64, budget: Option<usize>, verbosity: crate::args::Verbosity) -> Progress {
+        use crate::args::Verbosity;
+        use std::io::IsTerminal;
+        let lines = match verbosity {
+            Verbosity::Quiet => false,
+            Verbosity::Normal => !std::io::stderr().is_terminal(),
+            Verbosity::Verbose => true,
+        };
+        Progress {
+            gamma_w,
+            budget,
+            bar: None,
+            hidden: verbosity == Verbosity::Quiet,
+            lines,
+            label: String::new(),
+            stage: String::new(),
+            start: Instant::now(),
+        }
+    }
+
+    /// The same budget, nothing shown.
+    pub(crate) fn hidden(mut self) -> Progress {
+        self.hidden = true;
+        self.lines = false;
+        self
+    }
+
+    /// Each line starts with `[label] `.
+    pub(crate) fn labelled(mut self, label: Option<&str>) -> Progress {
+        self.label = label.map(|l| format!("[{l}] ")).unwrap_or_default();
+        self
+    }
+
+    /// Leaves the bar where it stopped, with `why`.
+    pub(crate) fn abandon(&mut self, why: &'static str) {
+        if let Some(bar) = self.bar.take() {
+            bar.abandon_with_message(why);
+        }
+    }
+
+    fn line(&self, what: std::fmt::Arguments<'_>) {
+        eprintln!("{}[{:8.1} s] {} {what}", self.label, self.start.elapsed().as_secs_f64(), self.stage);
+    }
+}
+
+impl Observer for Progress {
+    fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
+        self.stage = format!("stage {}/{stages} ({})", stage + 1, spec.label);
+        if self.lines {
+            self.line(format_args!("starts, at most {} iterations ({done} done)", spec.max_iterations));
+        }
+        let bar = if self.hidden || self.lines {
+            indicatif::ProgressBar::hidden()
+        } else {
+            indicatif::ProgressBar::new(spec.max_iterations as u64)
+        };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} it, ETA {eta} | {msg}")
+                .expect("a valid template")
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(self.stage.clone());
+        bar.set_position(done as u64);
+        self.bar = Some(bar);
+        if self.budget == Some(0) { Control::Stop } else { Control::Continue }
+    }
+
+    fn iteration(&mut self, _stage: usize, it: &Iteration) -> Control {
+        let parts = format!(
+            "J {:.6e} = H {:.4e} + γ_W·A {:.4e}, step {:.2e}",
+            it.value,
+            it.energy,
+            self.gamma_w * it.attachment,
+            it.step
+        );
+        if self.lines {
+            self.line(format_args!("iteration {}: {parts}, {} evaluations", it.iteration, it.evaluations));
+        }
+        if let Some(bar) = &self.bar {
+            bar.set_position(it.iteration as u64);
+            bar.set_message(parts);
+        }
+        self.budget = self.budget.map(|b| b.saturating_sub(1));
+        if self.budget == Some(0) { Control::Stop } else { Control::Continue }
+    }
+
+    fn stage_finished(&mut self, _stage: usize, record: &StageRecord) {
+        if self.lines {
+            self.line(format_args!("ends: {} after {} iterations", record.reason, record.iterations.len()));
+        }
+        if let Some(bar) = self.bar.take() {
+            bar.finish_with_message(format!("{} after {} iterations", record.reason, record.iterations.len()));
+        }
+    }
+}
