@@ -138,6 +138,23 @@ class Geodesic(TypedDict):
     """T x n."""
     hamiltonian: npt.NDArray[np.float64]
 
+class Alignment(TypedDict):
+    """A pre-alignment ([prealign] in the configuration): T(x) = matrix (x, 1)
+    from the source's frame to the target's."""
+    kind: Literal["rigid", "similarity", "affine"]
+    moving: Literal["source", "target"]
+    """Which shape the registration moved (T on the source, T^-1 on the target)."""
+    matrix: list[list[float]]
+    """(d + 1) x (d + 1), row-major."""
+    scale: float
+    rotation_degrees: float
+    translation: list[float]
+    """The translation of the source's centroid."""
+    attachment_before: float
+    attachment_after: float
+    start: int
+    starts: int
+
 class MatchResult(TypedDict):
     stopped: bool
     """True when the progress callback ended the run before its end: the
@@ -148,6 +165,7 @@ class MatchResult(TypedDict):
     energies: Energies
     quality: Quality
     initial_quality: Quality
+    alignment: Optional[Alignment]
     stages: list[dict[str, Any]]
     iterations: int
     evaluations: int
@@ -163,6 +181,8 @@ class SubjectResult(TypedDict):
     quality: Quality
     template_quality: Quality
     initial_attachment: float
+    alignment: Optional[Alignment]
+    """The pre-alignment that moved this subject onto the initial template."""
     geodesic: Geodesic
 
 class AtlasResult(TypedDict):

@@ -54,6 +54,11 @@
 //! [atlas]                           # fshape atlas only
 //! template = "free"                 # free | hypertemplate              (default free)
 //! gamma_v0 = 1.0                    # hypertemplate: weight γ_V0 of its energy (default 1)
+//!
+//! [prealign]                         # before matching (crate::prealign)
+//! kind = "rigid"                    # none | rigid | similarity | affine (default none)
+//! move = "source"                   # source | target: which is moved  (default source; atlases move the subjects)
+//! max_iterations = 100              # L-BFGS iterations per start        (default 100)
 //! ```
 //!
 //! **Scale-free weights** (`normalize = true`, the default). The three
@@ -124,6 +129,9 @@ pub struct Config {
     /// `[atlas]` (atlas estimation only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub atlas: Option<AtlasSection>,
+    /// `[prealign]` (matching and atlases; none by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prealign: Option<crate::prealign::PrealignSection>,
 }
 
 /// Which template model an atlas estimates.
@@ -555,6 +563,7 @@ impl Config {
             optimizer: OptimizerSection::default(),
             schedule: None,
             atlas: None,
+            prealign: None,
         }
     }
 

@@ -37,6 +37,7 @@ pub mod atlas;
 mod config;
 pub mod demo;
 pub mod optimize;
+pub mod prealign;
 pub mod precondition;
 pub mod quality;
 pub mod resolution;
@@ -50,6 +51,7 @@ pub use config::{
     ModelSection, NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec,
     StageSpec, TemplateKind,
 };
+pub use prealign::{AlignKind, Alignment, Moving, PrealignSection};
 pub use quality::{Quality, quality};
 pub use runner::{
     CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Outcome, Runner, StageRecord, StageSetup,

@@ -34,6 +34,10 @@ pub struct MatchResult {
     pub quality: crate::Quality,
     /// How close the template was, for comparison.
     pub initial_quality: crate::Quality,
+    /// The pre-alignment the registration ran after (`[prealign]`), if
+    /// any: the source and the result are in the target's frame (or the
+    /// target in the source's, `move = "target"`).
+    pub alignment: Option<crate::Alignment>,
     /// Whether every stage ran to its stopping rule; `false` for
     /// [`Session::result_so_far`](Runner::result_so_far) of a run stopped before its end.
     pub finished: bool,
@@ -58,6 +62,8 @@ pub struct Pair {
     stages: Stages,
     problem: Problem,
     target: FShape,
+    /// The pre-alignment that moved the source or the target, if any.
+    alignment: Option<crate::Alignment>,
     unknowns: Unknowns,
     /// The stage whose data term the problem holds.
     staged: Option<usize>,
@@ -144,6 +150,14 @@ impl Staged for Pair {
         &mut self.stages
     }
 
+    /// A stage template moves with the source when `[prealign]` moved it.
+    fn stage_template(&self, template: FShape) -> Result<FShape, MatchError> {
+        match &self.alignment {
+            Some(a) if a.moving == crate::Moving::Source => a.apply(&template),
+            _ => Ok(template),
+        }
+    }
+
     fn len_at(&self, k: usize) -> usize {
         self.unknowns_len(k)
     }
@@ -185,6 +199,9 @@ impl Runner<Pair> {
                 target.dim()
             )));
         }
+        // With `[prealign]`, the registration runs on the aligned pair.
+        let (source, target, alignment) = crate::prealign::prealigned(source, target, config)?;
+        let (source, target) = (&source, &target);
         let plan = config.plan(source, target)?;
         let counts: Vec<Option<usize>> = plan.stages.iter().map(|s| s.vertices).collect();
         let auto = counts.iter().any(Option::is_some);
@@ -206,6 +223,7 @@ impl Runner<Pair> {
             stages: Stages::new(plan, source.clone()),
             problem,
             target: target.clone(),
+            alignment,
             unknowns,
             staged: None,
             stage_targets: targets,
@@ -214,7 +232,7 @@ impl Runner<Pair> {
             parallel: true,
         };
         let session = Runner::of(pair, fingerprint(source, target, config));
-        let mut session = if auto { session.set_stage_templates(templates)? } else { session };
+        let mut session = if auto { session.set_stage_templates(templates, false)? } else { session };
         // The problem holds stage 0's template: say so, or the first stage
         // would set it up again.
         session.staged.on_template = session.staged.stages.template_of(0).0;
@@ -227,6 +245,17 @@ impl Runner<Pair> {
         self.staged.problem.set_parallel(parallel);
         self.staged.parallel = parallel;
         self
+    }
+
+    /// The pre-alignment the session runs after (`[prealign]`), if any.
+    pub fn alignment(&self) -> Option<&crate::Alignment> {
+        self.staged.alignment.as_ref()
+    }
+
+    /// The target the session matches (moved by T⁻¹ with `[prealign]
+    /// move = "target"`).
+    pub fn target(&self) -> &FShape {
+        &self.staged.target
     }
 
     /// The problem (template, model, current target).
@@ -295,6 +324,7 @@ impl Runner<Pair> {
             .with_signal(Some(trajectory.signal(last).to_vec()))?;
         let quality = crate::quality(&matched, &pair.target)?;
         let initial_quality = crate::quality(template, &pair.target)?;
+        let alignment = pair.alignment.clone();
         // Finished stages, and the one under way when stopped within it.
         let checkpoint = self.checkpoint();
         let (iterations, evaluations) = checkpoint.totals();
@@ -309,6 +339,7 @@ impl Runner<Pair> {
             seconds: checkpoint.seconds,
             quality,
             initial_quality,
+            alignment,
             finished,
         })
     }

@@ -10,6 +10,8 @@ mod errors;
 mod objective;
 #[path = "matching/optimize.rs"]
 mod optimize;
+#[path = "matching/prealign.rs"]
+mod prealign;
 #[path = "matching/precondition.rs"]
 mod precondition;
 #[path = "matching/quality.rs"]

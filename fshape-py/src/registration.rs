@@ -55,7 +55,9 @@ fn prepared<S: Staged>(
 /// Returns a dict: `stopped` (whether the callback ended the run before
 /// its end), `p0` (n × d), `pf` (n), `energies`, `quality` and
 /// `initial_quality` (how close the matched shape and the template are to
-/// the target), `stages` (every iteration's J), `iterations`,
+/// the target), `alignment` (with `[prealign]`: the map T as a homogeneous
+/// `matrix`, its `scale`, `rotation_degrees`, `translation`, the
+/// attachment before and after; else None), `stages` (every iteration's J), `iterations`,
 /// `evaluations`, `seconds`, `geodesic` (`times`, `points` T × n × d,
 /// `signals` T × n, `hamiltonian`), `matched` (the FShape at t = 1), and
 /// `config` (the configuration with the weights used, for `shoot`).
@@ -107,6 +109,7 @@ pub(crate) fn match_shapes<'py>(
     d.set_item("energies", to_py(py, &r.energies)?)?;
     d.set_item("quality", to_py(py, &r.quality)?)?;
     d.set_item("initial_quality", to_py(py, &r.initial_quality)?)?;
+    d.set_item("alignment", r.alignment.as_ref().map(|a| to_py(py, a)).transpose()?)?;
     d.set_item("stages", to_py(py, &r.stages)?)?;
     d.set_item("iterations", r.iterations)?;
     d.set_item("evaluations", r.evaluations)?;
@@ -176,6 +179,7 @@ pub(crate) fn atlas<'py>(
         e.set_item("quality", to_py(py, &s.quality)?)?;
         e.set_item("template_quality", to_py(py, &s.template_quality)?)?;
         e.set_item("initial_attachment", s.initial_attachment)?;
+        e.set_item("alignment", s.alignment.as_ref().map(|a| to_py(py, a)).transpose()?)?;
         e.set_item("geodesic", geodesic(py, &s.trajectory, dim, &node_times(steps))?)?;
         list.append(e)?;
     }

@@ -100,6 +100,10 @@ struct SubjectSummary {
     /// and how close the estimated template itself is.
     quality: fshape_match::Quality,
     template_quality: fshape_match::Quality,
+    /// The pre-alignment that moved the subject onto the initial template
+    /// (`[prealign]`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    prealign: Option<fshape_match::Alignment>,
     directory: String,
 }
 
@@ -297,12 +301,19 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
             attachment_fall: (s.initial_attachment > 0.0).then(|| 1.0 - s.energies.attachment / s.initial_attachment),
             quality: s.quality,
             template_quality: s.template_quality,
+            prealign: s.alignment.clone(),
             directory: dir,
         });
     }
     push("momenta.csv".into(), table.into_bytes());
-    // Pictures: the template, and a grid of each subject (left) next to the
-    // template shot onto it (right), all with one camera and colour range.
+    // Pictures: the template, and a grid of each subject (left, as the
+    // atlas saw it: pre-aligned with [prealign]) next to the template shot
+    // onto it (right), all with one camera and colour range.
+    let subjects: Vec<FShape> = subjects
+        .iter()
+        .zip(&result.subjects)
+        .map(|(s, r)| r.alignment.as_ref().map_or_else(|| Ok(s.clone()), |a| a.apply(s)))
+        .collect::<Result<_, _>>()?;
     let mut all: Vec<&FShape> = subjects.iter().collect();
     all.push(&result.template);
     all.push(atlas.initial_template());

@@ -113,6 +113,11 @@ struct Summary<'a> {
     /// target's diagonal and signal range), and the template was.
     quality: fshape_match::Quality,
     quality_before: fshape_match::Quality,
+    /// The pre-alignment the registration ran after (`[prealign]`): T as
+    /// a homogeneous matrix from the source's frame to the target's, and
+    /// the attachment before and after.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    prealign: Option<&'a fshape_match::Alignment>,
     iterations: usize,
     evaluations: usize,
     seconds: f64,
@@ -198,6 +203,8 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
             template.clone().with_points(x)?.with_signal(Some(f))
         })
         .collect::<Result<_, _>>()?;
+    // The target as matched (moved by [prealign] move = "target").
+    let target = session.target().clone();
     let mut all: Vec<&FShape> = frames.iter().collect();
     all.push(&target);
     let view = crate::render::View::fit(&all, a.view.0, a.view.1).with_range_of(&[&frames[0], &target]);
@@ -234,6 +241,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         hamiltonian: traj.hamiltonian.clone(),
         quality: result.quality,
         quality_before: result.initial_quality,
+        prealign: result.alignment.as_ref(),
         iterations: result.iterations,
         evaluations: result.evaluations,
         seconds: result.seconds + after.elapsed().as_secs_f64(),
@@ -252,6 +260,12 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         result.stages.len(),
         summary.seconds
     );
+    if let Some(al) = &result.alignment {
+        println!(
+            "  prealigned    {:?}: rotation {:.1} deg, scale {:.3}, attachment {:.3e} -> {:.3e} (summary.json: prealign)",
+            al.kind, al.rotation_degrees, al.scale, al.attachment_before, al.attachment_after
+        );
+    }
     for line in brief(&result.initial_quality, &result.quality) {
         println!("  {line}");
     }

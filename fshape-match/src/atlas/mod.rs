@@ -107,6 +107,9 @@ pub struct SubjectResult {
     /// The data term A at the start: the initial template against it,
     /// with the last stage's kernel.
     pub initial_attachment: f64,
+    /// The pre-alignment that moved it onto the initial template
+    /// (`[prealign]`), if any.
+    pub alignment: Option<crate::Alignment>,
 }
 
 /// The atlas: the template and every subject's geodesic.
@@ -138,7 +141,10 @@ pub struct Population {
     /// The plan, the initial template at full resolution (with a signal:
     /// the stages' start) and the stage templates.
     stages: Stages,
+    /// The subjects (pre-aligned with `[prealign]`).
     subjects: Vec<FShape>,
+    /// Per subject, the pre-alignment that moved it, if any.
+    alignments: Vec<Option<crate::Alignment>>,
     /// Per stage, the subjects simplified for it (`[schedule] vertices`
     /// with coarse targets) or `None` (the subjects themselves).
     stage_subjects: Vec<Option<Vec<FShape>>>,
@@ -305,7 +311,24 @@ impl Runner<Population> {
                 )));
             }
         }
-        let plan = config.plan(template, first)?;
+        // With `[prealign]`, every subject is moved onto the initial
+        // template first (one pass; the plan then sees the moved subjects).
+        let (moved, alignments) = match config.prealign.as_ref().filter(|s| s.kind != crate::AlignKind::None) {
+            None => (subjects.to_vec(), vec![None; subjects.len()]),
+            Some(section) => {
+                let kernel = config.plan(template, first)?.stages[0].kernel.clone();
+                let mut moved = Vec::with_capacity(subjects.len());
+                let mut alignments = Vec::with_capacity(subjects.len());
+                for s in subjects {
+                    let a = crate::prealign::prealign(s, template, &kernel, section)?;
+                    moved.push(a.apply(s)?);
+                    alignments.push(Some(a));
+                }
+                (moved, alignments)
+            }
+        };
+        let subjects = &moved[..];
+        let plan = config.plan(template, &subjects[0])?;
         let source = match template.signal() {
             Some(_) => template.clone(),
             None => template.clone().with_signal(Some(vec![0.0; template.n_vertices()]))?,
@@ -357,6 +380,7 @@ impl Runner<Population> {
         let population = Population {
             stages: Stages::new(plan, source),
             subjects: subjects.to_vec(),
+            alignments,
             stage_subjects,
             hyper_model,
             level: None,
@@ -369,7 +393,7 @@ impl Runner<Population> {
         if !auto {
             return Ok(atlas);
         }
-        atlas.set_stage_templates(templates)
+        atlas.set_stage_templates(templates, false)
     }
 
     /// Shares the subjects' evaluations among the processes of `cluster`
@@ -490,6 +514,7 @@ impl Runner<Population> {
                 quality: crate::quality(&matched, subject)?,
                 template_quality: crate::quality(&template, subject)?,
                 initial_attachment,
+                alignment: population.alignments[i].clone(),
                 p0,
                 pf,
                 energies: e,

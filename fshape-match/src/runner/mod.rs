@@ -87,8 +87,8 @@ pub trait Staged {
     fn stages(&self) -> &Stages;
     /// The same, to set the stage templates.
     fn stages_mut(&mut self) -> &mut Stages;
-    /// A hand-made or simplified stage template as the stages run on it
-    /// (default: as given).
+    /// A hand-made stage template (in the frame of the inputs as given)
+    /// as the stages run on it (default: as given).
     fn stage_template(&self, template: FShape) -> Result<FShape, MatchError> {
         Ok(template)
     }
@@ -149,8 +149,13 @@ impl StageTemplates {
 
     /// Checks `templates` (one per stage of `staged`'s schedule, the last
     /// `None`, each a non-empty mesh of the start shape's kind and
-    /// dimension), completes them ([`Staged::stage_template`]) and keys them.
-    fn checked<S: Staged>(staged: &S, templates: Vec<Option<FShape>>) -> Result<StageTemplates, MatchError> {
+    /// dimension), completes those the user `given` ([`Staged::stage_template`];
+    /// simplified ones are made complete) and keys them.
+    fn checked<S: Staged>(
+        staged: &S,
+        templates: Vec<Option<FShape>>,
+        given: bool,
+    ) -> Result<StageTemplates, MatchError> {
         let (n, start, what) = (staged.stages().plan.stages.len(), &staged.stages().start, S::START);
         if templates.len() != n {
             return Err(MatchError::StageTemplates(format!(
@@ -172,7 +177,8 @@ impl StageTemplates {
                         "stage {k}'s template is not a non-empty mesh of the {what}'s kind and dimension"
                     )));
                 }
-                Some(t) => Some(staged.stage_template(t)?),
+                Some(t) if given => Some(staged.stage_template(t)?),
+                Some(t) => Some(t),
             });
         }
         let keys = (0..n)
@@ -249,12 +255,17 @@ impl<S: Staged> Runner<S> {
         if self.plan().stages.iter().any(|s| s.vertices.is_some()) {
             return Err(MatchError::StageTemplatesTwice);
         }
-        self.set_stage_templates(templates)
+        self.set_stage_templates(templates, true)
     }
 
-    /// [`Runner::with_stage_templates`], from the schedule's counts too.
-    pub(crate) fn set_stage_templates(mut self, templates: Vec<Option<FShape>>) -> Result<Self, MatchError> {
-        let templates = StageTemplates::checked(&self.staged, templates)?;
+    /// [`Runner::with_stage_templates`] (`given`), or the schedule's
+    /// simplified copies of the start shape.
+    pub(crate) fn set_stage_templates(
+        mut self,
+        templates: Vec<Option<FShape>>,
+        given: bool,
+    ) -> Result<Self, MatchError> {
+        let templates = StageTemplates::checked(&self.staged, templates, given)?;
         self.checkpoint.fingerprint = templates.fingerprint(&self.checkpoint.fingerprint);
         self.staged.stages_mut().templates = templates;
         Ok(self)
