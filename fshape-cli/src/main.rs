@@ -61,7 +61,10 @@ enum Command {
     /// coarse-to-fine schedule. Writes the geodesic (VTK + .pvd, PLY), the
     /// momenta (p0.csv, pf.csv, momenta.vtk), summary.json and energy.svg/.png.
     /// A checkpoint is written after every iteration: after Ctrl-C or a
-    /// kill, `--resume` continues to the same result, bit for bit.
+    /// kill, `--resume` continues to the same result, bit for bit. With a
+    /// `[prealign]` section (kind = "rigid" | "similarity" | "affine") the
+    /// source is first aligned to the target on the data attachment, from
+    /// 24 starts; summary.json's `prealign` holds the 4 × 4 matrix.
     Match(commands::matching::Args),
     /// Register every pair of a table: one `fshape match` per row, each in
     /// OUT/NAME (its own checkpoint and outputs), then OUT/index.csv and

@@ -628,3 +628,37 @@ fn each_process_sets_up_only_its_own_subjects() {
         assert_eq!(atlas.subjects_set_up(), held, "process {rank}");
     }
 }
+
+#[test]
+fn with_prealign_every_subject_is_moved_onto_the_initial_template_first() {
+    // The subjects turned by a quarter turn about z and shifted far away:
+    // aligned, each starts at least as close to the initial template as
+    // the plain subject does (the undone turn is one candidate of the
+    // fit; these near-spheres may also fit turned about their axes).
+    let turned: Vec<FShape> = subjects()
+        .iter()
+        .map(|s| {
+            let pts = s.points().chunks_exact(3).flat_map(|p| [-p[1] + 2.0, p[0] - 1.0, p[2] + 0.5]).collect();
+            s.clone().with_points(pts).unwrap()
+        })
+        .collect();
+    let config = config_with("metamorphosis", "h1", "[prealign]\nkind = \"rigid\"\n");
+    let mut atlas = Atlas::new(&template(), &turned, &config).unwrap();
+    atlas.run(&mut ()).unwrap();
+    let result = atlas.result().unwrap();
+    let mut plain = Atlas::new(&template(), &subjects(), &config_with("metamorphosis", "h1", "")).unwrap();
+    plain.run(&mut ()).unwrap();
+    let plain = plain.result().unwrap();
+    for (i, (s, p)) in result.subjects.iter().zip(&plain.subjects).enumerate() {
+        let a = s.alignment.as_ref().expect("every subject aligned");
+        assert!(a.attachment_after < a.attachment_before, "subject {i}: {a:?}");
+        assert!(
+            s.initial_attachment <= p.initial_attachment * (1.0 + 1e-6),
+            "subject {i}: aligned {} against plain {}",
+            s.initial_attachment,
+            p.initial_attachment
+        );
+        assert!(p.alignment.is_none());
+    }
+    assert!(result.energies.value < result.stages[0].initial.value);
+}

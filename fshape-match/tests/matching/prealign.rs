@@ -50,10 +50,12 @@ fn the_fit_gradient_matches_central_differences() {
     }
 }
 
-/// The rotation angle between two rotations, in degrees.
+/// The rotation angle between two rotations, in degrees: of u = aᵀb,
+/// from its skew part and trace (accurate near 0 and π).
 fn angle(a: &[f64], b: &[f64]) -> f64 {
-    let tr: f64 = (0..3).map(|i| (0..3).map(|k| a[k * 3 + i] * b[k * 3 + i]).sum::<f64>()).sum();
-    ((tr - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees()
+    let u: Vec<f64> = (0..9).map(|k| (0..3).map(|l| a[l * 3 + k / 3] * b[l * 3 + k % 3]).sum()).collect();
+    let skew = ((u[7] - u[5]).powi(2) + (u[2] - u[6]).powi(2) + (u[3] - u[1]).powi(2)).sqrt();
+    (0.5 * skew).atan2(0.5 * (u[0] + u[4] + u[8] - 1.0)).to_degrees()
 }
 
 /// A random rotation (uniform axis, angle uniform in [0°, 180°]).
