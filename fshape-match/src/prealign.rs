@@ -42,6 +42,18 @@ pub enum AlignKind {
     Affine,
 }
 
+impl AlignKind {
+    /// The configuration's spelling: `none`, `rigid`, `similarity`, `affine`.
+    pub fn name(self) -> &'static str {
+        match self {
+            AlignKind::None => "none",
+            AlignKind::Rigid => "rigid",
+            AlignKind::Similarity => "similarity",
+            AlignKind::Affine => "affine",
+        }
+    }
+}
+
 /// Which shape the map moves (`[prealign] move`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -104,8 +116,9 @@ pub struct Alignment {
     pub matrix: Vec<Vec<f64>>,
     /// The scale (the linear part's determinant to the power 1/dim).
     pub scale: f64,
-    /// The rotation's angle in degrees (of the linear part's nearest
-    /// rotation).
+    /// The rotation's angle in degrees: of the linear part divided by its
+    /// scale (the rotation itself for a rigid or similarity map; only
+    /// indicative for an affine one).
     pub rotation_degrees: f64,
     /// The translation of the source's centroid.
     pub translation: Vec<f64>,
@@ -197,7 +210,7 @@ fn hat(w: &[f64]) -> [f64; 9] {
     [0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0]
 }
 
-/// Exp(ω) on SO(3) (Rodrigues), or the plane rotation by ω[0].
+/// Exp(ω) on SO(3) (Rodrigues), or the plane rotation by the angle `w[0]`.
 pub fn rotation(w: &[f64], d: usize) -> Vec<f64> {
     if d == 2 {
         let (s, c) = w[0].sin_cos();

@@ -262,8 +262,12 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     );
     if let Some(al) = &result.alignment {
         println!(
-            "  prealigned    {:?}: rotation {:.1} deg, scale {:.3}, attachment {:.3e} -> {:.3e} (summary.json: prealign)",
-            al.kind, al.rotation_degrees, al.scale, al.attachment_before, al.attachment_after
+            "  prealigned    {}: rotation {:.1} deg, scale {:.3}, attachment {:.3e} -> {:.3e} (summary.json: prealign)",
+            al.kind.name(),
+            al.rotation_degrees,
+            al.scale,
+            al.attachment_before,
+            al.attachment_after
         );
     }
     for line in brief(&result.initial_quality, &result.quality) {
