@@ -12,7 +12,9 @@ fn repo(rel: &str) -> String {
 }
 
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fshape-cli-tests-{}", std::process::id()));
+    // Under target/tmp (cargo's scratch space for integration tests), not
+    // the system's temporary directory, which would keep every run's files.
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("fshape-cli-tests-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }

@@ -11,7 +11,9 @@ use proptest::prelude::*;
 use proptest::test_runner::Config;
 
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fshape-mesh-tests-{}", std::process::id()));
+    // Under target/tmp (cargo's scratch space for integration tests), not
+    // the system's temporary directory, which would keep every run's files.
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("fshape-mesh-tests-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }
