@@ -298,12 +298,19 @@ impl<'a> Fit<'a> {
             let m = m0.iter().zip(&u[d..]).map(|(a, b)| a + b).collect();
             return (m, t);
         }
-        let r = matmul(&self.start.rotation, &rotation(&u[d..d + self.n_rot()], d), d);
+        let (r, s) = self.rotation_and_scale(u);
+        (r.iter().map(|v| s * v).collect(), t)
+    }
+
+    /// R = R₀ Exp(ω) and s = s₀ e^σ at `u` (rigid and similarity fits).
+    fn rotation_and_scale(&self, u: &[f64]) -> (Vec<f64>, f64) {
+        let (d, n_rot) = (self.d(), self.n_rot());
+        let r = matmul(&self.start.rotation, &rotation(&u[d..d + n_rot], d), d);
         let s = match self.kind {
-            AlignKind::Similarity => self.start.scale * u[d + self.n_rot()].exp(),
+            AlignKind::Similarity => self.start.scale * u[d + n_rot].exp(),
             _ => self.start.scale,
         };
-        (r.iter().map(|v| s * v).collect(), t)
+        (r, s)
     }
 
     /// T(x) = M x + b as (M, b).
@@ -319,13 +326,8 @@ impl<'a> Fit<'a> {
     /// The start moved to the unknowns `u` (rotation, scale and
     /// translation folded in), so that a new fit from it starts at `u`.
     fn advanced(&self, u: &[f64]) -> Start {
-        let d = self.d();
-        let (m, translation) = self.map(u);
-        let rotation = matmul(&self.start.rotation, &rotation(&u[d..d + self.n_rot()], d), d);
-        let scale = match self.kind {
-            AlignKind::Similarity => m.iter().map(|v| v * v).sum::<f64>().sqrt() / (d as f64).sqrt(),
-            _ => self.start.scale,
-        };
+        let (_, translation) = self.map(u);
+        let (rotation, scale) = self.rotation_and_scale(u);
         Start { rotation, scale, translation }
     }
 
@@ -357,12 +359,7 @@ impl<'a> Fit<'a> {
             grad.extend(&big_g);
             return Ok((dist.value, grad));
         }
-        let n_rot = self.n_rot();
-        let r = matmul(&self.start.rotation, &rotation(&u[d..d + n_rot], d), d);
-        let s = match self.kind {
-            AlignKind::Similarity => self.start.scale * u[d + n_rot].exp(),
-            _ => self.start.scale,
-        };
+        let (r, s) = self.rotation_and_scale(u);
         // ∂A/∂R = s G; with M = Rᵀ G, δA = s a·(J_r δω).
         let mm = matmul(&transpose(&r, d), &big_g, d);
         if d == 2 {
