@@ -184,6 +184,9 @@ class SubjectResult(TypedDict):
     alignment: Optional[Alignment]
     """The pre-alignment that moved this subject onto the initial template."""
     geodesic: Geodesic
+    matched: FShape
+    """The template shot onto this subject (the geodesic's end), vertex for
+    vertex with the template: what `stats` compares."""
 
 class AtlasResult(TypedDict):
     template: FShape
@@ -287,3 +290,55 @@ def atlas(
 ) -> AtlasResult:
     """Estimates a metamorphosis atlas as `fshape atlas` does; `checkpoint`
     as for `match`."""
+
+
+class MapTest(TypedDict):
+    kind: Literal["t", "F"]
+    dof: Tuple[int, int]
+    """The contrast's rank and n − p."""
+    statistic: npt.NDArray[np.float64]
+    effect: npt.NDArray[np.float64]
+    """t tests: the contrast's estimate per vertex (in the map's unit); F: its norm."""
+    p: npt.NDArray[np.float64]
+    """Uncorrected permutation p per vertex."""
+    p_fwe: npt.NDArray[np.float64]
+    """Family-wise error corrected p (maximum statistic)."""
+    tfce: Optional[npt.NDArray[np.float64]]
+    tfce_p_fwe: Optional[npt.NDArray[np.float64]]
+    critical: float
+    """The tested value (|t| when two-sided) that reaches p_FWE ≤ alpha."""
+
+class StatsResult(TypedDict):
+    design: dict[str, Any]
+    """columns (intercept first, a factor as `column[level]`), terms, x."""
+    contrast: dict[str, Any]
+    rows_not_in_the_atlas: list[str]
+    maps: dict[str, MapTest]
+    """By map: "signal", "momentum", "displacement", "area"."""
+    multivariate: Optional[dict[str, Any]]
+    """With `scores`: statistic (Hotelling T² for a one-row contrast), p."""
+
+def stats(
+    atlas: AtlasResult,
+    covariates: Union[str, "PathLike[str]", Mapping[str, Sequence[Any]]],
+    contrast: str,
+    maps: Optional[Sequence[Literal["signal", "momentum", "displacement", "area"]]] = None,
+    columns: Optional[Sequence[str]] = None,
+    permutations: int = 5000,
+    seed: int = 0,
+    tfce: bool = False,
+    one_sided: bool = False,
+    scores: Optional[npt.NDArray[np.float64]] = None,
+    alpha: float = 0.05,
+) -> StatsResult:
+    """Where the atlas's subjects differ with a covariate, as `fshape
+    stats` does: per-vertex maps on the template (signal change, normal
+    momentum, normal displacement, log area change) tested with a general
+    linear model and Freedman–Lane permutations (FWE by the maximum
+    statistic; TFCE with `tfce`). `covariates`: a CSV table whose first
+    column names the subjects (index or `subject_003`), or a dict
+    {column: one value per subject, in the atlas's order}; numbers enter
+    as they are, names as a factor (treatment coding). `contrast`: a
+    column's name, a design column or weights `0,1,0` (`;` between rows
+    for an F test). `scores` (n × k): also Hotelling's test on them. The
+    same seed gives the same bits."""

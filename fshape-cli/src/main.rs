@@ -80,6 +80,17 @@ enum Command {
     /// subject's momenta and matched template, momenta.csv (one row per
     /// subject), pictures and summary.json; checkpoints every iteration.
     Atlas(commands::atlas::Args),
+    /// Group statistics on an atlas: where do the subjects' shapes and
+    /// signals differ with a covariate (a group, an age)? From an `fshape
+    /// atlas` folder and a covariates table, per-vertex maps on the
+    /// template (signal change, normal momentum, normal displacement, log
+    /// area change) are tested with a general linear model and
+    /// permutations (Freedman–Lane; family-wise error by the maximum
+    /// statistic, TFCE as an option), and the momenta's principal scores
+    /// with Hotelling's T². Writes t/F, effect and p maps (GIfTI, PLY),
+    /// pictures, multivariate.csv and summary.json. The same seed gives
+    /// the same bits.
+    Stats(commands::stats::Args),
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo(commands::demo::Args),
@@ -108,6 +119,7 @@ fn main() -> ExitCode {
         Command::Match(a) => commands::matching::run(a),
         Command::Batch(a) => commands::batch::run(a),
         Command::Atlas(a) => commands::atlas::run(a),
+        Command::Stats(a) => commands::stats::run(a),
         Command::Demo(a) => commands::demo::run(a),
         Command::Render(a) => commands::render::run(a),
         Command::Convert(a) => commands::convert::run(a),

@@ -22,6 +22,8 @@ pub struct View {
     scale: f64,
     /// Signal values mapped to the ends of the colour map.
     range: (f64, f64),
+    /// Blue–white–red instead of viridis (signed maps: a statistic).
+    diverging: bool,
 }
 
 impl View {
@@ -56,7 +58,7 @@ impl View {
         let span = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         let scale = if span > 0.0 { 0.9 * SIZE as f64 / span } else { 1.0 };
         let range = if flo < fhi { (flo, fhi) } else { (flo.min(0.0), flo.max(0.0) + 1.0) };
-        View { rot, centre: [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])], scale, range }
+        View { rot, centre: [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])], scale, range, diverging: false }
     }
 
     /// The same view with the colour map spanning the signals of `shapes`
@@ -74,6 +76,15 @@ impl View {
     /// The same view with the colour map spanning `lo..hi`.
     pub fn with_range(mut self, lo: f64, hi: f64) -> View {
         self.range = (lo, hi);
+        self
+    }
+
+    /// The same view coloured blue–white–red over −bound..bound: signed
+    /// maps (t statistics), white at 0.
+    pub fn diverging(mut self, bound: f64) -> View {
+        let b = if bound > 0.0 && bound.is_finite() { bound } else { 1.0 };
+        self.range = (-b, b);
+        self.diverging = true;
         self
     }
 
@@ -110,6 +121,14 @@ pub fn viridis(t: f64) -> [f64; 3] {
     std::array::from_fn(|c| C[k][c] * (1.0 - u) + C[k + 1][c] * u)
 }
 
+/// Blue (t = 0), white (0.5), red (1): a diverging map for signed values.
+pub fn blue_white_red(t: f64) -> [f64; 3] {
+    let t = if t.is_nan() { 0.5 } else { t.clamp(0.0, 1.0) };
+    let (blue, white, red) = ([0.23, 0.30, 0.75], [0.97, 0.97, 0.97], [0.71, 0.02, 0.15]);
+    let (a, b, u) = if t < 0.5 { (blue, white, 2.0 * t) } else { (white, red, 2.0 * t - 1.0) };
+    std::array::from_fn(|c| a[c] * (1.0 - u) + b[c] * u)
+}
+
 /// The PNG file of `shape` seen by `view`.
 pub fn picture(shape: &FShape, view: &View) -> anyhow::Result<Vec<u8>> {
     png(&rasterise(shape, view))
@@ -125,7 +144,8 @@ pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
     let px: Vec<[f64; 3]> = shape.points().chunks_exact(dim).map(|p| view.pixel(p)).collect();
     let (lo, hi) = view.range;
     let colour = |v: f64, light: f64| -> [u8; 3] {
-        let c = viridis((v - lo) / (hi - lo));
+        let t = (v - lo) / (hi - lo);
+        let c = if view.diverging { blue_white_red(t) } else { viridis(t) };
         std::array::from_fn(|k| (255.0 * c[k] * light).round().clamp(0.0, 255.0) as u8)
     };
     let mut put = |x: usize, y: usize, z: f64, c: [u8; 3]| {

@@ -14,6 +14,7 @@ mod progress;
 mod registration;
 mod shape;
 mod shoot;
+mod stats;
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -47,5 +48,6 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shoot::shoot, m)?)?;
     m.add_function(wrap_pyfunction!(registration::match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(registration::atlas, m)?)?;
+    m.add_function(wrap_pyfunction!(stats::stats, m)?)?;
     Ok(())
 }

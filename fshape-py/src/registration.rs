@@ -130,7 +130,8 @@ pub(crate) fn match_shapes<'py>(
 /// Returns a dict: `template` (the estimated FShape), `template_momenta`
 /// (hypertemplate model, else None), `subjects` (per subject: `p0`, `pf`,
 /// `energies`, `quality`, `template_quality`, `initial_attachment`,
-/// `geodesic`), `energies` (means), `stages`, `iterations`, `evaluations`,
+/// `alignment`, `geodesic`, `matched`: the template shot onto it),
+/// `energies` (means), `stages`, `iterations`, `evaluations`,
 /// `seconds`.
 #[pyfunction]
 #[pyo3(signature = (subjects, config, template = None, progress = None, stage_templates = None, checkpoint = None))]
@@ -181,6 +182,14 @@ pub(crate) fn atlas<'py>(
         e.set_item("initial_attachment", s.initial_attachment)?;
         e.set_item("alignment", s.alignment.as_ref().map(|a| to_py(py, a)).transpose()?)?;
         e.set_item("geodesic", geodesic(py, &s.trajectory, dim, &node_times(steps))?)?;
+        let last = s.trajectory.steps();
+        let matched = r
+            .template
+            .clone()
+            .with_points(s.trajectory.points(last).to_vec())
+            .and_then(|t| t.with_signal(Some(s.trajectory.signal(last).to_vec())))
+            .map_err(err)?;
+        e.set_item("matched", PyFShape { inner: matched })?;
         list.append(e)?;
     }
     d.set_item("subjects", list)?;

@@ -436,3 +436,39 @@ def test_every_gifti_file_of_nibabel_s_tests_reads_as_nibabel_reads_it():
     # The folder as nibabel 5.4 ships it: external, bz2 and gz surfaces,
     # GIFTI_ENDIAN_LITTLE, labels, shapes and a time series.
     assert seen == {"surface": 4, "signal": 4, "invalid": 2, "several": 1}, seen
+
+
+def test_stats_on_an_atlas_gives_the_cli_s_maps_and_names_a_bad_column(tmp_path):
+    # A small two-group atlas by the program (the stats-spheres demo's
+    # inputs, a few iterations), read back as `fshape.atlas` returns one.
+    cli("demo", "stats-spheres", "--quick", "--subjects", "4", "--max-iterations", "5",
+        "--permutations", "100", "--out", tmp_path)
+    root = tmp_path / "stats-spheres"
+    summary = json.loads((root / "atlas" / "summary.json").read_text())
+    atlas = {
+        "template": fshape.read_mesh(root / "atlas" / "template.ply"),
+        "subjects": [
+            {
+                "p0": np.loadtxt(root / "atlas" / s["directory"] / "p0.csv", delimiter=",", skiprows=1),
+                "matched": fshape.read_mesh(root / "atlas" / s["directory"] / "matched.ply"),
+            }
+            for s in summary["subjects"]
+        ],
+    }
+    groups = [line.split(",")[1] for line in (root / "covariates.csv").read_text().splitlines()[1:]]
+    cli("stats", root / "atlas", "--covariates", root / "covariates.csv", "--contrast", "group",
+        "--permutations", "100", "--tfce", "--out", tmp_path / "cli")
+    r = fshape.stats(atlas, {"group": groups}, "group", permutations=100, tfce=True)
+    assert r["design"]["columns"] == ["intercept", "group[effect]"]
+    for name in ["signal", "momentum", "displacement", "area"]:
+        m = r["maps"][name]
+        t = fshape.read_signal(tmp_path / "cli" / f"{name}_t.gii")
+        # GIfTI stores single precision.
+        assert np.allclose(m["statistic"], t, rtol=1e-6, atol=1e-6)
+        for key in ["p_fwe", "tfce_p_fwe"]:
+            assert np.array_equal(m[key], fshape.read_signal(tmp_path / "cli" / f"{name}_{key}.gii").astype(float))
+        assert m["kind"] == "t" and m["dof"] == [1, 6] or m["dof"] == (1, 6)
+    with pytest.raises(fshape.FShapeError, match="column `site`.*single group"):
+        fshape.stats(atlas, {"group": groups, "site": ["a"] * 8}, "group", permutations=10)
+    with pytest.raises(fshape.FShapeError, match="3 values for 8 subjects"):
+        fshape.stats(atlas, {"group": groups[:3]}, "group", permutations=10)

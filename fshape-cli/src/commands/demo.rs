@@ -15,14 +15,19 @@ pub enum Experiment {
     Cortex,
     AtlasDigits,
     AtlasSpheres,
+    StatsSpheres,
+    StatsDigits,
 }
 
 /// `fshape demo`'s arguments (its help is on the command).
 #[derive(clap::Args)]
 pub struct Args {
     /// Which experiment: digits, bunny, cortex, atlas-digits (an atlas
-    /// of 64 writers' 3s) or atlas-spheres (an atlas with a known
-    /// answer); the atlases write `fshape atlas` outputs.
+    /// of 64 writers' 3s), atlas-spheres (an atlas with a known answer),
+    /// stats-spheres (group statistics with a known answer: two groups
+    /// of turned and moved ellipsoids, effects at known places) or
+    /// stats-digits (where writers' 3s and 5s differ); the atlases write
+    /// `fshape atlas` outputs, the statistics `fshape stats` outputs.
     pub name: Experiment,
     /// Output directory.
     #[arg(long, default_value = "demo-output")]
@@ -45,14 +50,19 @@ pub struct Args {
     /// 10242 vertices.
     #[arg(long)]
     pub quick: bool,
-    /// atlas-digits: only the first N subjects (0: all 64).
+    /// atlas-digits: only the first N subjects (0: all 64);
+    /// stats-spheres: subjects per group (0: 10); stats-digits: writers
+    /// per class (0: 16).
     #[arg(long, default_value_t = 0)]
     pub subjects: usize,
+    /// stats-spheres, stats-digits: permutations of the group test.
+    #[arg(long, default_value_t = 2000)]
+    pub permutations: usize,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    if a.quick && a.name != Experiment::Bunny {
-        bail!("--quick: only the bunny demo has a quick variant");
+    if a.quick && !matches!(a.name, Experiment::Bunny | Experiment::StatsSpheres) {
+        bail!("--quick: only the bunny and stats-spheres demos have a quick variant");
     }
     let data = a.data.unwrap_or_else(demo::default_data);
     let (out, max_iterations, gamma_w, quick) = (&a.out, a.max_iterations, a.gamma_w, a.quick);
@@ -64,5 +74,18 @@ pub fn run(a: Args) -> Result<()> {
         Experiment::AtlasSpheres => demo::atlas_spheres(out, max_iterations, gamma_w),
         Experiment::AtlasDigits => demo::atlas_digits(&digits, a.subjects),
         Experiment::Digits => demo::digits(&digits),
+        Experiment::StatsDigits => demo::stats_digits(
+            &digits,
+            if a.subjects == 0 { demo::STATS_DIGITS_PER_CLASS } else { a.subjects },
+            a.permutations,
+        ),
+        Experiment::StatsSpheres => demo::stats_spheres(&demo::StatsSpheresArgs {
+            out,
+            per_group: if a.subjects == 0 { 10 } else { a.subjects },
+            max_iterations,
+            gamma_w,
+            permutations: a.permutations,
+            level: if quick { 2 } else { 3 },
+        }),
     }
 }

@@ -13,3 +13,4 @@ pub mod matching;
 pub mod quality;
 pub mod render;
 pub mod shoot;
+pub mod stats;

@@ -9,12 +9,16 @@ mod atlas_spheres;
 mod bunny;
 mod cortex;
 mod digits;
+mod stats_digits;
+mod stats_spheres;
 
 pub use atlas_digits::atlas_digits;
 pub use atlas_spheres::atlas_spheres;
 pub use bunny::bunny;
 pub use cortex::cortex;
 pub use digits::digits;
+pub use stats_digits::{STATS_DIGITS_PER_CLASS, stats_digits};
+pub use stats_spheres::{StatsSpheresArgs, stats_spheres};
 
 use std::path::{Path, PathBuf};
 

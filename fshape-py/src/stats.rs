@@ -1,0 +1,144 @@
+//! Group statistics on an atlas: `stats`.
+
+use fshape_mesh::FShape;
+use fshape_stats::{Covariates, Inference, MapKind, MeshGraph, StatKind, Tail, TfceParams};
+use numpy::{PyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString};
+
+use crate::conversions::{shape_of, to_py};
+use crate::err;
+
+/// The covariates as a table's text: a path's contents, or a mapping
+/// {column: values, one per subject in the atlas's order} written with
+/// the subjects' indices as their names.
+fn covariates_text(covariates: &Bound<'_, PyAny>, n: usize) -> PyResult<(String, String)> {
+    if let Ok(map) = covariates.cast::<PyDict>() {
+        let mut columns: Vec<(String, Vec<String>)> = Vec::new();
+        for (key, values) in map.iter() {
+            let name: String = key.extract().map_err(|_| err("covariates: column names must be strings"))?;
+            let cells: Vec<String> = values
+                .try_iter()
+                .map_err(|_| err(format!("covariates: column `{name}` is not a sequence")))?
+                .map(|v| v.and_then(|v| v.str().map(|s| s.to_string())))
+                .collect::<PyResult<_>>()?;
+            if cells.len() != n {
+                return Err(err(format!("covariates: column `{name}` has {} values for {n} subjects", cells.len())));
+            }
+            if let Some(c) = cells.iter().find(|c| c.contains(',') || c.contains('\n')) {
+                return Err(err(format!("covariates: column `{name}`: `{c}` holds a comma or a line break")));
+            }
+            columns.push((name, cells));
+        }
+        let mut text = std::iter::once("subject".to_string()).chain(columns.iter().map(|c| c.0.clone())).collect::<Vec<_>>().join(",");
+        text.push('\n');
+        for i in 0..n {
+            let row: Vec<String> = std::iter::once(i.to_string()).chain(columns.iter().map(|c| c.1[i].clone())).collect();
+            text.push_str(&(row.join(",") + "\n"));
+        }
+        return Ok((text, "covariates".into()));
+    }
+    let path: std::path::PathBuf = covariates
+        .extract()
+        .map_err(|_| err("covariates: expected a path to a CSV table or a dict {column: values}"))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| err(format!("{}: {e}", path.display())))?;
+    Ok((text, path.display().to_string()))
+}
+
+/// Tests a contrast on an atlas (the dict `atlas` returns), vertex by
+/// vertex on the template, as `fshape stats` does. Returns a dict:
+/// `design` (columns, terms), `contrast`, `maps` ({name: {statistic,
+/// effect, p, p_fwe, tfce, tfce_p_fwe, kind, dof, critical}}) and
+/// `multivariate` (when `scores` is given: Hotelling–Lawley on its rows).
+#[pyfunction]
+#[pyo3(signature = (atlas, covariates, contrast, maps = None, columns = None, permutations = 5000, seed = 0, tfce = false, one_sided = false, scores = None, alpha = 0.05))]
+#[expect(clippy::too_many_arguments, reason = "Python keyword arguments")]
+pub(crate) fn stats<'py>(
+    py: Python<'py>,
+    atlas: &Bound<'py, PyAny>,
+    covariates: &Bound<'py, PyAny>,
+    contrast: &str,
+    maps: Option<Vec<String>>,
+    columns: Option<Vec<String>>,
+    permutations: usize,
+    seed: u64,
+    tfce: bool,
+    one_sided: bool,
+    scores: Option<PyReadonlyArray2<'py, f64>>,
+    alpha: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let template = shape_of(&atlas.get_item("template").map_err(|_| err("atlas: no `template` (pass what fshape.atlas returns)"))?)?;
+    let subjects = atlas.get_item("subjects").map_err(|_| err("atlas: no `subjects`"))?;
+    let mut inputs: Vec<(Vec<f64>, FShape)> = Vec::new();
+    for (i, s) in subjects.try_iter()?.enumerate() {
+        let s = s?;
+        let p0: PyReadonlyArray2<'py, f64> =
+            s.get_item("p0").and_then(|p| p.extract()).map_err(|_| err(format!("atlas: subject {i}: no `p0` array")))?;
+        let matched = shape_of(&s.get_item("matched").map_err(|_| err(format!("atlas: subject {i}: no `matched` shape")))?)?;
+        inputs.push((p0.as_slice().map_err(err)?.to_vec(), matched));
+    }
+    let n = inputs.len();
+    let (text, source) = covariates_text(covariates, n)?;
+    let kinds: Vec<MapKind> = match maps {
+        None => MapKind::ALL.into_iter().filter(|k| k.available(&template)).collect(),
+        Some(names) => names
+            .iter()
+            .map(|m| MapKind::from_name(m).ok_or_else(|| err(format!("maps: `{m}` is not signal, momentum, displacement or area"))))
+            .collect::<PyResult<_>>()?,
+    };
+    let scores: Option<(Vec<f64>, usize)> = match scores {
+        None => None,
+        Some(a) => {
+            let k = a.shape()[1];
+            Some((a.as_slice().map_err(err)?.to_vec(), k))
+        }
+    };
+    let inference = Inference {
+        permutations,
+        seed,
+        tail: if one_sided { Tail::Positive } else { Tail::TwoSided },
+        tfce: tfce.then(TfceParams::default),
+    };
+    let run = py.detach(|| -> Result<_, fshape_stats::StatsError> {
+        let names: Vec<Vec<String>> = (0..n).map(|i| vec![i.to_string(), format!("subject_{i:03}")]).collect();
+        let (design, unused) = Covariates::parse(&text, &source)?.design(&names, columns.as_deref())?;
+        let contrast = design.contrast(contrast)?;
+        let graph = MeshGraph::new(&template);
+        let m = template.n_vertices();
+        let mut tests = Vec::new();
+        for kind in &kinds {
+            let mut values = Vec::with_capacity(n * m);
+            for (p0, matched) in &inputs {
+                values.extend(fshape_stats::subject_map(*kind, &template, p0, matched)?);
+            }
+            tests.push((*kind, fshape_stats::test_maps(&design, &contrast, &values, m, Some(&graph), &inference)?));
+        }
+        let multivariate = match &scores {
+            Some((values, k)) => Some(fshape_stats::test_scores(&design, &contrast, values, *k, &inference)?),
+            None => None,
+        };
+        Ok((design, contrast, unused, tests, multivariate))
+    });
+    let (design, contrast, unused, tests, multivariate) = run.map_err(err)?;
+    let d = PyDict::new(py);
+    d.set_item("design", to_py(py, &design)?)?;
+    d.set_item("contrast", to_py(py, &contrast)?)?;
+    d.set_item("rows_not_in_the_atlas", unused)?;
+    let out = PyDict::new(py);
+    for (kind, t) in &tests {
+        let e = PyDict::new(py);
+        e.set_item("kind", PyString::new(py, if t.kind == StatKind::T { "t" } else { "F" }))?;
+        e.set_item("dof", t.dof)?;
+        e.set_item("statistic", PyArray1::from_slice(py, &t.statistic))?;
+        e.set_item("effect", PyArray1::from_slice(py, &t.effect))?;
+        e.set_item("p", PyArray1::from_slice(py, &t.p_uncorrected))?;
+        e.set_item("p_fwe", PyArray1::from_slice(py, &t.p_fwe))?;
+        e.set_item("tfce", t.tfce.as_deref().map(|v| PyArray1::from_slice(py, v)))?;
+        e.set_item("tfce_p_fwe", t.tfce_p_fwe.as_deref().map(|v| PyArray1::from_slice(py, v)))?;
+        e.set_item("critical", t.critical(alpha))?;
+        out.set_item(kind.name(), e)?;
+    }
+    d.set_item("maps", out)?;
+    d.set_item("multivariate", multivariate.as_ref().map(|m| to_py(py, m)).transpose()?)?;
+    Ok(d)
+}
