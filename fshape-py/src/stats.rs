@@ -2,7 +2,7 @@
 
 use fshape_mesh::FShape;
 use fshape_stats::{Covariates, Inference, MapKind, MeshGraph, StatKind, Tail, TfceParams};
-use numpy::{PyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
@@ -30,10 +30,14 @@ fn covariates_text(covariates: &Bound<'_, PyAny>, n: usize) -> PyResult<(String,
             }
             columns.push((name, cells));
         }
-        let mut text = std::iter::once("subject".to_string()).chain(columns.iter().map(|c| c.0.clone())).collect::<Vec<_>>().join(",");
+        let mut text = std::iter::once("subject".to_string())
+            .chain(columns.iter().map(|c| c.0.clone()))
+            .collect::<Vec<_>>()
+            .join(",");
         text.push('\n');
         for i in 0..n {
-            let row: Vec<String> = std::iter::once(i.to_string()).chain(columns.iter().map(|c| c.1[i].clone())).collect();
+            let row: Vec<String> =
+                std::iter::once(i.to_string()).chain(columns.iter().map(|c| c.1[i].clone())).collect();
             text.push_str(&(row.join(",") + "\n"));
         }
         return Ok((text, "covariates".into()));
@@ -67,14 +71,19 @@ pub(crate) fn stats<'py>(
     scores: Option<PyReadonlyArray2<'py, f64>>,
     alpha: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let template = shape_of(&atlas.get_item("template").map_err(|_| err("atlas: no `template` (pass what fshape.atlas returns)"))?)?;
+    let template = shape_of(
+        &atlas.get_item("template").map_err(|_| err("atlas: no `template` (pass what fshape.atlas returns)"))?,
+    )?;
     let subjects = atlas.get_item("subjects").map_err(|_| err("atlas: no `subjects`"))?;
     let mut inputs: Vec<(Vec<f64>, FShape)> = Vec::new();
     for (i, s) in subjects.try_iter()?.enumerate() {
         let s = s?;
-        let p0: PyReadonlyArray2<'py, f64> =
-            s.get_item("p0").and_then(|p| p.extract()).map_err(|_| err(format!("atlas: subject {i}: no `p0` array")))?;
-        let matched = shape_of(&s.get_item("matched").map_err(|_| err(format!("atlas: subject {i}: no `matched` shape")))?)?;
+        let p0: PyReadonlyArray2<'py, f64> = s
+            .get_item("p0")
+            .and_then(|p| p.extract())
+            .map_err(|_| err(format!("atlas: subject {i}: no `p0` array")))?;
+        let matched =
+            shape_of(&s.get_item("matched").map_err(|_| err(format!("atlas: subject {i}: no `matched` shape")))?)?;
         inputs.push((p0.as_slice().map_err(err)?.to_vec(), matched));
     }
     let n = inputs.len();
@@ -83,7 +92,10 @@ pub(crate) fn stats<'py>(
         None => MapKind::ALL.into_iter().filter(|k| k.available(&template)).collect(),
         Some(names) => names
             .iter()
-            .map(|m| MapKind::from_name(m).ok_or_else(|| err(format!("maps: `{m}` is not signal, momentum, displacement or area"))))
+            .map(|m| {
+                MapKind::from_name(m)
+                    .ok_or_else(|| err(format!("maps: `{m}` is not signal, momentum, displacement or area")))
+            })
             .collect::<PyResult<_>>()?,
     };
     let scores: Option<(Vec<f64>, usize)> = match scores {

@@ -82,8 +82,16 @@ struct Subject {
     matched: FShape,
 }
 
+/// An atlas folder's contents: the template, the subjects and, from
+/// pca.csv, the scores' names and values (subject-major).
+struct AtlasFolder {
+    template: FShape,
+    subjects: Vec<Subject>,
+    scores: Option<(Vec<String>, Vec<f64>)>,
+}
+
 /// The atlas folder's template, subjects and principal scores.
-fn read_atlas(dir: &Path) -> Result<(FShape, Vec<Subject>, Option<(Vec<String>, Vec<f64>)>)> {
+fn read_atlas(dir: &Path) -> Result<AtlasFolder> {
     let summary_path = dir.join("summary.json");
     let text = std::fs::read(&summary_path)
         .with_context(|| format!("{}: not an `fshape atlas` output folder (no summary.json)", dir.display()))?;
@@ -145,7 +153,7 @@ fn read_atlas(dir: &Path) -> Result<(FShape, Vec<Subject>, Option<(Vec<String>, 
     } else {
         None
     };
-    Ok((template, subjects, scores))
+    Ok(AtlasFolder { template, subjects, scores })
 }
 
 #[derive(Serialize)]
@@ -210,7 +218,7 @@ pub fn run(a: Args) -> Result<()> {
     if !(a.alpha > 0.0 && a.alpha < 1.0) {
         bail!("--alpha: {} is not in (0, 1)", a.alpha);
     }
-    let (template, subjects, scores) = read_atlas(&a.atlas)?;
+    let AtlasFolder { template, subjects, scores } = read_atlas(&a.atlas)?;
     let text = std::fs::read_to_string(&a.covariates).with_context(|| format!("reading {}", a.covariates.display()))?;
     let table = Covariates::parse(&text, &a.covariates.display().to_string())?;
     let names: Vec<Vec<String>> = subjects.iter().map(|s| s.names.clone()).collect();
