@@ -112,17 +112,5 @@ pub fn atlas_digits(a: &DigitsArgs<'_>, subjects: usize) -> Result<()> {
     let cfg = run.join("config.toml");
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
     io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
-    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
-        subjects: &[],
-        list: Some(&list_path),
-        template: Some(&template_path),
-        config: &cfg,
-        out: &run,
-        resume: false,
-        stop_after: None,
-        signal_name: None,
-        view: (0.0, 90.0),
-        stage_templates: &[],
-        verbosity: crate::args::Verbosity::Normal,
-    })
+    super::run_atlas(&list_path, &template_path, &cfg, &run, (0.0, 90.0))
 }

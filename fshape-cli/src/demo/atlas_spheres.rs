@@ -72,19 +72,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
                   # by less than 1e-3 over 5 iterations.\n\n";
     io::write_atomic(&cfg, format!("{header}{}", config.to_toml()).as_bytes(), false)?;
     eprintln!("atlas-spheres: {} subjects shot from an ellipsoid of {n} vertices -> {}", subjects.len(), run.display());
-    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
-        subjects: &[],
-        list: Some(&list_path),
-        template: Some(&start),
-        config: &cfg,
-        out: &run,
-        resume: false,
-        stop_after: None,
-        signal_name: None,
-        view: crate::args::DEFAULT_CAMERA.pair(),
-        stage_templates: &[],
-        verbosity: crate::args::Verbosity::Normal,
-    })?;
+    super::run_atlas(&list_path, &start, &cfg, &run, crate::args::DEFAULT_CAMERA.pair())?;
     // The estimate against the truth, and the bound.
     let estimate = io::read_mesh(&run.join("template.ply"), &io::ReadOptions::default())?;
     let got = fshape_match::quality(&estimate, &truth)?;

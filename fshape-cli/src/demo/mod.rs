@@ -109,6 +109,52 @@ fn run_match(
     })
 }
 
+/// `fshape atlas` as the atlas demos run it: the subjects of `list` from
+/// `template`, the configuration file `config`, outputs in `out`, the
+/// pictures from `view` (azimuth, elevation).
+fn run_atlas(list: &Path, template: &Path, config: &Path, out: &Path, view: (f64, f64)) -> Result<()> {
+    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
+        subjects: &[],
+        list: Some(list),
+        template: Some(template),
+        config,
+        out,
+        resume: false,
+        stop_after: None,
+        signal_name: None,
+        view,
+        stage_templates: &[],
+        verbosity: crate::args::Verbosity::Normal,
+    })
+}
+
+/// `fshape stats` as the statistics demos run it: every map the template
+/// allows, TFCE, seed 0, two-sided, α = 0.05.
+fn run_stats(
+    atlas: &Path,
+    covariates: &Path,
+    contrast: &str,
+    out: &Path,
+    permutations: usize,
+    camera: crate::args::Camera,
+) -> Result<()> {
+    crate::commands::stats::run(crate::commands::stats::Args {
+        atlas: atlas.to_path_buf(),
+        covariates: covariates.to_path_buf(),
+        contrast: contrast.into(),
+        out: out.to_path_buf(),
+        columns: Vec::new(),
+        maps: Vec::new(),
+        permutations,
+        seed: 0,
+        tfce: true,
+        one_sided: false,
+        alpha: 0.05,
+        modes: None,
+        view: crate::args::View { camera },
+    })
+}
+
 /// Settings shared by the digits runs.
 pub struct DigitsArgs<'a> {
     pub out: &'a Path,

@@ -48,34 +48,15 @@ pub fn stats_digits(a: &DigitsArgs<'_>, per_class: usize, permutations: usize) -
         mesh.n_vertices(),
         dir.display()
     );
-    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
-        subjects: &[],
-        list: Some(&list_path),
-        template: Some(&template_path),
-        config: &cfg,
-        out: &run,
-        resume: false,
-        stop_after: None,
-        signal_name: None,
-        view: (0.0, 90.0),
-        stage_templates: &[],
-        verbosity: crate::args::Verbosity::Normal,
-    })?;
+    super::run_atlas(&list_path, &template_path, &cfg, &run, (0.0, 90.0))?;
     // `digit` is a factor: `five` is the reference (sorted first), so t > 0
     // where the 3s are higher.
-    crate::commands::stats::run(crate::commands::stats::Args {
-        atlas: run,
-        covariates: table_path,
-        contrast: "digit".into(),
-        out: dir.join("stats"),
-        columns: Vec::new(),
-        maps: Vec::new(),
+    super::run_stats(
+        &run,
+        &table_path,
+        "digit",
+        &dir.join("stats"),
         permutations,
-        seed: 0,
-        tfce: true,
-        one_sided: false,
-        alpha: 0.05,
-        modes: None,
-        view: crate::args::View { camera: crate::args::Camera { azimuth: 0.0, elevation: 90.0 } },
-    })
+        crate::args::Camera { azimuth: 0.0, elevation: 90.0 },
+    )
 }

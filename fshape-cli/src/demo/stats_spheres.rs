@@ -173,35 +173,9 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
         2 * a.per_group,
         run.display()
     );
-    crate::commands::atlas::run_with(&crate::commands::atlas::AtlasArgs {
-        subjects: &[],
-        list: Some(&list_path),
-        template: Some(&start),
-        config: &cfg,
-        out: &run,
-        resume: false,
-        stop_after: None,
-        signal_name: None,
-        view: crate::args::DEFAULT_CAMERA.pair(),
-        stage_templates: &[],
-        verbosity: crate::args::Verbosity::Normal,
-    })?;
+    super::run_atlas(&list_path, &start, &cfg, &run, crate::args::DEFAULT_CAMERA.pair())?;
     let stats_dir = dir.join("stats");
-    crate::commands::stats::run(crate::commands::stats::Args {
-        atlas: run.clone(),
-        covariates: table_path,
-        contrast: "group".into(),
-        out: stats_dir.clone(),
-        columns: Vec::new(),
-        maps: Vec::new(),
-        permutations: a.permutations,
-        seed: 0,
-        tfce: true,
-        one_sided: false,
-        alpha: 0.05,
-        modes: None,
-        view: crate::args::View { camera: crate::args::DEFAULT_CAMERA },
-    })?;
+    super::run_stats(&run, &table_path, "group", &stats_dir, a.permutations, crate::args::DEFAULT_CAMERA)?;
     // Where each map found something, against the truth: vertices with
     // corrected p ≤ 0.05 near the geometric effect, near the signal's, and
     // away from both (there the groups do not differ: false positives).
