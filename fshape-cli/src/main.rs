@@ -17,6 +17,7 @@ mod plots;
 mod processes;
 mod progress;
 mod render;
+mod report;
 
 #[derive(Parser)]
 #[command(name = "fshape", version, about = "Functional shapes: meshes carrying a signal, and their metamorphoses")]
@@ -103,6 +104,13 @@ enum Command {
     /// each optionally .gz, or a FreeSurfer surface name such as lh.pial),
     /// optionally attaching a signal from a signal file.
     Convert(commands::convert::Args),
+    /// Write DIR/report.html again for an `fshape match`, `atlas` or
+    /// `batch` output folder (they write it themselves): one page, viewable
+    /// offline, with the geodesic as a 3-D view (rotate, zoom, a time
+    /// slider), the match quality, the stages, the energy plot and the
+    /// configuration; for an atlas the template, each subject and the
+    /// modes; for a batch the index with thumbnails.
+    Report(commands::report::Args),
     /// Where a run's checkpoint (OUT/checkpoint.bin, binary) stands, as one
     /// line of JSON: finished stages, the stage under way with its
     /// iterations and evaluations, wall seconds so far.
@@ -124,6 +132,7 @@ fn main() -> ExitCode {
         Command::Render(a) => commands::render::run(a),
         Command::Convert(a) => commands::convert::run(a),
         Command::Checkpoint(a) => commands::checkpoint::run(a),
+        Command::Report(a) => commands::report::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

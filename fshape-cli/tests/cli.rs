@@ -1615,3 +1615,55 @@ fn stats_gives_the_same_bits_for_a_seed_and_refuses_bad_tables_naming_the_cell()
         assert!(!out.exists(), "case {k}: nothing written");
     }
 }
+
+#[test]
+fn match_writes_a_self_contained_report_that_fshape_report_writes_again() {
+    use base64::Engine;
+    use std::io::Read;
+    let (s, t, c) = match_inputs("report", 3);
+    let out = tmp("report_out");
+    let o = fshape(&["match", &s, &t, "--config", &c, "--out", &out.display().to_string()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("report.html"), "the console names the report: {stdout}");
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    // Nothing from the network: no external script, style, image or font.
+    for pattern in ["src=\"http", "href=\"http", "url(http", "@import", "<link"] {
+        assert!(!page.contains(pattern), "{pattern}");
+    }
+    assert!(page.contains("default-src 'none'"), "a policy that forbids loading anything");
+    // The data: every state of the geodesic, as the PLY files hold it
+    // (float32), and the target.
+    let start = page.find("id=\"fshape-data\">").unwrap() + "id=\"fshape-data\">".len();
+    let json = &page[start..start + page[start..].find("</script>").unwrap()];
+    let data: serde_json::Value = serde_json::from_str(json).unwrap();
+    let scene = &data["scenes"][0];
+    let frames = scene["mesh"]["frames"].as_array().unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(frames.len(), 5, "the five times of --times");
+    let unpack = |b64: &str| -> Vec<f32> {
+        let gz = base64::engine::general_purpose::STANDARD.decode(b64).unwrap();
+        let mut bytes = Vec::new();
+        flate2::read::GzDecoder::new(&gz[..]).read_to_end(&mut bytes).unwrap();
+        bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+    };
+    use fshape_mesh::io::{ReadOptions, read_mesh};
+    let last = read_mesh(&out.join("state_004.ply"), &ReadOptions::default()).unwrap();
+    let shown = unpack(frames[4].as_str().unwrap());
+    assert_eq!(shown.len(), last.points().len());
+    for (a, b) in shown.iter().zip(last.points()) {
+        assert_eq!(*a, *b as f32);
+    }
+    assert!(scene["companion"]["frames"].as_array().unwrap().len() == 1, "the target");
+    assert!(summary["files"].as_array().unwrap().iter().any(|f| f == "report.html"));
+    // `fshape report` writes the same page again.
+    std::fs::remove_file(out.join("report.html")).unwrap();
+    let again = fshape(&["report", &out.display().to_string()]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert_eq!(std::fs::read_to_string(out.join("report.html")).unwrap(), page);
+    // A folder that is not an output is refused by name.
+    let bad = fshape(&["report", &tmp("no_such_run").display().to_string()]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("not an fshape match, atlas or batch folder"));
+}

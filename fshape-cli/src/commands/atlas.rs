@@ -255,6 +255,9 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         io::write_to(&mut bytes, &result.template, format, Encoding::Binary)?;
         push(name.into(), bytes);
     }
+    let mut bytes = Vec::new();
+    io::write_to(&mut bytes, atlas.initial_template(), io::Format::Ply, Encoding::Binary)?;
+    push("template_start.ply".into(), bytes);
     let dim = result.template.dim();
     let kind = model.kind();
     let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
@@ -267,6 +270,12 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         header.extend((0..result.template.n_vertices()).map(|v| format!("pf_{v}")));
     }
     let mut table = header.join(",") + "\n";
+    // Each subject as the atlas saw it (pre-aligned with [prealign]).
+    let subjects: Vec<FShape> = subjects
+        .iter()
+        .zip(&result.subjects)
+        .map(|(s, r)| r.alignment.as_ref().map_or_else(|| Ok(s.clone()), |a| a.apply(s)))
+        .collect::<Result<_, _>>()?;
     let mut matched = Vec::new();
     let mut subject_summaries = Vec::new();
     for (i, (s, (path, _))) in result.subjects.iter().zip(&paths).enumerate() {
@@ -286,6 +295,9 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         io::write_to(&mut bytes, &end, io::Format::Ply, Encoding::Binary)?;
         push(format!("{dir}/matched.ply"), bytes);
         matched.push(end);
+        let mut bytes = Vec::new();
+        io::write_to(&mut bytes, &subjects[i], io::Format::Ply, Encoding::Binary)?;
+        push(format!("{dir}/subject.ply"), bytes);
         let row: Vec<String> = std::iter::once(i.to_string())
             .chain(
                 s.p0.iter().chain(if kind == ModelKind::Lddmm { &[][..] } else { &s.pf[..] }).map(|v| format!("{v:e}")),
@@ -307,13 +319,8 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
     }
     push("momenta.csv".into(), table.into_bytes());
     // Pictures: the template, and a grid of each subject (left, as the
-    // atlas saw it: pre-aligned with [prealign]) next to the template shot
-    // onto it (right), all with one camera and colour range.
-    let subjects: Vec<FShape> = subjects
-        .iter()
-        .zip(&result.subjects)
-        .map(|(s, r)| r.alignment.as_ref().map_or_else(|| Ok(s.clone()), |a| a.apply(s)))
-        .collect::<Result<_, _>>()?;
+    // atlas saw it) next to the template shot onto it (right), all with
+    // one camera and colour range.
     let mut all: Vec<&FShape> = subjects.iter().collect();
     all.push(&result.template);
     all.push(atlas.initial_template());
@@ -399,7 +406,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         iterations: result.iterations,
         evaluations: result.evaluations,
         seconds: result.seconds + after.elapsed().as_secs_f64(),
-        files: files.clone(),
+        files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
     };
     outputs.push((a.out.join("summary.json"), serde_json::to_vec_pretty(&summary)?));
     for (path, bytes) in &outputs {
@@ -408,8 +415,9 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         }
         io::write_atomic(path, bytes, false)?;
     }
+    let report = crate::report::write_report(a.out, a.view)?;
     println!(
-        "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files to {}",
+        "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files and {}",
         result.subjects.len(),
         e.value,
         e.energy,
@@ -417,7 +425,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         result.iterations,
         result.stages.len(),
         outputs.len(),
-        a.out.display()
+        report.display()
     );
     let signal = mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
     println!(

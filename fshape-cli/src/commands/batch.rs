@@ -238,7 +238,8 @@ fn done(dir: &Path) -> Option<serde_json::Value> {
     serde_json::from_str(&text).ok()
 }
 
-/// Writes index.csv and index.json of every row; returns the entries.
+/// Writes index.csv, index.json and report.html of every row; returns
+/// the entries.
 fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
     let entries: Vec<Entry> = rows.iter().map(|r| entry(a.out, a.pairs, r)).collect();
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:e}"));
@@ -279,6 +280,7 @@ fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     io::write_atomic(&a.out.join("index.csv"), csv.as_bytes(), false)?;
     io::write_atomic(&a.out.join("index.json"), &serde_json::to_vec_pretty(&json)?, false)?;
+    crate::report::write_report(a.out, a.view)?;
     Ok(entries)
 }
 
@@ -440,7 +442,7 @@ fn report(a: &BatchArgs<'_>, entries: &[Entry], in_shard: Option<impl Fn(&Entry)
     let selected: Vec<&Entry> = entries.iter().filter(|e| in_shard.as_ref().is_none_or(|f| f(e))).collect();
     let count = |s: &str| selected.iter().filter(|e| e.status == s).count();
     println!(
-        "batch: {} done, {} failed, {} incomplete, {} pending of {} rows; index in {}",
+        "batch: {} done, {} failed, {} incomplete, {} pending of {} rows; index in {} and report.html",
         count("done"),
         count("failed"),
         count("incomplete"),

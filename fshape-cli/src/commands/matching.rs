@@ -215,6 +215,10 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     }
     outputs.push((a.out.join("target.png"), crate::render::picture(&target, &view)?));
     files.push("target.png".into());
+    let mut target_ply = Vec::new();
+    io::write_to(&mut target_ply, &target, io::Format::Ply, io::Encoding::Binary)?;
+    outputs.push((a.out.join("target.ply"), target_ply));
+    files.push("target.ply".into());
     let (svg, png) = energy_plot(&result.stages, model.gamma_w(), "matching: objective by iteration")?;
     outputs.push((a.out.join("energy.svg"), svg.into_bytes()));
     outputs.push((a.out.join("energy.png"), png));
@@ -245,12 +249,14 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         iterations: result.iterations,
         evaluations: result.evaluations,
         seconds: result.seconds + after.elapsed().as_secs_f64(),
-        files: files.clone(),
+        files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
     };
     outputs.push((a.out.join("summary.json"), serde_json::to_vec_pretty(&summary)?));
     for (path, bytes) in &outputs {
         io::write_atomic(path, bytes, false)?;
     }
+    // The page a colleague opens, from the files just written.
+    let report = crate::report::write_report(a.out, a.view)?;
     println!(
         "{} -> {}: J {:.4e} after {} iterations in {} stage(s), {:.0} s",
         a.source.display(),
@@ -273,7 +279,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     for line in brief(&result.initial_quality, &result.quality) {
         println!("  {line}");
     }
-    println!("  wrote {} files to {} (every figure in summary.json)", outputs.len(), a.out.display());
+    println!("  report        {} ({} files beside it; every figure in summary.json)", report.display(), outputs.len());
     Ok(())
 }
 

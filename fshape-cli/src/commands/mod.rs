@@ -12,5 +12,6 @@ pub mod info;
 pub mod matching;
 pub mod quality;
 pub mod render;
+pub mod report;
 pub mod shoot;
 pub mod stats;

@@ -1,0 +1,626 @@
+//! `report.html`: one self-contained page per run that a colleague opens
+//! in a browser, offline. Every byte it needs is inside: the meshes as
+//! base64 of gzip-compressed float32 arrays (inflated by the browser's
+//! own DecompressionStream), the viewer (`viewer.js`, WebGL written here,
+//! no library) and the style. A registration shows its geodesic (time
+//! slider, play, the target beside or overlaid), the match quality, the
+//! stages, the energy plot and the configuration; an atlas its template,
+//! each subject and the modes as sliders; a batch its index, sortable,
+//! with thumbnails linking to each row's report.
+//!
+//! Reports are built from the files a run writes, so `fshape report DIR`
+//! gives the same page afterwards. Surfaces above [`DISPLAY_VERTICES`]
+//! are simplified for display (fshape-mesh's simplifier) and the page
+//! says so.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use base64::Engine;
+use fshape_mesh::io::{self, ReadOptions};
+use fshape_mesh::{CellKind, FShape};
+use serde::Serialize;
+
+/// Vertices above which a surface is simplified for display.
+pub const DISPLAY_VERTICES: usize = 40_000;
+
+/// Subjects of an atlas shown one by one (as subjects.png).
+const ATLAS_SUBJECTS: usize = 32;
+
+fn gzip_base64(bytes: &[u8]) -> Result<String> {
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(bytes)?;
+    Ok(base64::engine::general_purpose::STANDARD.encode(enc.finish()?))
+}
+
+fn packed_f32(values: impl Iterator<Item = f64>) -> Result<String> {
+    let bytes: Vec<u8> = values.flat_map(|v| (v as f32).to_le_bytes()).collect();
+    gzip_base64(&bytes)
+}
+
+/// One mesh for the viewer: cells, positions (three per vertex) and
+/// signals, per frame.
+#[derive(Serialize)]
+struct MeshData {
+    kind: &'static str,
+    planar: bool,
+    cells: String,
+    frames: Vec<String>,
+    signals: Option<Vec<String>>,
+}
+
+/// What the viewer shows at a time: a mesh whose frames the slider moves
+/// through (interpolating between them), and a second mesh beside it or
+/// overlaid (the target).
+#[derive(Serialize)]
+pub struct Scene {
+    name: String,
+    labels: Vec<String>,
+    note: Option<String>,
+    mesh: MeshData,
+    companion: Option<MeshData>,
+    /// What the companion is ("target", "subject").
+    companion_name: String,
+    range: Option<[f64; 2]>,
+}
+
+/// `frames` (one mesh, the same cells) with the simplification applied,
+/// if any: the kept vertices of the first frame and its coarse cells.
+fn mesh_data(frames: &[&FShape]) -> Result<(MeshData, Option<usize>)> {
+    mesh_data_within(frames, DISPLAY_VERTICES)
+}
+
+/// [`mesh_data`] with the display limit given.
+fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Option<usize>)> {
+    let first = frames[0];
+    let (cells, kept): (Vec<usize>, Option<Vec<usize>>) =
+        if first.n_vertices() > limit && first.kind() == CellKind::Triangle {
+            let s = first.simplified(limit).context("simplifying for display")?;
+            (s.shape.cells().iter().map(|&c| s.kept[c]).collect(), Some(s.kept))
+        } else {
+            (first.cells().to_vec(), None)
+        };
+    // Renumber to the kept vertices (all of them when not simplified).
+    let order: Vec<usize> = kept.clone().unwrap_or_else(|| (0..first.n_vertices()).collect());
+    let mut index = vec![u32::MAX; first.n_vertices()];
+    for (k, &v) in order.iter().enumerate() {
+        index[v] = k as u32;
+    }
+    let cell_bytes: Vec<u8> = cells.iter().flat_map(|&v| index[v].to_le_bytes()).collect();
+    let d = first.dim();
+    let mut positions = Vec::new();
+    let mut signals = Vec::new();
+    for f in frames {
+        positions.push(packed_f32(order.iter().flat_map(|&v| {
+            let p = f.point(v);
+            [p[0], p[1], if d == 3 { p[2] } else { 0.0 }]
+        }))?);
+        if let Some(s) = f.signal() {
+            signals.push(packed_f32(order.iter().map(|&v| s[v]))?);
+        }
+    }
+    let data = MeshData {
+        kind: if first.kind() == CellKind::Triangle { "triangle" } else { "segment" },
+        planar: d == 2,
+        cells: gzip_base64(&cell_bytes)?,
+        frames: positions,
+        signals: (signals.len() == frames.len()).then_some(signals),
+    };
+    Ok((data, kept.map(|k| k.len())))
+}
+
+/// A scene: `frames` under the slider (labelled), `companion` (named, as
+/// "target") beside. The colour range spans the first frame's and the
+/// companion's signals.
+pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Option<(&str, &FShape)>) -> Result<Scene> {
+    let (companion_name, companion) = match companion {
+        Some((n, c)) => (n.to_string(), Some(c)),
+        None => (String::new(), None),
+    };
+    if frames.is_empty() {
+        bail!("{name}: no frames to show");
+    }
+    let (mesh, simplified) = mesh_data(frames)?;
+    let (companion_data, companion_simplified) = match companion {
+        Some(c) => {
+            let (m, s) = mesh_data(&[c])?;
+            (Some(m), s)
+        }
+        None => (None, None),
+    };
+    let mut notes = Vec::new();
+    if let Some(k) = simplified {
+        notes.push(format!(
+            "shown simplified from {} to {k} vertices (the files hold every vertex)",
+            frames[0].n_vertices()
+        ));
+    }
+    if let (Some(k), Some(c)) = (companion_simplified, companion) {
+        notes.push(format!("the {companion_name} is shown simplified from {} to {k} vertices", c.n_vertices()));
+    }
+    let values = frames[0].signal().into_iter().chain(companion.and_then(FShape::signal)).flatten();
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    Ok(Scene {
+        name: name.to_string(),
+        labels,
+        note: (!notes.is_empty()).then(|| format!("{}.", notes.join("; "))),
+        mesh,
+        companion: companion_data,
+        companion_name,
+        range: (lo < hi).then_some([lo, hi]),
+    })
+}
+
+/// HTML-escaped text.
+pub fn escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// A page: its title, a line under it, the viewer's scenes and camera,
+/// and the sections below the viewer (HTML).
+pub struct Page {
+    pub title: String,
+    pub subtitle: String,
+    pub view: (f64, f64),
+    pub scenes: Vec<Scene>,
+    pub sections: Vec<String>,
+}
+
+/// The page's HTML. The data's JSON is escaped for a script element
+/// (`</` cannot end it).
+pub fn html(page: &Page) -> Result<String> {
+    let data = serde_json::json!({ "scenes": page.scenes, "view": [page.view.0, page.view.1] });
+    let data = serde_json::to_string(&data)?.replace("</", "<\\/");
+    let viewer = if page.scenes.is_empty() {
+        String::new()
+    } else {
+        concat!(
+            "<section id=\"viewer\">\n",
+            "<div class=\"controls\"><label>show <select id=\"scene\"></select></label>",
+            "<button id=\"play\">▶ play</button><input type=\"range\" id=\"frame\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"time\">",
+            "<span id=\"frame-label\"></span>",
+            "<select id=\"companion\" aria-label=\"the second shape\"><option value=\"beside\">beside</option>",
+            "<option value=\"overlay\">overlaid</option><option value=\"hidden\">hidden</option></select></div>\n",
+            "<canvas id=\"view\"></canvas>\n",
+            "<div id=\"colourbar\"><span>signal</span><span id=\"lo\"></span><canvas id=\"bar\" width=\"256\" height=\"12\"></canvas><span id=\"hi\"></span>",
+            "<span class=\"hint\">drag to turn, wheel to zoom, double-click to reset</span></div>\n",
+            "<p class=\"note\" id=\"note\"></p><p id=\"status\">loading the 3-D view…</p>\n</section>\n"
+        )
+        .to_string()
+    };
+    Ok(format!(
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
+         <meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src data:\">\n\
+         <title>{title}</title>\n<style>\n{css}</style></head>\n<body>\n<h1>{title}</h1>\n<p class=\"subtitle\">{subtitle}</p>\n{viewer}{sections}\n\
+         <p class=\"subtitle\">Written by fshape {version}; every figure is also in the folder's JSON files.</p>\n\
+         <script type=\"application/json\" id=\"fshape-data\">{data}</script>\n<script>\n{js}</script>\n</body></html>\n",
+        title = escape(&page.title),
+        subtitle = escape(&page.subtitle),
+        css = include_str!("style.css"),
+        sections = page.sections.join("\n"),
+        version = env!("CARGO_PKG_VERSION"),
+        js = include_str!("viewer.js"),
+    ))
+}
+
+/// A table: a header row and rows of cells (already HTML).
+pub fn table(class: &str, header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut s = format!("<table class=\"{class}\"><thead><tr>");
+    for h in header {
+        s.push_str(&format!("<th>{}</th>", escape(h)));
+    }
+    s.push_str("</tr></thead><tbody>");
+    for row in rows {
+        s.push_str("<tr>");
+        for c in row {
+            s.push_str(&format!("<td>{c}</td>"));
+        }
+        s.push_str("</tr>");
+    }
+    s.push_str("</tbody></table>");
+    s
+}
+
+fn read_json(path: &Path) -> Result<serde_json::Value> {
+    let text = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_slice(&text).with_context(|| format!("{}: not JSON", path.display()))
+}
+
+fn read(path: &Path) -> Result<FShape> {
+    Ok(io::read_mesh(path, &ReadOptions::default())?)
+}
+
+fn percent(v: &serde_json::Value) -> String {
+    v.as_f64().map_or("–".into(), |x| format!("{:.3} %", 100.0 * x))
+}
+
+/// The match quality before and after, as a table.
+fn quality_table(before: &serde_json::Value, after: &serde_json::Value) -> String {
+    let rows: Vec<Vec<String>> = [
+        ("mean distance (of the target's diagonal)", "mean_distance"),
+        ("95th percentile distance", "p95_distance"),
+        ("largest distance", "max_distance"),
+        ("share of the target within 1 %", "target_within_1pct"),
+        ("signal error, rms (of the target's range)", "signal_rms"),
+        ("signal error, 99th percentile", "signal_p99"),
+    ]
+    .iter()
+    .filter(|(_, k)| !after[*k].is_null())
+    .map(|(name, k)| vec![escape(name), percent(&before[*k]), percent(&after[*k])])
+    .chain(after["signal_roughness"].as_f64().map(|r| {
+        vec![
+            "signal roughness (its Dirichlet seminorm over the target's)".into(),
+            before["signal_roughness"].as_f64().map_or("–".into(), |b| format!("{b:.3}")),
+            format!("{r:.3}"),
+        ]
+    }))
+    .collect();
+    table("quality", &["", "before", "after"], &rows)
+}
+
+/// The stages, one row each.
+fn stages_table(stages: &serde_json::Value) -> String {
+    let rows: Vec<Vec<String>> = stages
+        .as_array()
+        .map(Vec::as_slice)
+        .unwrap_or_default()
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let its = s["iterations"].as_array().map_or(0, Vec::len);
+            let last = s["iterations"].as_array().and_then(|v| v.last()).unwrap_or(&s["initial"]);
+            let j = |v: &serde_json::Value| v["value"].as_f64().map_or("–".into(), |x| format!("{x:.4e}"));
+            vec![
+                format!("{}", k + 1),
+                escape(s["kernel_geom"].as_str().unwrap_or("")),
+                its.to_string(),
+                j(&s["initial"]),
+                j(last),
+                escape(s["reason"].as_str().unwrap_or("")),
+            ]
+        })
+        .collect();
+    table("stages", &["stage", "k_p", "iterations", "J at start", "J at end", "why it ended"], &rows)
+}
+
+fn figure(dir: &Path, name: &str) -> String {
+    std::fs::read_to_string(dir.join(name)).map_or(String::new(), |svg| format!("<div class=\"figure\">{svg}</div>"))
+}
+
+fn file_text(dir: &Path, name: &str) -> String {
+    std::fs::read_to_string(dir.join(name)).map_or(String::new(), |t| format!("<pre>{}</pre>", escape(&t)))
+}
+
+/// The (time, state file) pairs of a ParaView collection, in order.
+fn collection(dir: &Path) -> Result<Vec<(f64, String)>> {
+    let path = dir.join("trajectory.pvd");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let attr = |line: &str, key: &str| -> Option<String> {
+        let start = line.find(&format!("{key}=\""))? + key.len() + 2;
+        Some(line[start..].split('"').next()?.to_string())
+    };
+    let mut out = Vec::new();
+    for line in text.lines().filter(|l| l.contains("<DataSet")) {
+        let (Some(t), Some(file)) = (attr(line, "timestep"), attr(line, "file")) else { continue };
+        out.push((t.parse().with_context(|| format!("{}: timestep `{t}`", path.display()))?, file));
+    }
+    if out.is_empty() {
+        bail!("{}: no states", path.display());
+    }
+    Ok(out)
+}
+
+/// The report of an `fshape match` folder.
+pub fn match_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
+    let summary = read_json(&dir.join("summary.json"))?;
+    let states: Vec<(f64, FShape)> = collection(dir)?
+        .into_iter()
+        .map(|(t, file)| read(&dir.join(file.replace(".vtk", ".ply"))).map(|s| (t, s)))
+        .collect::<Result<_>>()?;
+    let target = read(&dir.join("target.ply"))?;
+    let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
+    let labels = states.iter().map(|(t, _)| format!("t = {t:.2}")).collect();
+    let scene = scene("the geodesic", &frames, labels, Some(("target", &target)))?;
+    let text = |k: &str| summary[k].as_str().unwrap_or("").to_string();
+    let mut sections = vec![
+        format!("<h2>How close it came</h2>{}", quality_table(&summary["quality_before"], &summary["quality"])),
+        format!(
+            "<h2>The run</h2><p>{} model, {} signal norm; J = {:.4e} (energy {:.4e}, data term {:.4e}) after {} iterations and {} evaluations in {:.1} s.</p>{}",
+            escape(&text("model")),
+            escape(&text("norm")),
+            summary["final_value"].as_f64().unwrap_or(f64::NAN),
+            summary["final_energy"].as_f64().unwrap_or(f64::NAN),
+            summary["final_attachment"].as_f64().unwrap_or(f64::NAN),
+            summary["iterations"],
+            summary["evaluations"],
+            summary["seconds"].as_f64().unwrap_or(f64::NAN),
+            stages_table(&summary["stages"])
+        ),
+    ];
+    if let Some(a) = summary.get("prealign").filter(|a| !a.is_null()) {
+        sections.push(format!(
+            "<h2>Pre-alignment</h2><p>{} ({} moved): rotation {:.2}°, scale {:.4}, data term {:.4e} → {:.4e}.</p>",
+            escape(a["kind"].as_str().unwrap_or("")),
+            escape(a["moving"].as_str().unwrap_or("")),
+            a["rotation_degrees"].as_f64().unwrap_or(f64::NAN),
+            a["scale"].as_f64().unwrap_or(f64::NAN),
+            a["attachment_before"].as_f64().unwrap_or(f64::NAN),
+            a["attachment_after"].as_f64().unwrap_or(f64::NAN),
+        ));
+    }
+    sections.push(format!("<h2>The objective by iteration</h2>{}", figure(dir, "energy.svg")));
+    sections.push(format!(
+        "<h2>Configuration</h2><p>As run, with the weights the model used (<code>shoot.toml</code>; the file given was <code>{}</code>).</p>{}",
+        escape(&text("config")),
+        file_text(dir, "shoot.toml")
+    ));
+    Ok(Page {
+        title: format!("{} → {}", text("source"), text("target")),
+        subtitle: format!(
+            "fshape match: mean distance {} → {} of the diagonal{}",
+            percent(&summary["quality_before"]["mean_distance"]),
+            percent(&summary["quality"]["mean_distance"]),
+            summary["quality"]["signal_rms"].as_f64().map_or(String::new(), |_| format!(
+                ", signal error {} → {} of its range",
+                percent(&summary["quality_before"]["signal_rms"]),
+                percent(&summary["quality"]["signal_rms"])
+            ))
+        ),
+        view,
+        scenes: vec![scene],
+        sections,
+    })
+}
+
+/// The report of an `fshape atlas` folder.
+pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
+    let summary = read_json(&dir.join("summary.json"))?;
+    let template = read(&dir.join("template.ply"))?;
+    let start = read(&dir.join("template_start.ply"))?;
+    let mut scenes = vec![scene(
+        "the template",
+        &[&start, &template],
+        vec!["the initial template".into(), "the estimated template".into()],
+        None,
+    )?];
+    let subjects = summary["subjects"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let mut rows = Vec::new();
+    for (i, s) in subjects.iter().enumerate() {
+        let folder = s["directory"].as_str().unwrap_or_default();
+        if i < ATLAS_SUBJECTS {
+            let matched = read(&dir.join(folder).join("matched.ply"))?;
+            let subject = read(&dir.join(folder).join("subject.ply"))?;
+            scenes.push(scene(
+                &format!("subject {i}: the template shot onto it"),
+                &[&template, &matched],
+                vec!["the template".into(), "shot onto the subject".into()],
+                Some(("subject", &subject)),
+            )?);
+        }
+        let q = &s["quality"];
+        rows.push(vec![
+            i.to_string(),
+            escape(s["file"].as_str().unwrap_or("")),
+            percent(&q["mean_distance"]),
+            percent(&q["target_within_1pct"]),
+            percent(&q["signal_rms"]),
+            percent(&s["attachment_fall"]),
+        ]);
+    }
+    let modes = summary["modes"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let mut mode_rows = Vec::new();
+    for (k, m) in modes.iter().enumerate() {
+        let (minus, plus) = (
+            read(&dir.join(format!("mode_{}_minus2sd.ply", k + 1)))?,
+            read(&dir.join(format!("mode_{}_plus2sd.ply", k + 1)))?,
+        );
+        scenes.push(scene(
+            &format!("mode {} (±2 standard deviations)", k + 1),
+            &[&minus, &template, &plus],
+            vec!["−2 SD".into(), "the template".into(), "+2 SD".into()],
+            None,
+        )?);
+        mode_rows.push(vec![
+            (k + 1).to_string(),
+            format!("{:.4e}", m["sd"].as_f64().unwrap_or(f64::NAN)),
+            percent(&m["share"]),
+        ]);
+    }
+    let mut sections = vec![format!(
+        "<h2>The subjects</h2><p>How close the template shot by each subject's momenta came to it. Click a header to sort.{}</p>{}",
+        if subjects.len() > ATLAS_SUBJECTS {
+            format!(" The viewer shows the first {ATLAS_SUBJECTS}.")
+        } else {
+            String::new()
+        },
+        table(
+            "sortable",
+            &["subject", "file", "mean distance", "within 1 %", "signal error", "data term removed"],
+            &rows
+        )
+    )];
+    if !mode_rows.is_empty() {
+        sections.push(format!(
+            "<h2>Modes of variation</h2><p>Principal components of the initial momenta (energy metric); the viewer shoots the template to ±2 SD along each.</p>{}",
+            table("modes", &["mode", "SD", "share of the variance"], &mode_rows)
+        ));
+    }
+    sections.push(format!("<h2>The mean objective by iteration</h2>{}", figure(dir, "energy.svg")));
+    Ok(Page {
+        title: format!("Atlas of {} subjects", subjects.len()),
+        subtitle: format!(
+            "fshape atlas: {} model; the subjects matched from the template to {} of the diagonal on average",
+            summary["model"].as_str().unwrap_or(""),
+            percent(&summary["mean_distance"])
+        ),
+        view,
+        scenes,
+        sections,
+    })
+}
+
+/// The report of an `fshape batch` folder: its index, sortable, each row
+/// with a thumbnail linking to its own report.
+pub fn batch_page(dir: &Path) -> Result<Page> {
+    let index = read_json(&dir.join("index.json"))?;
+    let rows = index["rows"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let mut cells = Vec::new();
+    for r in rows {
+        let name = r["name"].as_str().unwrap_or_default();
+        let row_dir = dir.join(name);
+        // The geodesic's last picture, as a thumbnail.
+        let last = (0..1000).map(|k| row_dir.join(format!("render_{k:03}.png"))).take_while(|p| p.exists()).last();
+        let thumb = last.and_then(|p| thumbnail(&p).ok()).map_or(String::new(), |png| {
+            format!(
+                "<a href=\"{}/report.html\"><img class=\"thumb\" alt=\"{}\" src=\"data:image/png;base64,{}\"></a>",
+                escape(name),
+                escape(name),
+                base64::engine::general_purpose::STANDARD.encode(png)
+            )
+        });
+        let link = if row_dir.join("report.html").exists() {
+            format!("<a href=\"{}/report.html\">{}</a>", escape(name), escape(name))
+        } else {
+            escape(name)
+        };
+        let num = |k: &str| r[k].as_f64().map_or(String::new(), |v| format!("{v:.4e}"));
+        cells.push(vec![
+            thumb,
+            link,
+            escape(r["status"].as_str().unwrap_or("")),
+            percent(&r["mean_distance"]),
+            percent(&r["target_within_1pct"]),
+            percent(&r["signal_rms"]),
+            num("value"),
+            r["iterations"].as_u64().map_or(String::new(), |i| i.to_string()),
+            r["seconds"].as_f64().map_or(String::new(), |s| format!("{s:.1}")),
+            escape(r["error"].as_str().unwrap_or("")),
+        ]);
+    }
+    let count = |k: &str| index[k].as_u64().unwrap_or(0);
+    Ok(Page {
+        title: format!("Batch of {} pairs", rows.len()),
+        subtitle: format!(
+            "fshape batch: {} done, {} failed, {} incomplete, {} pending",
+            count("done"),
+            count("failed"),
+            count("incomplete"),
+            count("pending")
+        ),
+        view: crate::args::DEFAULT_CAMERA.pair(),
+        scenes: Vec::new(),
+        sections: vec![format!(
+            "<h2>The pairs</h2><p>Click a header to sort, a picture or a name to open that registration's report.</p>{}",
+            table(
+                "sortable",
+                &[
+                    "",
+                    "name",
+                    "status",
+                    "mean distance",
+                    "within 1 %",
+                    "signal error",
+                    "J",
+                    "iterations",
+                    "seconds",
+                    "error"
+                ],
+                &cells
+            )
+        )],
+    })
+}
+
+/// A PNG render shrunk four times (the mean of each 4 × 4 block), as PNG.
+fn thumbnail(path: &Path) -> Result<Vec<u8>> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path)?));
+    let mut reader = decoder.read_info()?;
+    let mut buf = vec![0; reader.output_buffer_size().context("PNG size")?];
+    let info = reader.next_frame(&mut buf)?;
+    let channels = info.color_type.samples();
+    let (w, h) = (info.width as usize / 4, info.height as usize / 4);
+    let mut rgb = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                let sum: usize = (0..16)
+                    .map(|b| {
+                        usize::from(
+                            buf[((4 * y + b / 4) * info.width as usize + 4 * x + b % 4) * channels
+                                + c.min(channels - 1)],
+                        )
+                    })
+                    .sum();
+                rgb[(y * w + x) * 3 + c] = (sum / 16) as u8;
+            }
+        }
+    }
+    crate::render::png_sized(&rgb, w as u32, h as u32)
+}
+
+/// Which kind of run a folder holds.
+pub fn write_report(dir: &Path, view: (f64, f64)) -> Result<PathBuf> {
+    let page = if dir.join("index.json").exists() {
+        batch_page(dir)?
+    } else {
+        let summary = read_json(&dir.join("summary.json"))
+            .with_context(|| format!("{}: not an fshape match, atlas or batch folder", dir.display()))?;
+        if summary.get("subjects").is_some() { atlas_page(dir, view)? } else { match_page(dir, view)? }
+    };
+    let path = dir.join("report.html");
+    io::write_atomic(&path, html(&page)?.as_bytes(), false)?;
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Read;
+
+    fn unpack(b64: &str) -> Vec<u8> {
+        let gz = base64::engine::general_purpose::STANDARD.decode(b64).unwrap();
+        let mut bytes = Vec::new();
+        flate2::read::GzDecoder::new(&gz[..]).read_to_end(&mut bytes).unwrap();
+        bytes
+    }
+
+    #[test]
+    fn a_large_surface_is_shown_simplified_every_frame_at_the_kept_vertices() {
+        let sphere = fshape_mesh::generate::icosphere(4, 1.0); // 2562 vertices
+        let f: Vec<f64> = sphere.points().chunks_exact(3).map(|p| p[2]).collect();
+        let first = sphere.clone().with_signal(Some(f.clone())).unwrap();
+        let grown = first.clone().with_points(sphere.points().iter().map(|x| 2.0 * x).collect()).unwrap();
+        let (data, kept) = mesh_data_within(&[&first, &grown], 500).unwrap();
+        let kept = kept.expect("simplified");
+        assert!(kept <= 600 && kept >= 400, "{kept}");
+        let cells: Vec<u32> =
+            unpack(&data.cells).chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        assert!(cells.iter().all(|&c| (c as usize) < kept));
+        let floats = |b64: &str| -> Vec<f32> {
+            unpack(b64).chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        };
+        let (x0, x1) = (floats(&data.frames[0]), floats(&data.frames[1]));
+        assert_eq!(x0.len(), 3 * kept);
+        // The same vertices in both frames: the second is the first doubled,
+        // each a point of the unit sphere carrying its own z.
+        for (a, b) in x0.iter().zip(&x1) {
+            assert_eq!(2.0 * a, *b);
+        }
+        let signal = floats(&data.signals.as_ref().unwrap()[0]);
+        for (v, z) in signal.iter().enumerate() {
+            assert_eq!(*z, x0[3 * v + 2]);
+            let r: f32 = (0..3).map(|k| x0[3 * v + k].powi(2)).sum::<f32>().sqrt();
+            assert!((r - 1.0).abs() < 1e-5);
+        }
+        // Below the limit nothing is simplified.
+        let (small, none) = mesh_data_within(&[&first], 10_000).unwrap();
+        assert!(none.is_none());
+        assert_eq!(floats(&small.frames[0]).len(), 3 * 2562);
+    }
+
+    #[test]
+    fn escaping_keeps_text_text() {
+        assert_eq!(escape("<a href=\"x\">&</a>"), "&lt;a href=&quot;x&quot;&gt;&amp;&lt;/a&gt;");
+    }
+}

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The HTML reports as a colleague opens them: a registration's, an atlas's
+# and a batch's report.html made by the fshape program (debug build unless
+# FSHAPE_BIN names one), each opened in headless Chromium (Debian's
+# package, installed if missing) by scripts/report-check.mjs through
+# playwright-core (npm, installed under target/report-check): no console
+# error, no network request, the 3-D canvas draws and its time slider
+# moves the picture.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if ! command -v chromium >/dev/null; then
+    echo "installing Debian's chromium"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+fi
+check=target/report-check
+mkdir -p "$check"
+if [ ! -d "$check/node_modules/playwright-core" ]; then
+    (cd "$check" && npm install --silent --no-audit --no-fund playwright-core@1.57.0 >/dev/null)
+fi
+cp scripts/report-check.mjs "$check/"
+if [ -z "${FSHAPE_BIN:-}" ]; then
+    cargo build --quiet -p fshape-cli
+    FSHAPE_BIN="$PWD/target/debug/fshape"
+fi
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+# A registration (a digit, planar) and an atlas (ellipsoids, in space).
+"$FSHAPE_BIN" demo digits --ratios 100 --max-iterations 2 --out "$work" >/dev/null 2>&1
+"$FSHAPE_BIN" demo stats-spheres --quick --subjects 3 --max-iterations 3 --permutations 50 --out "$work" >/dev/null 2>&1
+# A batch of two pairs and a row that fails.
+mkdir -p "$work/batch"
+cp "$work/digits/source.ply" "$work/digits/target.ply" "$work/batch/"
+sed -e 's/^max_iterations = [0-9]*$/max_iterations = 2/' -e '/^max_iterations = \[/d' "$work/digits/ratio_100/config.toml" > "$work/batch/config.toml"
+printf 'source,target,name\nsource.ply,target.ply,forth\ntarget.ply,source.ply,back\nsource.ply,missing.ply,broken\n' > "$work/batch/pairs.csv"
+"$FSHAPE_BIN" batch "$work/batch/pairs.csv" --config "$work/batch/config.toml" --out "$work/batch/out" >/dev/null 2>&1 || true
+node "$check/report-check.mjs" \
+    "$work/digits/ratio_100/report.html" \
+    "$work/stats-spheres/atlas/report.html" \
+    "$work/batch/out/report.html" \
+    "$work/batch/out/forth/report.html"
+echo "reports checked"
