@@ -593,7 +593,7 @@ mod tests {
         let grown = first.clone().with_points(sphere.points().iter().map(|x| 2.0 * x).collect()).unwrap();
         let (data, kept) = mesh_data_within(&[&first, &grown], 500).unwrap();
         let kept = kept.expect("simplified");
-        assert!(kept <= 600 && kept >= 400, "{kept}");
+        assert!((400..=600).contains(&kept), "{kept}");
         let cells: Vec<u32> =
             unpack(&data.cells).chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
         assert!(cells.iter().all(|&c| (c as usize) < kept));
