@@ -1,6 +1,6 @@
 """Split a registration's signal error into a smooth part and an oscillating part.
 
-Diagnostic of docs/experiments.md (tenth session), not part of the test suite.
+Diagnostic of docs/experiments.md (“a deep stage on the coarse sphere”), not part of the test suite.
 Needs numpy and scipy:
 
     python docs/experiments/signal_error_parts.py TARGET.ply RESULT.ply [RESULT.ply ...]

@@ -1,4 +1,4 @@
-"""Move a coarse solution's momenta to a finer template two ways, for docs/experiments.md (tenth session).
+"""Move a coarse solution's momenta to a finer template two ways, for docs/experiments.md (“a deep stage on the coarse sphere”).
 
 A diagnostic, not part of the test suite. Needs numpy and scipy:
 

@@ -14,7 +14,7 @@
 //! and a fine mesh sees what the coarse quadrature gets wrong: on the
 //! bunny, a level-3 sphere's converged solution carried to level 4 so
 //! shoots to an attachment ten times the coarse end's (docs/experiments.md,
-//! tenth session). [`prolongate_fitted`] instead takes the fine p_0 whose
+//! “a deep stage on the coarse sphere”). [`prolongate_fitted`] instead takes the fine p_0 whose
 //! velocity at the fine vertices *is* the coarse solution's there, a
 //! regularised least-squares fit; the stages of a [`crate::Session`] use it.
 

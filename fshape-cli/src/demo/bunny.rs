@@ -23,7 +23,7 @@ pub const BUNNY_COARSE_DECREASE: f64 = 5e-3;
 /// its signal error from 5.8 % to 3.0 %). Iterations on 642 vertices cost
 /// a tenth of a second, so this stage goes on much longer and the stages
 /// on finer templates start near their optimum (docs/experiments.md,
-/// tenth session).
+/// “a deep stage on the coarse sphere”).
 pub const BUNNY_DEEP_DECREASE: (f64, usize) = (2e-3, 10);
 
 /// γ_f of the bunny runs, below the default 0.1 (issue 16 lets a demo
@@ -31,7 +31,7 @@ pub const BUNNY_DEEP_DECREASE: (f64, usize) = (2e-3, 10);
 /// norms is about a signal that is matched closely: it says the lumped-L²
 /// oscillations shrink as γ_f grows, at the price of the signal's
 /// accuracy. Measured at the paper's resolution with this demo's stages
-/// (docs/experiments.md, thirteenth session), H¹ matches the bunny better
+/// (docs/experiments.md, “γ_f, the weight the paper's comparison of the norms turns on”), H¹ matches the bunny better
 /// on every measure as γ_f falls from 0.1 (3.17 % signal error, fitted
 /// with 94 % of the target's amplitude) to 0.01 (1.86 %, 98 %), in 285 s
 /// instead of 207, while lumped L²'s oscillations grow (its error
@@ -41,7 +41,7 @@ pub const BUNNY_GAMMA_F: f64 = 0.01;
 /// L-BFGS's memory in the bunny runs (the default is 10): on the quick
 /// setting's long last stage, 30 pairs reach after 400 iterations the J
 /// that 10 pairs reach after 550 to 600, at the same cost per iteration
-/// (docs/experiments.md, tenth session).
+/// (docs/experiments.md, “a deep stage on the coarse sphere”).
 pub const BUNNY_LBFGS_MEMORY: usize = 30;
 
 /// The bunny (paper section 5.1): the level-5 sphere with signal 0 onto the
