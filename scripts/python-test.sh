@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The Python package as a user gets it: `pip install ./fshape-py` into the
 # project's venv (scripts/python-venv.sh), then its tests (pytest) and the
-# README's example, run as written. The tests compare with the fshape
+# the guide's example (docs/guide/src/python.md), run as written. The tests compare with the fshape
 # program, built here in debug (cargo test's build) unless FSHAPE_BIN names one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,15 +18,22 @@ cargo build --quiet -p fshape-cli --target-dir target
 export FSHAPE_BIN="${FSHAPE_BIN:-$PWD/target/debug/fshape}"
 echo "== fshape-py: pytest"
 "$venv/bin/python" -m pytest -q fshape-py/tests
-echo "== README's Python example"
+echo "== the guide's Python example"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 "$venv/bin/python" - "$tmp/example.py" <<'PY'
 import re, sys
-text = open("README.md").read()
+text = open("docs/guide/src/python.md").read()
 block = text.split("<!-- python-example", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
 open(sys.argv[1], "w").write(block)
 PY
 (cd "$tmp" && ln -s "$OLDPWD/data" data && "$venv/bin/python" example.py)
 test -s "$tmp/matched.surf.gii"
-echo "README example ran"
+# The README's few lines too.
+"$venv/bin/python" - "$tmp/readme.py" <<'PY'
+import re, sys
+block = re.findall(r"```python\n(.*?)```", open("README.md").read(), re.S)[0]
+open(sys.argv[1], "w").write(block)
+PY
+(cd "$tmp" && "$venv/bin/python" readme.py)
+echo "the guide's Python example ran"

@@ -19,7 +19,7 @@
 //! (slow, but only x86 CPUs older than AVX2 take it), so every
 //! instruction set gives the same bits. They made the shooting's kernel
 //! sums 1.06 to 1.3 times faster (`cargo bench -p fshape-kernels --bench
-//! kernels -- shooting`, docs/experiments.md, “a faster evaluation”).
+//! kernels -- shooting`, docs/guide/src/experiments.md, “a faster evaluation”).
 //!
 //! The exponential is written here ([`exp_lanes`]) because the arguments
 //! are always finite and ≤ 0: the general-purpose SIMD exps (wide's, with

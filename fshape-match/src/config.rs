@@ -81,7 +81,7 @@
 //! larger deformation); γ_W/γ_f how closely the signal is (larger: a
 //! closer signal, changed more along the path; with an L² norm, also a
 //! signal that oscillates where the target does not pin it, as over the
-//! bunny's holes: the paper's observation, measured in docs/experiments.md,
+//! bunny's holes: the paper's observation, measured in docs/guide/src/experiments.md,
 //! and why `fshape demo bunny` uses γ_f = 0.01); γ_V/γ_f how the match
 //! shares the work between moving the signal with the shape and changing
 //! it (the paper's ratios 1, 20, 100 on the digits). `normalize = false`
@@ -185,19 +185,24 @@ pub enum NormKind {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ModelSection {
-    /// metamorphosis | tangential | lddmm.
+    /// metamorphosis | tangential | lddmm: the signal changes along the
+    /// path (the paper's metamorphosis), by a residual added on the
+    /// template and carried by the flow (tangential), or not at all
+    /// (LDDMM: geometry only).
     pub kind: ModelKind,
-    /// l2-lumped | l2 | h1.
+    /// The signal norm: l2-lumped (diagonal mass) | l2 (P1 mass) | h1
+    /// (mass + ℓ² stiffness).
     pub norm: NormKind,
-    /// ℓ of the H1 norm.
+    /// ℓ of the H¹ norm, in the data's length unit.
     pub length: f64,
-    /// γ_V.
+    /// γ_V, the weight of the deformation energy.
     pub gamma_v: f64,
-    /// γ_f.
+    /// γ_f, the weight of the signal change's energy.
     pub gamma_f: f64,
-    /// γ_W.
+    /// γ_W, the weight of the data attachment.
     pub gamma_w: f64,
-    /// Weights relative to the data's scale (module docs).
+    /// Weights relative to the data's scale ("Scale-free weights" below;
+    /// false: as written, in the data's units).
     pub normalize: bool,
 }
 

@@ -20,7 +20,7 @@
 //! template. The ridge keeps the factor well defined where K is
 //! numerically singular (wide kernels on fine meshes), at the price of
 //! treating directions of K-eigenvalue below it as L²; a ten times smaller
-//! ridge made line searches fail on the bunny (docs/experiments.md). The
+//! ridge made line searches fail on the bunny (docs/guide/src/experiments.md). The
 //! factor costs n³/3 operations and n² values for n vertices, hence
 //! [`MAX_VERTICES`]: a larger template takes a two-scale approximation of
 //! the same inverse ([`TwoLevel`]), whose cost grows linearly with the
@@ -37,7 +37,7 @@ pub const RIDGE: f64 = 1.5e-4;
 /// The largest template (vertices) whose kernel matrix is factored: 16384
 /// vertices is 2 GiB and about 1.5·10¹² operations (the bunny's
 /// 10242-vertex template: 800 MiB and 10 s serial on the 2-core machine of
-/// docs/experiments.md, less than one evaluation of J there).
+/// docs/guide/src/experiments.md, less than one evaluation of J there).
 pub const MAX_VERTICES: usize = 16384;
 
 /// The Cholesky factor of K(x_0) + λD_0⁻¹, applying H_0's shape

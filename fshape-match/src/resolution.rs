@@ -13,7 +13,7 @@
 //! The velocity field is only kept to the accuracy of that quadrature,
 //! and a fine mesh sees what the coarse quadrature gets wrong: on the
 //! bunny, a level-3 sphere's converged solution carried to level 4 so
-//! shoots to an attachment ten times the coarse end's (docs/experiments.md,
+//! shoots to an attachment ten times the coarse end's (docs/guide/src/experiments.md,
 //! “a deep stage on the coarse sphere”). [`prolongate_fitted`] instead takes the fine p_0 whose
 //! velocity at the fine vertices *is* the coarse solution's there, a
 //! regularised least-squares fit; the stages of a [`crate::Session`] use it.
@@ -48,7 +48,7 @@ pub const FIT_RIDGE: f64 = 1e-6;
 ///
 /// Up to [`MAX_VERTICES`] fine vertices the solve is dense (a Cholesky
 /// factor, n²/2 values and n³/3 operations, about 10 s for 10242
-/// vertices on the machine of docs/experiments.md). Beyond, it is
+/// vertices on the machine of docs/guide/src/experiments.md). Beyond, it is
 /// [`FIT_ITERATIONS`] steps of conjugate gradients on the kernel's fast
 /// sums (its evaluation path for the fine template, as the fine stage's
 /// shooting takes it), from the momenta carried as densities

@@ -50,7 +50,7 @@ pub enum Metric {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Metrics {
     /// Of p_0 (default the energy's: fewer iterations to the same fit,
-    /// docs/experiments.md).
+    /// docs/guide/src/experiments.md).
     pub momentum: Metric,
     /// Of p^f or ζ (default L², the paper's).
     pub signal: Metric,

@@ -16,6 +16,8 @@ mod prealign;
 mod precondition;
 #[path = "matching/quality.rs"]
 mod quality;
+#[path = "matching/reference.rs"]
+mod reference;
 #[path = "matching/resolution.rs"]
 mod resolution;
 #[path = "matching/session.rs"]

@@ -12,7 +12,7 @@ use super::{BUNNY_DECREASE, RunArgs, run_match, schedule, write_inputs};
 /// (same window): with 1 % the H¹ run ended short of the quality bar
 /// (89.2 % of the target within 1 % of the diagonal, signal error 5.55 %),
 /// with 0.5 % it met it (91.7 %, 4.40 %) in a minute more
-/// (docs/experiments.md).
+/// (docs/guide/src/experiments.md).
 pub const BUNNY_COARSE_DECREASE: f64 = 5e-3;
 
 /// The test of the bunny's deep stage, the last one on the 642-vertex
@@ -22,7 +22,7 @@ pub const BUNNY_COARSE_DECREASE: f64 = 5e-3;
 /// on to 1000 iterations, the quick H¹ run's J fell from 1.86 to 1.38 and
 /// its signal error from 5.8 % to 3.0 %). Iterations on 642 vertices cost
 /// a tenth of a second, so this stage goes on much longer and the stages
-/// on finer templates start near their optimum (docs/experiments.md,
+/// on finer templates start near their optimum (docs/guide/src/experiments.md,
 /// “a deep stage on the coarse sphere”).
 pub const BUNNY_DEEP_DECREASE: (f64, usize) = (2e-3, 10);
 
@@ -31,7 +31,7 @@ pub const BUNNY_DEEP_DECREASE: (f64, usize) = (2e-3, 10);
 /// norms is about a signal that is matched closely: it says the lumped-L²
 /// oscillations shrink as γ_f grows, at the price of the signal's
 /// accuracy. Measured at the paper's resolution with this demo's stages
-/// (docs/experiments.md, “γ_f, the weight the paper's comparison of the norms turns on”), H¹ matches the bunny better
+/// (docs/guide/src/experiments.md, “γ_f, the weight the paper's comparison of the norms turns on”), H¹ matches the bunny better
 /// on every measure as γ_f falls from 0.1 (3.17 % signal error, fitted
 /// with 94 % of the target's amplitude) to 0.01 (1.86 %, 98 %), in 285 s
 /// instead of 207, while lumped L²'s oscillations grow (its error
@@ -41,7 +41,7 @@ pub const BUNNY_GAMMA_F: f64 = 0.01;
 /// L-BFGS's memory in the bunny runs (the default is 10): on the quick
 /// setting's long last stage, 30 pairs reach after 400 iterations the J
 /// that 10 pairs reach after 550 to 600, at the same cost per iteration
-/// (docs/experiments.md, “a deep stage on the coarse sphere”).
+/// (docs/guide/src/experiments.md, “a deep stage on the coarse sphere”).
 pub const BUNNY_LBFGS_MEMORY: usize = 30;
 
 /// The bunny (paper section 5.1): the level-5 sphere with signal 0 onto the
@@ -54,7 +54,7 @@ pub const BUNNY_LBFGS_MEMORY: usize = 30;
 /// ([`BUNNY_COARSE_DECREASE`] for the first two and the fourth,
 /// [`BUNNY_DEEP_DECREASE`] for the third, [`BUNNY_DECREASE`] for the
 /// last), with limits of 4, 4, 6, 1.5 and 0.4 times `max_iterations`
-/// iterations as a safety net (docs/experiments.md). `quick`: the
+/// iterations as a safety net (docs/guide/src/experiments.md). `quick`: the
 /// level-3 sphere as the template and the first three stages on it.
 pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
     let dir = a.out.join(if a.quick { "bunny-quick" } else { "bunny" });

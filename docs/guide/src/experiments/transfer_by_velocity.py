@@ -1,8 +1,8 @@
-"""Move a coarse solution's momenta to a finer template two ways, for docs/experiments.md (“a deep stage on the coarse sphere”).
+"""Move a coarse solution's momenta to a finer template two ways, for docs/guide/src/experiments.md (“a deep stage on the coarse sphere”).
 
 A diagnostic, not part of the test suite. Needs numpy and scipy:
 
-    python docs/experiments/transfer_by_velocity.py COARSE.ply FINE.ply P0.csv PF.csv OUT WIDTH [WIDTH ...]
+    python docs/guide/src/experiments/transfer_by_velocity.py COARSE.ply FINE.ply P0.csv PF.csv OUT WIDTH [WIDTH ...]
 
 COARSE and FINE are the two templates (binary little-endian PLY as fshape
 writes them, triangles), P0.csv and PF.csv the coarse solution's momenta

@@ -1,9 +1,9 @@
 """Split a registration's signal error into a smooth part and an oscillating part.
 
-Diagnostic of docs/experiments.md (“a deep stage on the coarse sphere”), not part of the test suite.
+Diagnostic of docs/guide/src/experiments.md (“a deep stage on the coarse sphere”), not part of the test suite.
 Needs numpy and scipy:
 
-    python docs/experiments/signal_error_parts.py TARGET.ply RESULT.ply [RESULT.ply ...]
+    python docs/guide/src/experiments/signal_error_parts.py TARGET.ply RESULT.ply [RESULT.ply ...]
 
 TARGET and RESULT are binary little-endian PLY files as fshape writes them
 (x, y, z, signal as doubles; triangles). For every target vertex the
