@@ -342,3 +342,17 @@ def stats(
     column's name, a design column or weights `0,1,0` (`;` between rows
     for an F test). `scores` (n × k): also Hotelling's test on them. The
     same seed gives the same bits."""
+
+def report(
+    path: Union[str, "PathLike[str]"],
+    source: FShape,
+    target: FShape,
+    result: MatchResult,
+    view: Tuple[float, float] = (30.0, 20.0),
+) -> None:
+    """Writes the report.html of a registration, as `fshape match` does:
+    one file, viewable offline, with the geodesic in 3-D under a time
+    slider and the target beside it, the match quality before and after,
+    the stages and the configuration. `source` and `target` as given to
+    `match`, `result` what it returned; `view` the camera's azimuth and
+    elevation in degrees."""

@@ -17,7 +17,6 @@ mod plots;
 mod processes;
 mod progress;
 mod render;
-mod report;
 
 #[derive(Parser)]
 #[command(name = "fshape", version, about = "Functional shapes: meshes carrying a signal, and their metamorphoses")]

@@ -12,6 +12,7 @@ mod io;
 mod measures;
 mod progress;
 mod registration;
+mod report;
 mod shape;
 mod shoot;
 mod stats;
@@ -49,5 +50,6 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(registration::match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(registration::atlas, m)?)?;
     m.add_function(wrap_pyfunction!(stats::stats, m)?)?;
+    m.add_function(wrap_pyfunction!(report::report, m)?)?;
     Ok(())
 }

@@ -474,3 +474,20 @@ def test_stats_on_an_atlas_gives_the_cli_s_maps_and_names_a_bad_column(tmp_path)
         fshape.stats(atlas, {"group": groups, "site": ["a"] * 8}, "group", permutations=10)
     with pytest.raises(fshape.FShapeError, match="3 values for 8 subjects"):
         fshape.stats(atlas, {"group": groups[:3]}, "group", permutations=10)
+
+
+def test_report_writes_one_self_contained_page_of_the_registration(tmp_path):
+    src, tgt = sphere_pair()
+    r = fshape.match(src, tgt, {**CONFIG, "optimizer": {"max_iterations": 3}})
+    path = tmp_path / "report.html"
+    fshape.report(path, src, tgt, r)
+    page = path.read_text()
+    assert "<canvas id=\"view\">" in page and "default-src 'none'" in page
+    assert "src=\"http" not in page and "<link" not in page
+    data = json.loads(page.split('id="fshape-data">', 1)[1].split("</script>", 1)[0])
+    # Every node of the geodesic, and the target beside it.
+    assert len(data["scenes"][0]["mesh"]["frames"]) == len(r["geodesic"]["times"])
+    assert len(data["scenes"][0]["companion"]["frames"]) == 1
+    assert "How close it came" in page
+    with pytest.raises(fshape.FShapeError, match="geodesic has 12 vertices"):
+        fshape.report(path, fshape.FShape(src.points[:4], [[0, 1, 2], [1, 2, 3]]), tgt, r)

@@ -415,7 +415,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         }
         io::write_atomic(path, bytes, false)?;
     }
-    let report = crate::report::write_report(a.out, a.view)?;
+    let report = fshape_report::write_report(a.out, a.view)?;
     println!(
         "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files and {}",
         result.subjects.len(),

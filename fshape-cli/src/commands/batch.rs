@@ -280,7 +280,7 @@ fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     io::write_atomic(&a.out.join("index.csv"), csv.as_bytes(), false)?;
     io::write_atomic(&a.out.join("index.json"), &serde_json::to_vec_pretty(&json)?, false)?;
-    crate::report::write_report(a.out, a.view)?;
+    fshape_report::write_report(a.out, a.view)?;
     Ok(entries)
 }
 

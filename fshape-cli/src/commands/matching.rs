@@ -256,7 +256,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         io::write_atomic(path, bytes, false)?;
     }
     // The page a colleague opens, from the files just written.
-    let report = crate::report::write_report(a.out, a.view)?;
+    let report = fshape_report::write_report(a.out, a.view)?;
     println!(
         "{} -> {}: J {:.4e} after {} iterations in {} stage(s), {:.0} s",
         a.source.display(),

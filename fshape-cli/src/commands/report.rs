@@ -1,5 +1,5 @@
 //! `fshape report DIR`: report.html again for an output folder (see
-//! `crate::report`).
+//! fshape-report).
 
 use std::path::PathBuf;
 
@@ -15,7 +15,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let path = crate::report::write_report(&a.dir, a.view.camera.pair())?;
+    let path = fshape_report::write_report(&a.dir, a.view.camera.pair())?;
     println!("{}", path.display());
     Ok(())
 }

@@ -9,18 +9,59 @@
 //! with thumbnails linking to each row's report.
 //!
 //! Reports are built from the files a run writes, so `fshape report DIR`
-//! gives the same page afterwards. Surfaces above [`DISPLAY_VERTICES`]
+//! gives the same page afterwards; [`registration_page`] builds a
+//! registration's page from memory (the Python package's `report`). Surfaces above [`DISPLAY_VERTICES`]
 //! are simplified for display (fshape-mesh's simplifier) and the page
 //! says so.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
 use base64::Engine;
 use fshape_mesh::io::{self, ReadOptions};
 use fshape_mesh::{CellKind, FShape};
 use serde::Serialize;
+
+/// What can stop a report; each names its file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReportError {
+    /// A mesh of the folder could not be read.
+    #[error(transparent)]
+    Read(#[from] io::ReadError),
+    /// The page could not be written.
+    #[error(transparent)]
+    Write(#[from] io::WriteError),
+    /// A file is missing, unreadable or not what a run writes.
+    #[error("{}: {message}", path.display())]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The folder holds no `fshape match`, `atlas` or `batch` output.
+    #[error("{}: not an fshape match, atlas or batch folder (no summary.json or index.json)", path.display())]
+    NotAnOutput {
+        /// The folder.
+        path: PathBuf,
+    },
+    /// A surface too large to show could not be simplified for display.
+    #[error("simplifying for display: {0}")]
+    Simplify(#[from] fshape_mesh::SimplifyError),
+    /// A scene has no shape to show.
+    #[error("{scene}: no frames to show")]
+    NoFrames {
+        /// The scene's name.
+        scene: String,
+    },
+}
+
+type Result<T> = std::result::Result<T, ReportError>;
+
+fn file_error(path: &Path, message: impl std::fmt::Display) -> ReportError {
+    ReportError::File { path: path.to_path_buf(), message: message.to_string() }
+}
 
 /// Vertices above which a surface is simplified for display.
 pub const DISPLAY_VERTICES: usize = 40_000;
@@ -28,13 +69,14 @@ pub const DISPLAY_VERTICES: usize = 40_000;
 /// Subjects of an atlas shown one by one (as subjects.png).
 const ATLAS_SUBJECTS: usize = 32;
 
-fn gzip_base64(bytes: &[u8]) -> Result<String> {
+fn gzip_base64(bytes: &[u8]) -> String {
     let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-    enc.write_all(bytes)?;
-    Ok(base64::engine::general_purpose::STANDARD.encode(enc.finish()?))
+    // Writing to memory cannot fail.
+    enc.write_all(bytes).expect("in memory");
+    base64::engine::general_purpose::STANDARD.encode(enc.finish().expect("in memory"))
 }
 
-fn packed_f32(values: impl Iterator<Item = f64>) -> Result<String> {
+fn packed_f32(values: impl Iterator<Item = f64>) -> String {
     let bytes: Vec<u8> = values.flat_map(|v| (v as f32).to_le_bytes()).collect();
     gzip_base64(&bytes)
 }
@@ -76,7 +118,7 @@ fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Optio
     let first = frames[0];
     let (cells, kept): (Vec<usize>, Option<Vec<usize>>) =
         if first.n_vertices() > limit && first.kind() == CellKind::Triangle {
-            let s = first.simplified(limit).context("simplifying for display")?;
+            let s = first.simplified(limit)?;
             (s.shape.cells().iter().map(|&c| s.kept[c]).collect(), Some(s.kept))
         } else {
             (first.cells().to_vec(), None)
@@ -95,15 +137,15 @@ fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Optio
         positions.push(packed_f32(order.iter().flat_map(|&v| {
             let p = f.point(v);
             [p[0], p[1], if d == 3 { p[2] } else { 0.0 }]
-        }))?);
+        })));
         if let Some(s) = f.signal() {
-            signals.push(packed_f32(order.iter().map(|&v| s[v]))?);
+            signals.push(packed_f32(order.iter().map(|&v| s[v])));
         }
     }
     let data = MeshData {
         kind: if first.kind() == CellKind::Triangle { "triangle" } else { "segment" },
         planar: d == 2,
-        cells: gzip_base64(&cell_bytes)?,
+        cells: gzip_base64(&cell_bytes),
         frames: positions,
         signals: (signals.len() == frames.len()).then_some(signals),
     };
@@ -119,7 +161,7 @@ pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Opt
         None => (String::new(), None),
     };
     if frames.is_empty() {
-        bail!("{name}: no frames to show");
+        return Err(ReportError::NoFrames { scene: name.to_string() });
     }
     let (mesh, simplified) = mesh_data(frames)?;
     let (companion_data, companion_simplified) = match companion {
@@ -160,18 +202,23 @@ pub fn escape(s: &str) -> String {
 /// A page: its title, a line under it, the viewer's scenes and camera,
 /// and the sections below the viewer (HTML).
 pub struct Page {
+    /// The page's title.
     pub title: String,
+    /// The line under it.
     pub subtitle: String,
+    /// The camera's azimuth and elevation, degrees.
     pub view: (f64, f64),
+    /// What the viewer shows (none: no viewer).
     pub scenes: Vec<Scene>,
+    /// The sections below the viewer, HTML.
     pub sections: Vec<String>,
 }
 
 /// The page's HTML. The data's JSON is escaped for a script element
 /// (`</` cannot end it).
-pub fn html(page: &Page) -> Result<String> {
+pub fn html(page: &Page) -> String {
     let data = serde_json::json!({ "scenes": page.scenes, "view": [page.view.0, page.view.1] });
-    let data = serde_json::to_string(&data)?.replace("</", "<\\/");
+    let data = serde_json::to_string(&data).expect("plain values").replace("</", "<\\/");
     let viewer = if page.scenes.is_empty() {
         String::new()
     } else {
@@ -189,7 +236,7 @@ pub fn html(page: &Page) -> Result<String> {
         )
         .to_string()
     };
-    Ok(format!(
+    format!(
         "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
          <meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src data:\">\n\
          <title>{title}</title>\n<style>\n{css}</style></head>\n<body>\n<h1>{title}</h1>\n<p class=\"subtitle\">{subtitle}</p>\n{viewer}{sections}\n\
@@ -201,7 +248,7 @@ pub fn html(page: &Page) -> Result<String> {
         sections = page.sections.join("\n"),
         version = env!("CARGO_PKG_VERSION"),
         js = include_str!("viewer.js"),
-    ))
+    )
 }
 
 /// A table: a header row and rows of cells (already HTML).
@@ -223,8 +270,8 @@ pub fn table(class: &str, header: &[&str], rows: &[Vec<String>]) -> String {
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value> {
-    let text = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_slice(&text).with_context(|| format!("{}: not JSON", path.display()))
+    let text = std::fs::read(path).map_err(|e| file_error(path, e))?;
+    serde_json::from_slice(&text).map_err(|e| file_error(path, format!("not JSON: {e}")))
 }
 
 fn read(path: &Path) -> Result<FShape> {
@@ -288,14 +335,10 @@ fn figure(dir: &Path, name: &str) -> String {
     std::fs::read_to_string(dir.join(name)).map_or(String::new(), |svg| format!("<div class=\"figure\">{svg}</div>"))
 }
 
-fn file_text(dir: &Path, name: &str) -> String {
-    std::fs::read_to_string(dir.join(name)).map_or(String::new(), |t| format!("<pre>{}</pre>", escape(&t)))
-}
-
 /// The (time, state file) pairs of a ParaView collection, in order.
 fn collection(dir: &Path) -> Result<Vec<(f64, String)>> {
     let path = dir.join("trajectory.pvd");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| file_error(&path, e))?;
     let attr = |line: &str, key: &str| -> Option<String> {
         let start = line.find(&format!("{key}=\""))? + key.len() + 2;
         Some(line[start..].split('"').next()?.to_string())
@@ -303,10 +346,10 @@ fn collection(dir: &Path) -> Result<Vec<(f64, String)>> {
     let mut out = Vec::new();
     for line in text.lines().filter(|l| l.contains("<DataSet")) {
         let (Some(t), Some(file)) = (attr(line, "timestep"), attr(line, "file")) else { continue };
-        out.push((t.parse().with_context(|| format!("{}: timestep `{t}`", path.display()))?, file));
+        out.push((t.parse().map_err(|_| file_error(&path, format!("timestep `{t}` is not a number")))?, file));
     }
     if out.is_empty() {
-        bail!("{}: no states", path.display());
+        return Err(file_error(&path, "no states"));
     }
     Ok(out)
 }
@@ -319,9 +362,29 @@ pub fn match_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
         .map(|(t, file)| read(&dir.join(file.replace(".vtk", ".ply"))).map(|s| (t, s)))
         .collect::<Result<_>>()?;
     let target = read(&dir.join("target.ply"))?;
+    let config = std::fs::read_to_string(dir.join("shoot.toml")).ok();
+    let energy = std::fs::read_to_string(dir.join("energy.svg")).ok();
+    registration_page(&states, &target, &summary, config.as_deref(), energy.as_deref(), view)
+}
+
+/// The report of a registration from what it produced: the geodesic's
+/// states (time, shape), the target as matched, its summary (the keys of
+/// `fshape match`'s summary.json: `source`, `target`, `model`, `norm`,
+/// `quality_before`, `quality`, `final_value`, `final_energy`,
+/// `final_attachment`, `iterations`, `evaluations`, `seconds`, `stages`,
+/// `prealign`, `config`), the configuration's text and the energy plot
+/// (SVG), when there are.
+pub fn registration_page(
+    states: &[(f64, FShape)],
+    target: &FShape,
+    summary: &serde_json::Value,
+    config: Option<&str>,
+    energy_svg: Option<&str>,
+    view: (f64, f64),
+) -> Result<Page> {
     let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
     let labels = states.iter().map(|(t, _)| format!("t = {t:.2}")).collect();
-    let scene = scene("the geodesic", &frames, labels, Some(("target", &target)))?;
+    let scene = scene("the geodesic", &frames, labels, Some(("target", target)))?;
     let text = |k: &str| summary[k].as_str().unwrap_or("").to_string();
     let mut sections = vec![
         format!("<h2>How close it came</h2>{}", quality_table(&summary["quality_before"], &summary["quality"])),
@@ -349,12 +412,20 @@ pub fn match_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
             a["attachment_after"].as_f64().unwrap_or(f64::NAN),
         ));
     }
-    sections.push(format!("<h2>The objective by iteration</h2>{}", figure(dir, "energy.svg")));
-    sections.push(format!(
-        "<h2>Configuration</h2><p>As run, with the weights the model used (<code>shoot.toml</code>; the file given was <code>{}</code>).</p>{}",
-        escape(&text("config")),
-        file_text(dir, "shoot.toml")
-    ));
+    if let Some(svg) = energy_svg {
+        sections.push(format!("<h2>The objective by iteration</h2><div class=\"figure\">{svg}</div>"));
+    }
+    if let Some(config) = config {
+        sections.push(format!(
+            "<h2>Configuration</h2><p>As run, with the weights the model used{}.</p><pre>{}</pre>",
+            if text("config").is_empty() {
+                String::new()
+            } else {
+                format!(" (the file given was <code>{}</code>)", escape(&text("config")))
+            },
+            escape(config)
+        ));
+    }
     Ok(Page {
         title: format!("{} → {}", text("source"), text("target")),
         subtitle: format!(
@@ -462,7 +533,7 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
 
 /// The report of an `fshape batch` folder: its index, sortable, each row
 /// with a thumbnail linking to its own report.
-pub fn batch_page(dir: &Path) -> Result<Page> {
+pub fn batch_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
     let index = read_json(&dir.join("index.json"))?;
     let rows = index["rows"].as_array().map(Vec::as_slice).unwrap_or_default();
     let mut cells = Vec::new();
@@ -471,7 +542,7 @@ pub fn batch_page(dir: &Path) -> Result<Page> {
         let row_dir = dir.join(name);
         // The geodesic's last picture, as a thumbnail.
         let last = (0..1000).map(|k| row_dir.join(format!("render_{k:03}.png"))).take_while(|p| p.exists()).last();
-        let thumb = last.and_then(|p| thumbnail(&p).ok()).map_or(String::new(), |png| {
+        let thumb = last.and_then(|p| thumbnail(&p)).map_or(String::new(), |png| {
             format!(
                 "<a href=\"{}/report.html\"><img class=\"thumb\" alt=\"{}\" src=\"data:image/png;base64,{}\"></a>",
                 escape(name),
@@ -508,7 +579,7 @@ pub fn batch_page(dir: &Path) -> Result<Page> {
             count("incomplete"),
             count("pending")
         ),
-        view: crate::args::DEFAULT_CAMERA.pair(),
+        view,
         scenes: Vec::new(),
         sections: vec![format!(
             "<h2>The pairs</h2><p>Click a header to sort, a picture or a name to open that registration's report.</p>{}",
@@ -533,11 +604,11 @@ pub fn batch_page(dir: &Path) -> Result<Page> {
 }
 
 /// A PNG render shrunk four times (the mean of each 4 × 4 block), as PNG.
-fn thumbnail(path: &Path) -> Result<Vec<u8>> {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path)?));
-    let mut reader = decoder.read_info()?;
-    let mut buf = vec![0; reader.output_buffer_size().context("PNG size")?];
-    let info = reader.next_frame(&mut buf)?;
+fn thumbnail(path: &Path) -> Option<Vec<u8>> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).ok()?));
+    let mut reader = decoder.read_info().ok()?;
+    let mut buf = vec![0; reader.output_buffer_size()?];
+    let info = reader.next_frame(&mut buf).ok()?;
     let channels = info.color_type.samples();
     let (w, h) = (info.width as usize / 4, info.height as usize / 4);
     let mut rgb = vec![0u8; w * h * 3];
@@ -556,20 +627,27 @@ fn thumbnail(path: &Path) -> Result<Vec<u8>> {
             }
         }
     }
-    crate::render::png_sized(&rgb, w as u32, h as u32)
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, w as u32, h as u32);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.write_header().ok()?.write_image_data(&rgb).ok()?;
+    Some(out)
 }
 
 /// Which kind of run a folder holds.
 pub fn write_report(dir: &Path, view: (f64, f64)) -> Result<PathBuf> {
     let page = if dir.join("index.json").exists() {
-        batch_page(dir)?
+        batch_page(dir, view)?
     } else {
-        let summary = read_json(&dir.join("summary.json"))
-            .with_context(|| format!("{}: not an fshape match, atlas or batch folder", dir.display()))?;
+        if !dir.join("summary.json").exists() {
+            return Err(ReportError::NotAnOutput { path: dir.to_path_buf() });
+        }
+        let summary = read_json(&dir.join("summary.json"))?;
         if summary.get("subjects").is_some() { atlas_page(dir, view)? } else { match_page(dir, view)? }
     };
     let path = dir.join("report.html");
-    io::write_atomic(&path, html(&page)?.as_bytes(), false)?;
+    io::write_atomic(&path, html(&page).as_bytes(), false)?;
     Ok(path)
 }
 

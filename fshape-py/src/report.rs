@@ -1,0 +1,93 @@
+//! `report`: a registration's report.html from its result.
+
+use std::path::PathBuf;
+
+use fshape_mesh::FShape;
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::config::config_of;
+use crate::conversions::shape_of;
+use crate::err;
+
+fn value(result: &Bound<'_, PyDict>, key: &str) -> PyResult<serde_json::Value> {
+    match result.get_item(key)? {
+        None => Ok(serde_json::Value::Null),
+        Some(v) if v.is_none() => Ok(serde_json::Value::Null),
+        Some(v) => pythonize::depythonize(&v).map_err(|e| err(format!("report: result[{key:?}]: {e}"))),
+    }
+}
+
+/// Writes the report.html of a registration, as `fshape match` does, from
+/// the source and target given to `match` and the dict it returned:
+/// the geodesic under a time slider with the target beside it, the match
+/// quality before and after, the stages and the configuration. One file,
+/// viewable offline.
+#[pyfunction]
+#[pyo3(signature = (path, source, target, result, view = (30.0, 20.0)))]
+pub(crate) fn report(
+    py: Python<'_>,
+    path: PathBuf,
+    source: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    result: &Bound<'_, PyDict>,
+    view: (f64, f64),
+) -> PyResult<()> {
+    let source = shape_of(source)?;
+    let target = shape_of(target)?;
+    let geodesic = result
+        .get_item("geodesic")?
+        .ok_or_else(|| err("report: the result has no `geodesic` (pass what fshape.match returns)"))?;
+    let times: PyReadonlyArray1<'_, f64> = geodesic.get_item("times")?.extract()?;
+    let points: PyReadonlyArray3<'_, f64> = geodesic.get_item("points")?.extract()?;
+    let signals: PyReadonlyArray2<'_, f64> = geodesic.get_item("signals")?.extract()?;
+    let (t, n, d) = (points.shape()[0], points.shape()[1], points.shape()[2]);
+    if n != source.n_vertices() || d != source.dim() {
+        return Err(err(format!(
+            "report: the geodesic has {n} vertices in R^{d}, the source {} in R^{}",
+            source.n_vertices(),
+            source.dim()
+        )));
+    }
+    let (times, points, signals) =
+        (times.as_slice().map_err(err)?, points.as_slice().map_err(err)?, signals.as_slice().map_err(err)?);
+    let states: Vec<(f64, FShape)> = (0..t)
+        .map(|k| {
+            let s = source
+                .clone()
+                .with_points(points[k * n * d..(k + 1) * n * d].to_vec())
+                .and_then(|s| s.with_signal(Some(signals[k * n..(k + 1) * n].to_vec())))
+                .map_err(err)?;
+            Ok((times[k], s))
+        })
+        .collect::<PyResult<_>>()?;
+    let energies = value(result, "energies")?;
+    let config = match result.get_item("config")? {
+        Some(c) if !c.is_none() => Some(config_of(&c)?),
+        _ => None,
+    };
+    let summary = serde_json::json!({
+        "source": "source",
+        "target": "target",
+        "model": config.as_ref().map(|c| c.model.kind.name()),
+        "norm": config.as_ref().map(|c| serde_json::to_value(c.model.norm).unwrap_or_default()),
+        "quality_before": value(result, "initial_quality")?,
+        "quality": value(result, "quality")?,
+        "final_value": energies["value"],
+        "final_energy": energies["energy"],
+        "final_attachment": energies["attachment"],
+        "iterations": value(result, "iterations")?,
+        "evaluations": value(result, "evaluations")?,
+        "seconds": value(result, "seconds")?,
+        "stages": value(result, "stages")?,
+        "prealign": value(result, "alignment")?,
+    });
+    let text = config.map(|c| c.to_toml());
+    py.detach(|| -> Result<(), fshape_report::ReportError> {
+        let page = fshape_report::registration_page(&states, &target, &summary, text.as_deref(), None, view)?;
+        fshape_mesh::io::write_atomic(&path, fshape_report::html(&page).as_bytes(), false)?;
+        Ok(())
+    })
+    .map_err(err)
+}
