@@ -185,6 +185,17 @@ impl Covariates {
                 }
             }
         }
+        // A row is one subject's: a name two subjects share (one's index,
+        // another's file stem) must not give both the same row.
+        for (i, row) in chosen.iter().enumerate() {
+            if let Some(j) = chosen[..i].iter().position(|r| r.line == row.line) {
+                return Err(table(
+                    row.line,
+                    "subject",
+                    format!("`{}` names both subject {j} and subject {i}: name them apart", row.subject),
+                ));
+            }
+        }
         let unused: Vec<String> =
             self.rows.iter().filter(|r| !chosen.iter().any(|c| c.line == r.line)).map(|r| r.subject.clone()).collect();
         let wanted: Vec<usize> = match columns {
@@ -455,6 +466,13 @@ mod tests {
         assert!(twice.contains("line 3") && twice.contains("already has a row (line 2)"), "{twice}");
         let both = error("subject,age\n0,30\nsubject_000,31\n", 1);
         assert!(both.contains("line 3") && both.contains("named both"), "{both}");
+        // Subject 1's index is subject 0's other name.
+        let shared = Covariates::parse("subject,age\n1,30\n2,31\n", "cov.csv")
+            .unwrap()
+            .design(&[vec!["0".into(), "1".into()], vec!["1".into()], vec!["2".into()]], None)
+            .unwrap_err()
+            .to_string();
+        assert!(shared.contains("line 2") && shared.contains("names both subject 0 and subject 1"), "{shared}");
         let dependent = error("subject,a,b\n0,1,2\n1,2,4\n2,3,6\n3,5,10\n", 4);
         assert!(dependent.contains("column `b`") && dependent.contains("combination"), "{dependent}");
         let few = error("subject,a,b\n0,1,2\n1,2,4\n2,3,7\n", 3);
