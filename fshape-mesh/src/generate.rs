@@ -34,6 +34,12 @@ impl SplitMix64 {
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.uniform()
     }
+
+    /// A standard normal number (Box–Muller, from two uniform numbers).
+    pub fn normal(&mut self) -> f64 {
+        let (u, v) = (1.0 - self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
 }
 
 /// The icosphere of the given subdivision level and radius, centred at the

@@ -85,17 +85,28 @@
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
-  const buffers = { p: gl.createBuffer(), n: gl.createBuffer(), f: gl.createBuffer(), i: gl.createBuffer() };
-
-  function draw(m, x, f, alpha, shift) {
-    const put = (buf, a, values, size) => {
+  // Each mesh keeps its own GL buffers: the cells are uploaded once, the
+  // positions, normals and signal only when the slider moves (turning or
+  // zooming the view draws the same buffers again).
+  function upload(m, position) {
+    if (!m.gl) {
+      m.gl = { p: gl.createBuffer(), n: gl.createBuffer(), f: gl.createBuffer(), i: gl.createBuffer(), at: null };
+      gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, m.gl.i); gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, m.cells, gl.STATIC_DRAW);
+    }
+    if (m.gl.at === position) return;
+    const x = lerp(m.frames, position), f = m.signals ? lerp(m.signals, position) : new Float32Array(m.n);
+    for (const [buf, values] of [[m.gl.p, x], [m.gl.n, m.planar ? new Float32Array(x.length) : normals(m, x)], [m.gl.f, f]]) {
       gl.bindBuffer(gl.ARRAY_BUFFER, buf); gl.bufferData(gl.ARRAY_BUFFER, values, gl.DYNAMIC_DRAW);
-      gl.enableVertexAttribArray(a); gl.vertexAttribPointer(a, size, gl.FLOAT, false, 0, 0);
-    };
-    put(buffers.p, attr.p, x, 3);
-    put(buffers.n, attr.n, m.planar ? new Float32Array(x.length) : normals(m, x), 3);
-    put(buffers.f, attr.f, f || new Float32Array(m.n), 1);
-    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.i); gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, m.cells, gl.DYNAMIC_DRAW);
+    }
+    m.gl.at = position;
+  }
+
+  function draw(m, position, alpha, shift) {
+    upload(m, position);
+    for (const [buf, a, size] of [[m.gl.p, attr.p, 3], [m.gl.n, attr.n, 3], [m.gl.f, attr.f, 1]]) {
+      gl.bindBuffer(gl.ARRAY_BUFFER, buf); gl.enableVertexAttribArray(a); gl.vertexAttribPointer(a, size, gl.FLOAT, false, 0, 0);
+    }
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, m.gl.i);
     gl.uniform1f(loc("alpha"), alpha); gl.uniform2f(loc("shift"), shift[0], shift[1]);
     gl.drawElements(m.kind === "triangle" ? gl.TRIANGLES : gl.LINES, m.cells.length, gl.UNSIGNED_INT, 0);
   }
@@ -133,15 +144,13 @@
     gl.uniform1f(loc("s"), cam.zoom / half); gl.uniform1f(loc("zs"), 0.5 / (sc.radius * 2.5));
     gl.uniform1f(loc("aspect"), aspect);
     gl.uniform2f(loc("range"), sc.range[0], sc.range[1]);
-    const x = lerp(sc.mesh.frames, position), f = sc.mesh.signals ? lerp(sc.mesh.signals, position) : null;
     gl.disable(gl.BLEND); gl.depthMask(true);
-    draw(sc.mesh, x, f, 1.0, beside ? [-1.1 * sc.radius, 0] : [0, 0]);
+    draw(sc.mesh, position, 1.0, beside ? [-1.1 * sc.radius, 0] : [0, 0]);
     if (sc.companion && companionMode !== "hidden") {
-      const m = sc.companion;
-      if (beside) draw(m, m.frames[0], m.signals && m.signals[0], 1.0, [1.1 * sc.radius, 0]);
+      if (beside) draw(sc.companion, 0, 1.0, [1.1 * sc.radius, 0]);
       else {
         gl.enable(gl.BLEND); gl.blendFunc(gl.SRC_ALPHA, gl.ONE_MINUS_SRC_ALPHA); gl.depthMask(false);
-        draw(m, m.frames[0], m.signals && m.signals[0], 0.45, [0, 0]);
+        draw(sc.companion, 0, 0.45, [0, 0]);
         gl.depthMask(true);
       }
     }

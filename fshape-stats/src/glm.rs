@@ -236,7 +236,7 @@ impl Model {
     fn statistic(&self, w: &[f64], norms: &[f64], stat: &mut [f64], effect: &mut [f64]) {
         let (m, p, r) = (norms.len(), self.p, self.r);
         let dof = self.dof() as f64;
-        let mut e = vec![0.0; r];
+        let (mut e, mut sol) = (vec![0.0; r], vec![0.0; r]);
         for v in 0..m {
             let fitted: f64 = (0..p).map(|j| w[j * m + v] * w[j * m + v]).sum();
             let rss = norms[v] - fitted;
@@ -250,7 +250,7 @@ impl Model {
                 stat[v] = if rss > 1e-13 * norms[v] && se > 0.0 { e[0] / se } else { 0.0 };
             } else {
                 effect[v] = e.iter().map(|x| x * x).sum::<f64>().sqrt();
-                let mut sol = e.clone();
+                sol.copy_from_slice(&e);
                 linalg::cholesky_solve(&self.llt, r, &mut sol);
                 let num: f64 = e.iter().zip(&sol).map(|(a, b)| a * b).sum::<f64>() / r as f64;
                 stat[v] = if rss > 1e-13 * norms[v] && sigma2 > 0.0 { num / sigma2 } else { 0.0 };

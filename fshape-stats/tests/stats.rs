@@ -11,12 +11,6 @@ fn two_groups(n: usize) -> Design {
     Design::from_matrix(vec!["intercept".into(), "group".into()], x).unwrap()
 }
 
-/// A standard normal number (Box–Muller).
-fn normal(rng: &mut SplitMix64) -> f64 {
-    let (u, v) = (1.0 - rng.uniform(), rng.uniform());
-    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-}
-
 #[test]
 fn two_groups_give_the_pooled_two_sample_t_and_three_give_the_one_way_anova_f() {
     let mut rng = SplitMix64(1);
@@ -69,7 +63,7 @@ fn two_groups_give_the_pooled_two_sample_t_and_three_give_the_one_way_anova_f() 
 fn two_groups_scores_give_hotelling_s_two_sample_t_squared() {
     let mut rng = SplitMix64(2);
     let (n, k) = (16, 3);
-    let scores: Vec<f64> = (0..n * k).map(|_| normal(&mut rng)).collect();
+    let scores: Vec<f64> = (0..n * k).map(|_| rng.normal()).collect();
     let design = two_groups(n);
     let test = test_scores(
         &design,
@@ -132,14 +126,14 @@ fn population(sphere: &FShape, subjects: usize, effect: f64, centre: [f64; 3], s
         x.extend([1.0, group, age]);
         let noise: Vec<([f64; 3], f64)> = (0..6)
             .map(|_| {
-                let c = [normal(&mut rng), normal(&mut rng), normal(&mut rng)];
+                let c = [rng.normal(), rng.normal(), rng.normal()];
                 let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                (c.map(|a| a / len), normal(&mut rng))
+                (c.map(|a| a / len), rng.normal())
             })
             .collect();
         for v in 0..m {
             let smooth: f64 = noise.iter().map(|(c, a)| a * bump(c, v, 0.5)).sum();
-            maps.push(smooth + 0.5 * normal(&mut rng) + 0.02 * age + group * effect * bump(&centre, v, 0.35));
+            maps.push(smooth + 0.5 * rng.normal() + 0.02 * age + group * effect * bump(&centre, v, 0.35));
         }
     }
     let design = Design::from_matrix(vec!["intercept".into(), "group".into(), "age".into()], x).unwrap();

@@ -54,7 +54,7 @@ pub struct StatsSpheresArgs<'a> {
 
 /// A uniform random rotation (from a uniform unit quaternion).
 fn random_rotation(rng: &mut SplitMix64) -> [[f64; 3]; 3] {
-    let q: [f64; 4] = std::array::from_fn(|_| normal(rng));
+    let q: [f64; 4] = std::array::from_fn(|_| rng.normal());
     let len = q.iter().map(|x| x * x).sum::<f64>().sqrt();
     let [w, x, y, z] = q.map(|c| c / len);
     [
@@ -78,12 +78,6 @@ fn gaussian_at(shape: &FShape, centre: &[f64], v: usize, width: f64) -> f64 {
     let p = shape.point(v);
     let d2: f64 = (0..3).map(|k| (p[k] - centre[k]).powi(2)).sum();
     (-d2 / (2.0 * width * width)).exp()
-}
-
-/// A standard normal number (Box–Muller).
-fn normal(rng: &mut SplitMix64) -> f64 {
-    let (u, v) = (1.0 - rng.uniform(), rng.uniform());
-    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
 }
 
 pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
@@ -124,7 +118,7 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
         let mut bumps: Vec<(Vec<f64>, f64, f64, f64)> = (0..NOISE_BUMPS)
             .map(|_| {
                 let at = truth.point((rng.uniform() * n as f64) as usize % n).to_vec();
-                (at, NOISE_WIDTH, NOISE_GEOMETRY * normal(&mut rng), NOISE_SIGNAL * normal(&mut rng))
+                (at, NOISE_WIDTH, NOISE_GEOMETRY * rng.normal(), NOISE_SIGNAL * rng.normal())
             })
             .collect();
         if effect {
