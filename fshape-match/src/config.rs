@@ -598,8 +598,13 @@ impl Config {
 
     /// Reads and parses a file (errors name it).
     pub fn read(path: &Path) -> Result<Config, MatchError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })?;
+        // Bounded like every input: a device or folder is refused.
+        let file = |message: String| MatchError::File { path: path.to_path_buf(), message };
+        let bytes = fshape_mesh::io::read_bytes(path).map_err(|e| match e {
+            fshape_mesh::io::ReadError::Io { source, .. } => file(source.to_string()),
+            other => file(other.to_string()),
+        })?;
+        let text = String::from_utf8(bytes).map_err(|e| file(format!("not UTF-8 text ({e})")))?;
         Config::parse(&text).map_err(|e| e.in_file(path))
     }
 

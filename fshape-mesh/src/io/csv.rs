@@ -5,10 +5,11 @@
 //! missing values are allowed (they must then be filled before the values
 //! become an fshape's signal, which has to be finite).
 
+use std::io::Read;
 use std::path::Path;
 
 use super::cursor::{Cursor, lossy, parse_f64};
-use super::{ParseError, ParseErrorKind, ReadError, WriteError, read_bytes, write_atomic};
+use super::{Location, ParseError, ParseErrorKind, ReadError, WriteError, write_atomic};
 
 /// A parsed signal column.
 #[derive(Clone, Debug, PartialEq)]
@@ -22,43 +23,90 @@ pub struct SignalColumn {
 /// Parses a one-column signal CSV. With `allow_missing` false, a `nan` (or
 /// any non-finite value) is an error naming its line.
 pub fn parse_signal(data: &[u8], allow_missing: bool) -> Result<SignalColumn, ParseError> {
-    let mut cur = Cursor::new(data);
-    let header = cur
-        .text_line("a header line")?
-        .ok_or_else(|| cur.error(ParseErrorKind::Missing { what: "the header line (column name)" }))?;
-    let name = header.trim().to_string();
+    parse_signal_from(&mut &data[..], allow_missing, None).map_err(|e| match e {
+        StreamError::Parse(e) => e,
+        StreamError::Io(e) => unreachable!("reading a slice cannot fail: {e}"),
+    })
+}
+
+/// Why reading a signal stream failed.
+#[derive(Debug)]
+pub enum StreamError {
+    /// Reading (or decompressing) the bytes failed.
+    Io(std::io::Error),
+    /// The text is not a signal column.
+    Parse(ParseError),
+}
+
+/// The longest line a signal CSV may have: a number or a column name.
+const MAX_LINE: u64 = 4096;
+
+/// Parses a one-column signal CSV from a stream, one line at a time. With
+/// `expected` given, the first value past that count is an error naming
+/// both counts, so a runaway stream is not read to its end.
+pub fn parse_signal_from(
+    r: &mut dyn std::io::BufRead,
+    allow_missing: bool,
+    expected: Option<usize>,
+) -> Result<SignalColumn, StreamError> {
+    let mut buf = Vec::new();
+    let mut line_no = 0;
+    // The next line without its terminator, or None at the end.
+    let mut next = |buf: &mut Vec<u8>, line_no: &mut usize| -> Result<Option<Location>, StreamError> {
+        buf.clear();
+        let mut line = std::io::Read::take(&mut *r, MAX_LINE + 1);
+        let n = std::io::BufRead::read_until(&mut line, b'\n', buf).map_err(StreamError::Io)?;
+        if n == 0 {
+            return Ok(None);
+        }
+        *line_no += 1;
+        let at = Location::Line(*line_no);
+        if buf.last() == Some(&b'\n') {
+            buf.pop();
+        } else if n as u64 > MAX_LINE {
+            return Err(StreamError::Parse(ParseError {
+                at,
+                kind: ParseErrorKind::BadToken { expected: "a line of at most 4096 bytes", found: lossy(buf) },
+            }));
+        }
+        if buf.last() == Some(&b'\r') {
+            buf.pop();
+        }
+        Ok(Some(at))
+    };
+    let bad = |at, expected, t: &[u8]| {
+        StreamError::Parse(ParseError { at, kind: ParseErrorKind::BadToken { expected, found: lossy(t) } })
+    };
+    let Some(at) = next(&mut buf, &mut line_no)? else {
+        return Err(StreamError::Parse(ParseError {
+            at: Location::Line(1),
+            kind: ParseErrorKind::Missing { what: "the header line (column name)" },
+        }));
+    };
+    let text = std::str::from_utf8(&buf).map_err(|_| bad(at, "a header line", &buf))?;
+    let name = text.trim().trim_start_matches('\u{feff}').trim().to_string();
     if name.is_empty() || parse_f64(name.as_bytes()).is_some() {
-        return Err(ParseError {
-            at: super::Location::Line(1),
-            kind: ParseErrorKind::BadToken {
-                expected: "a header line naming the column",
-                found: lossy(name.as_bytes()),
-            },
-        });
+        return Err(bad(at, "a header line naming the column", name.as_bytes()));
     }
     if name.contains(',') {
-        return Err(ParseError {
-            at: super::Location::Line(1),
-            kind: ParseErrorKind::BadToken { expected: "a single column (no comma)", found: lossy(name.as_bytes()) },
-        });
+        return Err(bad(at, "a single column (no comma)", name.as_bytes()));
     }
-    let mut values = Vec::new();
-    loop {
-        let at = cur.at();
-        let Some(line) = cur.text_line("a number")? else {
-            break;
-        };
-        let t = line.trim();
+    let mut values = Vec::with_capacity(expected.unwrap_or(0));
+    let what =
+        if allow_missing { "a number or `nan`" } else { "a finite number (missing values are not accepted here)" };
+    while let Some(at) = next(&mut buf, &mut line_no)? {
+        let t = buf.trim_ascii();
         if t.is_empty() {
             continue;
         }
-        let v = parse_f64(t.as_bytes()).filter(|v| v.is_finite() || (allow_missing && v.is_nan()));
-        let expected =
-            if allow_missing { "a number or `nan`" } else { "a finite number (missing values are not accepted here)" };
-        values.push(v.ok_or_else(|| ParseError {
-            at,
-            kind: ParseErrorKind::BadToken { expected, found: lossy(t.as_bytes()) },
-        })?);
+        if let Some(n) = expected.filter(|&n| values.len() == n) {
+            return Err(StreamError::Parse(ParseError {
+                at,
+                kind: ParseErrorKind::LongerThanMesh { vertices: n as u64 },
+            }));
+        }
+        let v = parse_f64(t).filter(|v| v.is_finite() || (allow_missing && v.is_nan()));
+        values.push(v.ok_or_else(|| bad(at, what, t))?);
     }
     Ok(SignalColumn { name, values })
 }
@@ -116,14 +164,18 @@ pub fn parse_vectors(data: &[u8], dim: usize) -> Result<Vec<f64>, ParseError> {
 
 /// Reads a vector-field CSV file (optionally gzipped); see [`parse_vectors`].
 pub fn read_vectors(path: &Path, dim: usize) -> Result<Vec<f64>, ReadError> {
-    let data = read_bytes(path)?;
+    let data = super::source::open(path, super::Expect::Text)?.read_all(path)?;
     parse_vectors(&data, dim).map_err(|source| ReadError::Parse { path: path.into(), source })
 }
 
-/// Reads a signal CSV file (optionally gzipped).
+/// Reads a signal CSV file (optionally gzipped), as a stream.
 pub fn read_signal(path: &Path, allow_missing: bool) -> Result<SignalColumn, ReadError> {
-    let data = read_bytes(path)?;
-    parse_signal(&data, allow_missing).map_err(|source| ReadError::Parse { path: path.into(), source })
+    let input = super::source::open(path, super::Expect::Text)?;
+    let mut reader = std::io::BufReader::new(std::io::Cursor::new(input.prefix).chain(input.rest));
+    parse_signal_from(&mut reader, allow_missing, None).map_err(|e| match e {
+        StreamError::Io(source) => ReadError::Io { path: path.into(), source },
+        StreamError::Parse(source) => ReadError::Parse { path: path.into(), source },
+    })
 }
 
 /// Writes a signal CSV atomically, values in Rust's shortest round-trip

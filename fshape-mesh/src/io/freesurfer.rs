@@ -44,6 +44,7 @@ fn count(cur: &mut Cursor, what: &'static str, bytes_each: usize) -> Result<usiz
         at,
         kind: ParseErrorKind::BadToken { expected: "a non-negative count", found: n.to_string() },
     })?;
+    super::source::check_values(n as u64, what).map_err(|kind| ParseError { at, kind })?;
     if n.saturating_mul(bytes_each) > cur.remaining() {
         return Err(ParseError {
             at,
@@ -263,6 +264,7 @@ pub fn parse_mgh(data: &[u8]) -> Result<Vec<f64>, ParseError> {
         return Err(cur.error(ParseErrorKind::Eof { expected: "the 284-byte MGH header" }));
     }
     cur.take(MGH_HEADER - 24, "the MGH header")?;
+    super::source::check_values(n as u64, "values").map_err(|kind| cur.error(kind))?;
     if n.saturating_mul(size) > cur.remaining() {
         return Err(cur.error(ParseErrorKind::Truncated {
             what: "values",

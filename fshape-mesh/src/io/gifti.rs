@@ -415,6 +415,7 @@ fn decode(h: &Header, text: &str, folder: Option<&Path>) -> Result<Vec<f64>, Par
         expected: "dimensions whose product fits in memory",
         found: format!("{:?}", h.dims),
     })?;
+    super::source::check_values(n as u64, "values in a data array")?;
     let encoding = h.encoding.as_deref().ok_or(ParseErrorKind::Missing { what: "the DataArray's Encoding" })?;
     let mismatch = |found: usize| ParseErrorKind::CountMismatch {
         what: "values in the Data element against the product of the Dim attributes",
@@ -497,11 +498,35 @@ fn external(h: &Header, folder: Option<&Path>, want: usize) -> Result<Vec<u8>, P
             found: name.clone(),
         });
     };
-    let path = folder.join(name);
+    let limits = super::limits();
+    let relative = Path::new(name);
+    let inside = relative.components().all(|c| matches!(c, std::path::Component::Normal(_)));
+    if !inside && !limits.external_data_anywhere {
+        return Err(ParseErrorKind::Unsupported {
+            what: "external data file outside the .gii's folder (an absolute name or one with `..`; \
+                   set FSHAPE_EXTERNAL_DATA_ANYWHERE=1 to allow it)",
+            found: name.clone(),
+        });
+    }
+    let path = folder.join(relative);
     let unreadable = |e: std::io::Error| ParseErrorKind::BadToken {
         expected: "a readable external data file",
         found: format!("{}: {e}", path.display()),
     };
+    // Checked by its metadata before it is opened: a FIFO would block the
+    // open, a device would be read forever.
+    let meta = std::fs::metadata(&path).map_err(unreadable)?;
+    if !meta.is_file() {
+        return Err(unreadable(std::io::Error::other("not a regular file (a device, a FIFO or a folder)")));
+    }
+    let end = offset.checked_add(want as u64);
+    if end.is_none_or(|end| end > meta.len()) {
+        return Err(ParseErrorKind::CountMismatch {
+            what: "bytes in the external data file from ExternalFileOffset against the Dim attributes times the type's size",
+            expected: want as u64,
+            found: meta.len().saturating_sub(*offset),
+        });
+    }
     let mut file = std::fs::File::open(&path).map_err(unreadable)?;
     std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(*offset)).map_err(unreadable)?;
     let mut bytes = Vec::with_capacity(want);

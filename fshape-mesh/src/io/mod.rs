@@ -22,7 +22,12 @@ pub mod image;
 pub mod mtx;
 pub mod obj;
 pub mod ply;
+mod source;
+pub mod table;
 pub mod vtk;
+
+use source::Expect;
+pub use source::{EXPANSION, EXPANSION_FLOOR, Limits, PIPE_BYTES, limits, set_limits};
 
 /// Where in a file a parse error happened.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -111,6 +116,23 @@ pub enum ParseErrorKind {
         cell: usize,
         /// Its vertex count.
         found: usize,
+    },
+    /// A header declares more values than fshape's limit
+    /// ([`Limits::max_values`]).
+    #[error("the header claims {claimed} {what}, more than the limit of {limit} (set FSHAPE_MAX_VALUES to raise it)")]
+    TooMany {
+        /// Which values.
+        what: &'static str,
+        /// The count in the header.
+        claimed: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// A signal goes on past the mesh's vertex count (reading stopped here).
+    #[error("the signal goes on past the mesh's {vertices} vertices (value {} is here)", vertices + 1)]
+    LongerThanMesh {
+        /// The mesh's vertex count.
+        vertices: u64,
     },
     /// Two counts that must agree do not.
     #[error("{what}: expected {expected}, found {found}")]
@@ -349,22 +371,11 @@ impl RawMesh {
     }
 }
 
-/// Reads a whole file, gunzipping it when it starts with the gzip magic.
+/// Reads a whole file, gunzipping it when it starts with the gzip magic
+/// (and bunzipping a `.bz2`), within the [`Limits`]: devices and folders
+/// are refused, pipes and decompressed data are capped.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
-    let io = |source| ReadError::Io { path: path.into(), source };
-    let raw = std::fs::read(path).map_err(io)?;
-    if raw.starts_with(&[0x1f, 0x8b]) {
-        let mut out = Vec::new();
-        flate2::read::MultiGzDecoder::new(&raw[..]).read_to_end(&mut out).map_err(io)?;
-        Ok(out)
-    } else if raw.starts_with(b"BZh") && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bz2")) {
-        // bzip2, as nibabel reads it (`.gii.bz2`).
-        let mut out = Vec::new();
-        bzip2::read::MultiBzDecoder::new(&raw[..]).read_to_end(&mut out).map_err(io)?;
-        Ok(out)
-    } else {
-        Ok(raw)
-    }
+    source::open(path, Expect::Any)?.read_all(path)
 }
 
 /// Reads a mesh (PLY, OBJ or VTK legacy, each optionally gzipped), with its
@@ -381,14 +392,15 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
 /// by its first bytes ([`Format::sniff`]).
 pub fn read_mesh(path: &Path, opts: &ReadOptions) -> Result<FShape, ReadError> {
     if let Some((format, _)) = Format::from_path(path) {
-        let data = read_bytes(path)?;
+        let data = source::open(path, Expect::Mesh(format))?.read_all(path)?;
         return parse_mesh(&data, format, opts, path);
     }
-    if std::fs::metadata(path).is_err() || std::fs::read_dir(path).is_ok() {
+    if std::fs::metadata(path).is_err() {
         return Err(ReadError::UnknownFormat { path: path.into() });
     }
-    let data = read_bytes(path)?;
-    let format = Format::sniff(&data).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
+    let input = source::open(path, Expect::Any)?;
+    let format = Format::sniff(&input.prefix).ok_or_else(|| ReadError::UnknownFormat { path: path.into() })?;
+    let data = input.read_all(path)?;
     parse_mesh(&data, format, opts, path)
 }
 
@@ -499,16 +511,16 @@ impl SignalFormat {
 /// FreeSurfer curv file or an MGH/MGZ file (chosen by [`SignalFormat::detect`]).
 /// Values must be finite.
 pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
-    let data = read_bytes(path)?;
+    read_signal_for(path, None)
+}
+
+/// [`read_signal`] for a mesh of `n_vertices` vertices: a CSV column is
+/// read as a stream and refused at its first value past that count, so a
+/// runaway file costs no more than the values expected.
+pub fn read_signal_for(path: &Path, n_vertices: Option<usize>) -> Result<csv::SignalColumn, ReadError> {
+    let input = source::open(path, Expect::Signal)?;
     let parse = |source| ReadError::Parse { path: path.into(), source };
-    // lh.thickness and lh.thickness.mgz are both "thickness".
-    let stem = || {
-        let n = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let n = n.strip_suffix(".gz").unwrap_or(&n);
-        let n = n.strip_suffix(".mgh").or_else(|| n.strip_suffix(".mgz")).unwrap_or(n);
-        n.rsplit('.').next().unwrap_or(n).to_string()
-    };
-    if let Some(f) = Format::sniff(&data).filter(|&f| f != Format::Gifti) {
+    if let Some(f) = Format::sniff(&input.prefix).filter(|&f| f != Format::Gifti) {
         return Err(parse(ParseError {
             at: Location::Byte(0),
             kind: ParseErrorKind::Unsupported {
@@ -517,6 +529,22 @@ pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
             },
         }));
     }
+    if SignalFormat::detect(&input.prefix, path) == SignalFormat::Csv {
+        let mut reader = std::io::BufReader::new(std::io::Cursor::new(input.prefix).chain(input.rest));
+        let column = csv::parse_signal_from(&mut reader, false, n_vertices).map_err(|e| match e {
+            csv::StreamError::Io(source) => ReadError::Io { path: path.into(), source },
+            csv::StreamError::Parse(source) => parse(source),
+        })?;
+        return Ok(column);
+    }
+    let data = input.read_all(path)?;
+    // lh.thickness and lh.thickness.mgz are both "thickness".
+    let stem = || {
+        let n = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let n = n.strip_suffix(".gz").unwrap_or(&n);
+        let n = n.strip_suffix(".mgh").or_else(|| n.strip_suffix(".mgz")).unwrap_or(n);
+        n.rsplit('.').next().unwrap_or(n).to_string()
+    };
     let column = match SignalFormat::detect(&data, path) {
         SignalFormat::Csv => return csv::parse_signal(&data, false).map_err(parse),
         SignalFormat::Gifti => {

@@ -237,6 +237,8 @@ fn index(cur: &mut Cursor, body: Body, t: Scalar, expected: &'static str) -> Res
 }
 
 fn check_count(cur: &Cursor, el: &Element, body: Body) -> Result<(), ParseError> {
+    super::source::check_values(el.count, if el.name == "vertex" { "vertices" } else { "records" })
+        .map_err(|kind| cur.error(kind))?;
     let min = el.min_record_bytes(body == Body::Ascii) as u64;
     // An ASCII last record needs no trailing separator: allow one byte slack.
     if el.count.saturating_mul(min) > cur.remaining() as u64 + 1 {

@@ -81,6 +81,7 @@ impl<'a> Reader<'a> {
 
     /// Refuses a count whose data cannot fit in the rest of the file.
     fn check_room(&self, n: u64, bytes_each: usize) -> Result<usize, ParseError> {
+        super::source::check_values(n, "values").map_err(|kind| self.line_error(kind))?;
         let min = if self.binary { bytes_each as u64 } else { 2 };
         if n.saturating_mul(min) > self.cur.remaining() as u64 + 1 {
             return Err(self.line_error(ParseErrorKind::Truncated {

@@ -1,0 +1,236 @@
+//! Files a careless script or a hostile colleague could produce: devices,
+//! FIFOs, short files, offsets past the end, huge counts, decompression
+//! bombs, runaway signal tables. Each is given to a child `fshape` under a
+//! CPU-time limit of 1 s and an address-space limit of 64 MiB above what
+//! reading a small valid file needs (so memory growth past 64 MiB aborts
+//! the child, which the test sees); each must end in a clean error (exit
+//! status 1, `error: …` naming the problem), within a wall-clock watchdog
+//! that catches a blocked read. The corpus is made here, in a temporary
+//! folder, on each run.
+#![cfg(target_os = "linux")]
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Memory a hostile file may add to a small file's reading.
+const GROWTH_KIB: u64 = 64 << 10;
+
+struct Outcome {
+    code: Option<i32>,
+    stderr: String,
+    wall: Duration,
+}
+
+/// Runs `fshape args…` (through `sh -c`, with `shell_prefix` before it,
+/// e.g. a pipe) under `ulimit -v limit_kib` and 1 s of CPU; kills it after
+/// 20 s of wall time.
+fn run_limited(limit_kib: u64, shell_prefix: &str, args: &[&str]) -> Outcome {
+    let script = format!("ulimit -v {limit_kib}; ulimit -t 1; {shell_prefix} \"$0\" \"$@\"");
+    let start = Instant::now();
+    let mut child = Command::new("sh")
+        .arg("-c")
+        .arg(script)
+        .arg(env!("CARGO_BIN_EXE_fshape"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("sh runs");
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = String::new();
+            std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut stderr).unwrap();
+            return Outcome { code: status.code(), stderr, wall: start.elapsed() };
+        }
+        if start.elapsed() > Duration::from_secs(20) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("fshape {args:?} did not finish in 20 s (a blocked read?)");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// The smallest address space (KiB, to 1 MiB) in which `fshape info` reads
+/// a small valid file.
+fn baseline_kib(small: &Path) -> u64 {
+    let ok = |kib: u64| run_limited(kib, "exec", &["info", small.to_str().unwrap()]).code == Some(0);
+    let (mut lo, mut hi) = (16 << 10, 4 << 20);
+    assert!(ok(hi), "fshape info of a small file fails even with 4 GiB");
+    while hi - lo > 1 << 10 {
+        let mid = (lo + hi) / 2;
+        if ok(mid) { hi = mid } else { lo = mid }
+    }
+    hi
+}
+
+fn gifti_external(dir: &Path, file: &str, name: &str, dim: u64, offset: u64) -> PathBuf {
+    let path = dir.join(file);
+    let xml = format!(
+        "<?xml version=\"1.0\"?>\n<GIFTI Version=\"1.0\" NumberOfDataArrays=\"1\">\n\
+         <DataArray Intent=\"NIFTI_INTENT_SHAPE\" DataType=\"NIFTI_TYPE_FLOAT32\" ArrayIndexingOrder=\"RowMajorOrder\" \
+         Dimensionality=\"1\" Dim0=\"{dim}\" Encoding=\"ExternalFileBinary\" Endian=\"LittleEndian\" \
+         ExternalFileName=\"{name}\" ExternalFileOffset=\"{offset}\"><Data></Data></DataArray>\n</GIFTI>\n"
+    );
+    std::fs::write(&path, xml).unwrap();
+    path
+}
+
+fn gz(path: &Path, parts: &[(&[u8], usize)]) {
+    let file = std::fs::File::create(path).unwrap();
+    // A bomb is small: the best compression (about 1000 times on repeated bytes).
+    let mut enc = flate2::write::GzEncoder::new(std::io::BufWriter::new(file), flate2::Compression::best());
+    for (chunk, times) in parts {
+        for _ in 0..*times {
+            enc.write_all(chunk).unwrap();
+        }
+    }
+    enc.finish().unwrap().flush().unwrap();
+}
+
+#[test]
+fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
+    let dir = std::env::temp_dir().join(format!("fshape-hostile-{}", std::process::id()));
+    let sub = dir.join("surfaces");
+    std::fs::create_dir_all(&sub).unwrap();
+    let p = |name: &str| sub.join(name).to_str().unwrap().to_string();
+
+    // A small valid surface (a tetrahedron) and its signal.
+    let small = sub.join("small.ply");
+    std::fs::write(
+        &small,
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+         element face 4\nproperty list uchar int vertex_indices\nend_header\n\
+         0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n",
+    )
+    .unwrap();
+    let base = baseline_kib(&small);
+    let limit = base + GROWTH_KIB;
+
+    // Devices, FIFOs and folders, named directly or through a link.
+    std::os::unix::fs::symlink("/dev/zero", sub.join("zero.ply")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", sub.join("zero.bin")).unwrap();
+    std::os::unix::fs::symlink("/dev/urandom", sub.join("random.bin")).unwrap();
+    assert!(Command::new("mkfifo").arg(sub.join("fifo.bin")).status().unwrap().success(), "mkfifo");
+    std::fs::create_dir_all(sub.join("folder.ply")).unwrap();
+    // External GIfTI data: outside the folder, a device, a FIFO, too short, an offset past the end.
+    gifti_external(&sub, "abs_zero.shape.gii", "/dev/zero", 1_000_000_000, 0);
+    gifti_external(&sub, "up.shape.gii", "../outside.bin", 4, 0);
+    std::fs::write(dir.join("outside.bin"), [0u8; 16]).unwrap();
+    gifti_external(&sub, "link_zero.shape.gii", "zero.bin", 1_000_000_000, 0);
+    gifti_external(&sub, "link_random.shape.gii", "random.bin", 1_000_000_000, 0);
+    gifti_external(&sub, "fifo.shape.gii", "fifo.bin", 4, 0);
+    std::fs::write(sub.join("short.bin"), [0u8; 100]).unwrap();
+    gifti_external(&sub, "short.shape.gii", "short.bin", 1_000_000_000, 0);
+    gifti_external(&sub, "offset.shape.gii", "short.bin", 4, 1 << 40);
+    gifti_external(&sub, "huge_dim.shape.gii", "short.bin", 1 << 40, 0);
+    // Headers that claim more than the file holds, or more than the limit.
+    std::fs::write(
+        sub.join("huge_count.ply"),
+        "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n",
+    )
+    .unwrap();
+    let mut curv = vec![0xff, 0xff, 0xff];
+    curv.extend(0x7fff_ffffi32.to_be_bytes());
+    curv.extend(1i32.to_be_bytes());
+    curv.extend(1i32.to_be_bytes());
+    std::fs::write(sub.join("lh.thickness"), &curv).unwrap();
+    // Decompression bombs behind a valid start: a PLY header then 64 MiB
+    // of spaces; a signal column of 100 M values for a 4-vertex mesh.
+    gz(
+        &sub.join("bomb.ply.gz"),
+        &[(b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nend_header\n", 1), (&[b' '; 1 << 20], 64)],
+    );
+    let ones = b"1\n".repeat(1 << 19);
+    gz(&sub.join("bomb.csv.gz"), &[(b"thickness\n", 1), (&ones, 200)]);
+    // An uncompressed runaway signal table: 64 MB of values for 4 vertices.
+    let mut big = std::io::BufWriter::new(std::fs::File::create(sub.join("runaway.csv")).unwrap());
+    big.write_all(b"thickness\n").unwrap();
+    for _ in 0..64 {
+        big.write_all(&ones).unwrap();
+    }
+    big.into_inner().unwrap().sync_all().unwrap();
+
+    let small_s = small.to_str().unwrap();
+    let cases: Vec<(&str, Vec<String>, &str)> = vec![
+        ("exec", vec!["info".into(), "/dev/zero".into()], "device"),
+        ("exec", vec!["info".into(), p("zero.ply")], "device"),
+        ("exec", vec!["info".into(), p("folder.ply")], "folder"),
+        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("zero.bin")], "device"),
+        (
+            "exec",
+            vec!["info".into(), small_s.into(), "--signal".into(), p("abs_zero.shape.gii")],
+            "outside the .gii's folder",
+        ),
+        (
+            "exec",
+            vec!["info".into(), small_s.into(), "--signal".into(), p("up.shape.gii")],
+            "outside the .gii's folder",
+        ),
+        (
+            "exec",
+            vec!["info".into(), small_s.into(), "--signal".into(), p("link_zero.shape.gii")],
+            "not a regular file",
+        ),
+        (
+            "exec",
+            vec!["info".into(), small_s.into(), "--signal".into(), p("link_random.shape.gii")],
+            "not a regular file",
+        ),
+        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("fifo.shape.gii")], "not a regular file"),
+        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("short.shape.gii")], "external data file"),
+        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("offset.shape.gii")], "external data file"),
+        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("huge_dim.shape.gii")], "FSHAPE_MAX_VALUES"),
+        ("exec", vec!["info".into(), p("huge_count.ply")], "4000000000"),
+        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("lh.thickness")], "2147483647"),
+        ("exec", vec!["info".into(), p("bomb.ply.gz")], "decompresses to more than"),
+        (
+            "exec",
+            vec!["info".into(), small_s.into(), "--signal".into(), p("bomb.csv.gz")],
+            "past the mesh's 4 vertices (value 5 is here)",
+        ),
+        (
+            "exec",
+            vec!["info".into(), small_s.into(), "--signal".into(), p("runaway.csv")],
+            "past the mesh's 4 vertices (value 5 is here)",
+        ),
+        // Pipes are read, with a look at their first bytes.
+        ("cat /dev/zero |", vec!["info".into(), "/dev/stdin".into()], "unknown format"),
+        (
+            "cat /dev/zero |",
+            vec!["info".into(), small_s.into(), "--signal".into(), "/dev/stdin".into()],
+            "expected a signal file",
+        ),
+        (
+            "cat /dev/urandom |",
+            vec!["info".into(), small_s.into(), "--signal".into(), "/dev/stdin".into()],
+            "expected a signal file",
+        ),
+        (
+            "(echo thickness; yes 1) |",
+            vec!["info".into(), small_s.into(), "--signal".into(), "/dev/stdin".into()],
+            "past the mesh's 4 vertices (value 5 is here)",
+        ),
+        ("exec", vec!["checkpoint".into(), "/dev/zero".into()], "device"),
+    ];
+    let mut failures = Vec::new();
+    for (prefix, args, says) in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = run_limited(limit, prefix, &args);
+        let clean = o.code == Some(1) && o.stderr.starts_with("error: ") && !o.stderr.contains("panicked");
+        if !clean || !o.stderr.contains(says) {
+            failures.push(format!("{prefix} fshape {args:?}: status {:?}, {:?}, stderr: {}", o.code, o.wall, o.stderr));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "with {} KiB of address space ({} KiB for a small file):\n{}",
+        limit,
+        base,
+        failures.join("\n")
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
