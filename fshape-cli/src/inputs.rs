@@ -49,8 +49,24 @@ pub fn message(e: &anyhow::Error) -> String {
 pub fn load(path: &Path, signal_name: Option<String>, signal: Option<&Path>) -> Result<FShape> {
     let shape = io::read_mesh(path, &ReadOptions { signal_name })?;
     let Some(csv) = signal else { return Ok(shape) };
-    let column = io::read_signal(csv)?;
+    let column = io::read_signal_for(csv, Some(shape.n_vertices()))?;
     shape
         .with_signal(Some(column.values))
         .with_context(|| format!("attaching the signal of {} to {}", csv.display(), path.display()))
+}
+
+/// Warns when `--resume` reads a format-3 checkpoint: it has no checksum,
+/// so damage in it would go unnoticed (it is read, and written back as
+/// the current format). Reads the header only.
+pub fn warn_if_unchecked(checkpoint: &Path) {
+    let mut head = [0u8; 20];
+    let read = std::fs::File::open(checkpoint).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head));
+    if read.is_ok() && u32::from_le_bytes([head[16], head[17], head[18], head[19]]) == fshape_match::UNCHECKED_FORMAT {
+        eprintln!(
+            "warning: {} is a format-{} checkpoint, without a checksum: it is read as it is, and a damaged byte \
+             in it would go unnoticed; the checkpoints written from now on carry one",
+            checkpoint.display(),
+            fshape_match::UNCHECKED_FORMAT
+        );
+    }
 }

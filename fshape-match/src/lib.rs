@@ -55,7 +55,7 @@ pub use prealign::{AlignKind, Alignment, Moving, PrealignSection};
 pub use quality::{Quality, quality};
 pub use runner::{
     CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Outcome, Runner, StageRecord, StageSetup,
-    Staged,
+    Staged, UNCHECKED_FORMAT,
 };
 pub use session::{MatchResult, Session, fingerprint};
 pub use unknowns::{Metric, Metrics};

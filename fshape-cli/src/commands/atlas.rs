@@ -153,18 +153,20 @@ struct Summary<'a> {
 fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<(PathBuf, Option<PathBuf>)>> {
     let mut paths = Vec::new();
     if let Some(list) = a.list {
-        let text = std::fs::read_to_string(list).with_context(|| format!("reading {}", list.display()))?;
         let base = list.parent().unwrap_or(Path::new("."));
-        for (k, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
-                continue;
-            }
-            let mut parts = line.split(',').map(str::trim);
-            let mesh = parts.next().unwrap_or_default();
-            let signal = parts.next().filter(|s| !s.is_empty());
-            if parts.next().is_some() {
-                bail!("{}:{}: expected `mesh[,signal.csv]`, found `{line}`", list.display(), k + 1);
+        for io::table::Record { line, fields } in io::table::read_table(list)? {
+            let (mesh, signal) = match &fields[..] {
+                [mesh] => (mesh, None),
+                [mesh, signal] => (mesh, Some(signal).filter(|s| !s.is_empty())),
+                _ => bail!(
+                    "{}:{line}: expected `mesh[,signal.csv]`, found {} cells: {}",
+                    list.display(),
+                    fields.len(),
+                    fields.join(" | ")
+                ),
+            };
+            if mesh.is_empty() {
+                bail!("{}:{line}: no mesh named (expected `mesh[,signal.csv]`)", list.display());
             }
             paths.push((base.join(mesh), signal.map(|s| base.join(s))));
         }
@@ -220,6 +222,9 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
             Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
         };
     let checkpoint_path = a.out.join("checkpoint.bin");
+    if a.resume {
+        crate::inputs::warn_if_unchecked(&checkpoint_path);
+    }
     let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };
     let atlas = match cluster {
         Some(c) => atlas.with_cluster(c),

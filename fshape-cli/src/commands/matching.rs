@@ -153,6 +153,9 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
             Some(templates) => session.with_stage_templates(templates).context("--stage-templates")?,
         };
     let checkpoint_path = a.out.join("checkpoint.bin");
+    if a.resume {
+        crate::inputs::warn_if_unchecked(&checkpoint_path);
+    }
     let session = if a.resume { session.resume_from_file(&checkpoint_path).context("--resume")? } else { session };
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut session = session.with_checkpoint_file(&checkpoint_path);

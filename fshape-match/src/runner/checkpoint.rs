@@ -11,12 +11,20 @@ use serde::{Deserialize, Serialize};
 use crate::MatchError;
 use crate::optimize::{State, Stop};
 
-/// The checkpoint format this version writes and reads: 3, binary
-/// ([`Checkpoint::to_bytes`]); format 2 was JSON.
-pub const CHECKPOINT_FORMAT: u32 = 3;
+/// The checkpoint format this version writes: 4, binary with a checksum
+/// ([`Checkpoint::to_bytes`]). Format 3 (the same without the checksum)
+/// is still read; format 2 was JSON.
+pub const CHECKPOINT_FORMAT: u32 = 4;
+
+/// The earlier binary format still read: no checksum, so damage in it goes
+/// unnoticed until it shows in the run.
+pub const UNCHECKED_FORMAT: u32 = 3;
 
 /// The first bytes of a checkpoint file, before its format number.
 const CHECKPOINT_MAGIC: &[u8; 16] = b"fshape-checkpnt\n";
+
+/// Where a damaged checkpoint leaves the user.
+const START_AGAIN: &str = "start again without --resume (delete the checkpoint or choose another output folder)";
 
 /// J and its parts after one accepted iteration (or at a stage's start).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -112,48 +120,93 @@ pub struct Checkpoint {
 }
 
 impl Checkpoint {
-    /// The file's bytes: the 16-byte magic `fshape-checkpnt\n`, the format (u32, little
-    /// endian), then the checkpoint in postcard's binary encoding (f64 as
-    /// their 8 bytes, so a resumed run continues bit for bit). At 150k
-    /// vertices a checkpoint holds about 13 million values (the point,
-    /// its gradient and L-BFGS's pairs): about 110 MB, where the JSON of
-    /// format 2 took 2.7 times as much (22.9 MB against 61.5 MB measured
-    /// at 32 492 vertices).
+    /// The file's bytes: the 16-byte magic `fshape-checkpnt\n`, the format
+    /// (u32, little endian), the checkpoint in postcard's binary encoding
+    /// (f64 as their 8 bytes, so a resumed run continues bit for bit), then
+    /// the CRC-32 (crc32fast, little endian) of everything before it. At
+    /// 150k vertices a checkpoint holds about 13 million values (the
+    /// point, its gradient and L-BFGS's pairs): about 110 MB, where the
+    /// JSON of format 2 took 2.7 times as much (22.9 MB against 61.5 MB
+    /// measured at 32 492 vertices).
     pub fn to_bytes(&self) -> Result<Vec<u8>, MatchError> {
         let mut bytes = CHECKPOINT_MAGIC.to_vec();
         bytes.extend(self.format.to_le_bytes());
-        postcard::to_extend(self, bytes).map_err(|e| checkpoint_error(format!("could not encode the checkpoint: {e}")))
+        let mut bytes = postcard::to_extend(self, bytes)
+            .map_err(|e| checkpoint_error(format!("could not encode the checkpoint: {e}")))?;
+        let crc = crc32fast::hash(&bytes);
+        bytes.extend(crc.to_le_bytes());
+        Ok(bytes)
     }
 
     /// A checkpoint from its file's bytes; anything else (another file, an
     /// earlier format, a truncated or damaged file) is an error saying so.
+    /// The checksum is checked before anything else is read; a format-3
+    /// file (no checksum) is read as it is, and its [`Checkpoint::format`]
+    /// says so.
     pub fn from_bytes(bytes: &[u8]) -> Result<Checkpoint, MatchError> {
         if bytes.first() == Some(&b'{') {
-            return Err(checkpoint_error(
-                "this is a JSON checkpoint of an earlier version (format 2); this version reads format 3: start again without resuming",
-            ));
-        }
-        let Some(rest) = bytes.strip_prefix(CHECKPOINT_MAGIC) else {
-            return Err(checkpoint_error("not an fshape checkpoint (its first bytes are not fshape's)"));
-        };
-        let Some((format, body)) = rest.split_first_chunk::<4>() else {
-            return Err(checkpoint_error("the checkpoint ends before its format number (a truncated file)"));
-        };
-        let format = u32::from_le_bytes(*format);
-        if format != CHECKPOINT_FORMAT {
             return Err(checkpoint_error(format!(
-                "the checkpoint is of format {format} (this version reads format {CHECKPOINT_FORMAT}); start again without resuming"
+                "this is a JSON checkpoint of an earlier version (format 2); this version reads formats \
+                 {UNCHECKED_FORMAT} and {CHECKPOINT_FORMAT}: {START_AGAIN}"
             )));
         }
-        postcard::from_bytes(body).map_err(|e| {
-            checkpoint_error(format!("the checkpoint is damaged or truncated ({e}); start again without resuming"))
-        })
+        let checked = |bytes: &[u8]| -> Option<usize> {
+            let (content, crc) = bytes.split_last_chunk::<4>()?;
+            (crc32fast::hash(content) == u32::from_le_bytes(*crc)).then_some(content.len())
+        };
+        if bytes.len() < CHECKPOINT_MAGIC.len() + 4 && CHECKPOINT_MAGIC.starts_with(&bytes[..bytes.len().min(16)]) {
+            return Err(damaged("it ends before its format number"));
+        }
+        let Some(rest) = bytes.strip_prefix(CHECKPOINT_MAGIC) else {
+            if checked(bytes).is_none() && bytes.len() > CHECKPOINT_MAGIC.len() + 8 {
+                // A damaged magic is still damage if the rest is a checkpoint.
+                let near = bytes.iter().zip(CHECKPOINT_MAGIC).filter(|(a, b)| a == b).count();
+                if near >= CHECKPOINT_MAGIC.len() - 2 {
+                    return Err(damaged("its first bytes"));
+                }
+            }
+            return Err(checkpoint_error("not an fshape checkpoint (its first bytes are not fshape's)"));
+        };
+        let Some((format, _)) = rest.split_first_chunk::<4>() else {
+            return Err(damaged("it ends before its format number"));
+        };
+        let format = u32::from_le_bytes(*format);
+        let body_end = if format == UNCHECKED_FORMAT {
+            bytes.len()
+        } else {
+            match checked(bytes) {
+                Some(end) if format == CHECKPOINT_FORMAT => end,
+                Some(_) => {
+                    return Err(checkpoint_error(format!(
+                        "the checkpoint is of format {format} (this version reads formats {UNCHECKED_FORMAT} and \
+                         {CHECKPOINT_FORMAT}); {START_AGAIN}"
+                    )));
+                }
+                None => return Err(damaged("its checksum does not match its contents")),
+            }
+        };
+        let body = &bytes[CHECKPOINT_MAGIC.len() + 4..body_end];
+        let (checkpoint, left): (Checkpoint, _) =
+            postcard::take_from_bytes(body).map_err(|e| damaged(&format!("it cannot be decoded: {e}")))?;
+        if !left.is_empty() {
+            return Err(damaged(&format!("{} bytes follow its end", left.len())));
+        }
+        if checkpoint.format != format {
+            return Err(damaged("its two format numbers differ"));
+        }
+        Ok(checkpoint)
     }
 
     /// [`Checkpoint::from_bytes`] of a file; errors name it.
     pub fn read(path: &Path) -> Result<Checkpoint, MatchError> {
-        let bytes =
-            std::fs::read(path).map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })?;
+        // Bounded like every input: a device or folder is refused.
+        let bytes = fshape_mesh::io::read_bytes(path).map_err(|e| {
+            let message = match e {
+                fshape_mesh::io::ReadError::Io { source, .. } => source.to_string(),
+                other => other.to_string(),
+            };
+            MatchError::File { path: path.to_path_buf(), message }
+        })?;
         Checkpoint::from_bytes(&bytes).map_err(|e| e.in_file(path))
     }
 }
@@ -180,6 +233,10 @@ pub(crate) fn save(checkpoint: &mut Checkpoint, file: Option<&Path>, seconds: f6
     let bytes = checkpoint.to_bytes()?;
     fshape_mesh::io::write_atomic(path, &bytes, false)
         .map_err(|e| MatchError::File { path: path.to_path_buf(), message: e.to_string() })
+}
+
+fn damaged(why: &str) -> MatchError {
+    checkpoint_error(format!("the checkpoint is damaged or truncated ({why}); {START_AGAIN}"))
 }
 
 pub(crate) fn checkpoint_error(problem: impl Into<String>) -> MatchError {

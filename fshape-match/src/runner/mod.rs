@@ -21,7 +21,7 @@ use std::time::Instant;
 use fshape_mesh::FShape;
 use fshape_shoot::Energies;
 
-pub use checkpoint::{CHECKPOINT_FORMAT, Checkpoint, Current, Iteration, StageRecord, StageSetup};
+pub use checkpoint::{CHECKPOINT_FORMAT, Checkpoint, Current, Iteration, StageRecord, StageSetup, UNCHECKED_FORMAT};
 pub(crate) use checkpoint::{Fnv, checkpoint_error};
 
 use crate::optimize::{Objective, Settings, State, Step};
@@ -274,13 +274,18 @@ impl<S: Staged> Runner<S> {
     /// Continues from `checkpoint`, after checking that it belongs to these
     /// inputs (fingerprint), was written by this format, and holds arrays of
     /// the problem's sizes with finite values.
-    pub fn resume(mut self, checkpoint: Checkpoint) -> Result<Self, MatchError> {
-        if checkpoint.format != CHECKPOINT_FORMAT {
+    pub fn resume(mut self, mut checkpoint: Checkpoint) -> Result<Self, MatchError> {
+        if checkpoint.format != CHECKPOINT_FORMAT && checkpoint.format != checkpoint::UNCHECKED_FORMAT {
             return Err(checkpoint_error(format!(
-                "the checkpoint is of format {} (this version reads format {CHECKPOINT_FORMAT}); start again without resuming",
-                checkpoint.format
+                "the checkpoint is of format {} (this version reads formats {} and {CHECKPOINT_FORMAT}); start again \
+                 without resuming",
+                checkpoint.format,
+                checkpoint::UNCHECKED_FORMAT
             )));
         }
+        // A format-3 checkpoint continues as format 4: the same contents,
+        // written from now on with their checksum.
+        checkpoint.format = CHECKPOINT_FORMAT;
         if checkpoint.fingerprint != self.checkpoint.fingerprint {
             return Err(checkpoint_error(format!(
                 "the checkpoint was written for other inputs ({} changed); remove it or start without resuming",

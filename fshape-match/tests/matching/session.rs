@@ -151,7 +151,7 @@ fn a_checkpoint_file_cut_short_or_with_short_arrays_names_the_file() {
     // Truncated bytes, another file, an earlier format: each said as it is.
     let bytes = good.to_bytes().unwrap();
     for (contents, says) in [
-        (bytes[..bytes.len() / 2].to_vec(), "damaged or truncated"),
+        (bytes[..bytes.len() / 2].to_vec(), "damaged or truncated (its checksum does not match"),
         (bytes[..18].to_vec(), "before its format number"),
         (b"ply\nformat ascii 1.0\n".to_vec(), "not an fshape checkpoint"),
         (serde_json::to_vec(&serde_json::json!({"format": 2})).unwrap(), "JSON checkpoint of an earlier version"),
@@ -160,8 +160,10 @@ fn a_checkpoint_file_cut_short_or_with_short_arrays_names_the_file() {
         let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
         assert!(e.contains(&file.display().to_string()) && e.contains(says), "{says}: {e}");
     }
-    let mut other = bytes.clone();
-    other[16] = 9; // format 9
+    // A later format, its checksum intact.
+    let mut other = bytes[..bytes.len() - 4].to_vec();
+    other[16] = 9;
+    other.extend(crc32fast::hash(&other).to_le_bytes());
     std::fs::write(&file, other).unwrap();
     let e = fresh().resume_from_file(&file).err().expect("refused").to_string();
     assert!(e.contains("format 9"), "{e}");
@@ -549,4 +551,46 @@ fn a_stopped_run_gives_its_result_so_far_on_the_source_and_then_goes_on_unchange
     let so_far = late.result_so_far().unwrap().unwrap();
     assert_eq!(so_far.stages.len(), 2);
     assert_eq!(so_far.energies.value.to_bits(), stop.iterations.last().unwrap().value.to_bits());
+}
+
+#[test]
+fn a_flipped_byte_anywhere_or_a_cut_anywhere_is_refused_as_damaged() {
+    let (good, _) = checkpoint_after_three();
+    let bytes = good.to_bytes().unwrap();
+    assert!(bytes.len() > 1000, "a checkpoint with its L-BFGS pairs: {} bytes", bytes.len());
+    for k in 0..bytes.len() {
+        for flip in [0x01, 0x80] {
+            let mut bad = bytes.clone();
+            bad[k] ^= flip;
+            let e = match Checkpoint::from_bytes(&bad) {
+                Ok(_) => panic!("byte {k} ^ {flip:#x}: accepted"),
+                Err(e) => e.to_string(),
+            };
+            assert!(e.contains("damaged") && e.contains("without --resume"), "byte {k} ^ {flip:#x}: {e}");
+        }
+    }
+    for len in 0..bytes.len() {
+        let e = match Checkpoint::from_bytes(&bytes[..len]) {
+            Ok(_) => panic!("cut to {len} bytes: accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains("damaged or truncated"), "cut to {len} bytes: {e}");
+    }
+}
+
+#[test]
+fn a_format_3_checkpoint_without_checksum_is_read_and_continues_as_format_4() {
+    let (good, fresh) = checkpoint_after_three();
+    let mut old = good.clone();
+    old.format = fshape_match::UNCHECKED_FORMAT;
+    // Format 3 is format 4 without the trailing checksum.
+    let v4 = old.to_bytes().unwrap();
+    let v3 = &v4[..v4.len() - 4];
+    let read = Checkpoint::from_bytes(v3).unwrap();
+    assert_eq!(read.format, 3);
+    assert_eq!(read.current.as_ref().unwrap().state.x, good.current.as_ref().unwrap().state.x);
+    let session = fresh().resume(read).unwrap();
+    assert_eq!(session.checkpoint().format, CHECKPOINT_FORMAT);
+    // With its checksum, a format-3 header is damage (the format says no checksum).
+    assert!(Checkpoint::from_bytes(&v4).unwrap_err().to_string().contains("4 bytes follow its end"));
 }
