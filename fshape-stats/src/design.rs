@@ -1,6 +1,7 @@
 //! The covariates table, the design matrix built from it and contrasts.
 //!
-//! The table is CSV (or tab-separated) with a header; its first column
+//! The table is CSV (or tab-separated) with a header, read by
+//! [`fshape_mesh::io::table`]; its first column
 //! names the subject, the others are covariates. A column whose values are
 //! all numbers is a numeric covariate (entered as it is); a column of
 //! names is a factor, entered with treatment coding: its levels sorted,
@@ -74,14 +75,11 @@ fn parse_number(cell: &str) -> Option<f64> {
     cell.parse::<f64>().ok()
 }
 
-fn unquote(cell: &str) -> String {
-    let t = cell.trim();
-    t.strip_prefix('"').and_then(|s| s.strip_suffix('"')).unwrap_or(t).to_string()
-}
-
 impl Covariates {
     /// Parses the table's text; `source` (its path) names it in errors.
-    /// Blank lines and lines starting with `#` are skipped.
+    /// Blank lines and lines starting with `#` are skipped; cells may be
+    /// quoted (`"Smith, J"`), and a byte-order mark and CRLF line ends
+    /// (what spreadsheets write) are read.
     pub fn parse(text: &str, source: &str) -> Result<Covariates, StatsError> {
         let table = |line: usize, column: Option<&str>, message: String| StatsError::Table {
             table: source.to_string(),
@@ -89,52 +87,56 @@ impl Covariates {
             column: column.map(str::to_string),
             message,
         };
-        let mut lines =
-            text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
-        let Some((header_line, header)) = lines.next() else {
+        // Quoted cells, a byte-order mark, CRLF, tabs: fshape_mesh's table reader.
+        let records = fshape_mesh::io::table::parse_table(text.as_bytes()).map_err(|e| {
+            let line = match e.at {
+                fshape_mesh::io::Location::Line(l) => l,
+                fshape_mesh::io::Location::Byte(_) => 0,
+            };
+            table(line, None, e.kind.to_string())
+        })?;
+        let mut lines = records.into_iter();
+        let Some(fshape_mesh::io::table::Record { line: header_line, fields: names }) = lines.next() else {
             return Err(table(1, None, "empty: expected a header `subject,covariate,…`".into()));
         };
-        let sep = if !header.contains(',') && header.contains('\t') { '\t' } else { ',' };
-        let names: Vec<String> = header.split(sep).map(unquote).collect();
         if names.len() < 2 {
             return Err(table(
-                header_line + 1,
+                header_line,
                 None,
                 "the header names no covariate (expected `subject,covariate,…`)".into(),
             ));
         }
         for (k, name) in names.iter().enumerate() {
             if name.is_empty() {
-                return Err(table(header_line + 1, None, format!("column {} has no name", k + 1)));
+                return Err(table(header_line, None, format!("column {} has no name", k + 1)));
             }
             if names[..k].contains(name) {
-                return Err(table(header_line + 1, Some(name), "named twice in the header".into()));
+                return Err(table(header_line, Some(name), "named twice in the header".into()));
             }
         }
         let mut rows: Vec<Row> = Vec::new();
-        for (k, line) in lines {
-            let cells: Vec<String> = line.split(sep).map(unquote).collect();
+        for fshape_mesh::io::table::Record { line, fields: cells } in lines {
             if cells.len() != names.len() {
                 return Err(table(
-                    k + 1,
+                    line,
                     None,
                     format!("{} cells, but the header has {} columns", cells.len(), names.len()),
                 ));
             }
             if cells[0].is_empty() {
-                return Err(table(k + 1, Some(&names[0]), "no subject named".into()));
+                return Err(table(line, Some(&names[0]), "no subject named".into()));
             }
             if let Some(other) = rows.iter().find(|r| r.subject == cells[0]) {
                 return Err(table(
-                    k + 1,
+                    line,
                     Some(&names[0]),
                     format!("subject `{}` already has a row (line {})", cells[0], other.line),
                 ));
             }
-            rows.push(Row { line: k + 1, subject: cells[0].clone(), cells: cells[1..].to_vec() });
+            rows.push(Row { line, subject: cells[0].clone(), cells: cells[1..].to_vec() });
         }
         if rows.is_empty() {
-            return Err(table(header_line + 1, None, "no rows after the header".into()));
+            return Err(table(header_line, None, "no rows after the header".into()));
         }
         Ok(Covariates { source: source.to_string(), columns: names[1..].to_vec(), rows })
     }
@@ -429,6 +431,18 @@ mod tests {
         let c = d.contrast("group").unwrap();
         assert_eq!((c.weights.as_slice(), c.rank), ([0.0, 1.0, 0.0].as_slice(), 1));
         assert_eq!(d.contrast("0,0,-1").unwrap().weights, [0.0, 0.0, -1.0]);
+    }
+
+    #[test]
+    fn a_spreadsheet_export_with_a_quoted_comma_a_bom_and_crlf_is_read() {
+        let text = "\u{feff}subject,clinician,age\r\n0,\"Smith, J\",30\r\n1,\"Doe, A\",41\r\n2,\"Smith, J\",35\r\n\
+                    3,\"Doe, A\",38\r\n";
+        let table = Covariates::parse(text, "cov.csv").unwrap();
+        assert_eq!(table.columns(), ["clinician", "age"]);
+        let (d, _) = table.design(&subjects(4), None).unwrap();
+        assert!(d.columns.contains(&"clinician[Smith, J]".to_string()), "{:?}", d.columns);
+        let e = error("subject,age\n0,30\n1,\"31\n", 2);
+        assert!(e.contains("line 3") && e.contains("quotes in pairs"), "{e}");
     }
 
     #[test]

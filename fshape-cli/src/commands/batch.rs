@@ -118,16 +118,15 @@ const COLUMNS: [&str; 5] = ["source", "target", "source_signal", "target_signal"
 /// line, paths relative to the table. A malformed row is returned with
 /// `invalid` set; a malformed header or an unreadable file is an error.
 fn read_pairs(path: &Path) -> Result<Vec<Row>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let records = io::table::read_table(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let mut lines =
-        text.lines().enumerate().map(|(k, l)| (k + 1, l.trim())).filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-    let Some((header_line, header)) = lines.next() else {
+    let mut lines = records.into_iter();
+    let Some(io::table::Record { line: header_line, fields: columns }) = lines.next() else {
         bail!("{}: no header (expected a line naming the columns, such as `source,target,name`)", path.display());
     };
-    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let header = columns.join(",");
     for (k, c) in columns.iter().enumerate() {
-        if !COLUMNS.contains(c) {
+        if !COLUMNS.contains(&c.as_str()) {
             bail!("{}:{header_line}: unknown column `{c}` (the columns are {})", path.display(), COLUMNS.join(", "));
         }
         if columns[..k].contains(c) {
@@ -139,8 +138,7 @@ fn read_pairs(path: &Path) -> Result<Vec<Row>> {
         bail!("{}:{header_line}: the header must name a `source` and a `target` column", path.display());
     };
     let mut rows: Vec<Row> = Vec::new();
-    for (index, (line, text)) in lines.enumerate() {
-        let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+    for (index, io::table::Record { line, fields }) in lines.enumerate() {
         let field = |k: Option<usize>| k.and_then(|k| fields.get(k)).filter(|f| !f.is_empty());
         let name = field(col("name")).map_or_else(|| format!("row_{:03}", index + 1), |s| s.to_string());
         let mut row = Row {
@@ -243,19 +241,17 @@ fn done(dir: &Path) -> Option<serde_json::Value> {
 fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
     let entries: Vec<Entry> = rows.iter().map(|r| entry(a.out, a.pairs, r)).collect();
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:e}"));
-    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
-    let mut csv = String::from(
-        "row,line,name,source,target,status,value,attachment,mean_distance,p95_distance,target_within_1pct,signal_rms,iterations,seconds,error\n",
-    );
+    let header = "row,line,name,source,target,status,value,attachment,mean_distance,p95_distance,target_within_1pct,\
+                  signal_rms,iterations,seconds,error";
+    let mut table = vec![header.split(',').map(str::to_string).collect::<Vec<_>>()];
     for e in &entries {
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            e.row,
-            e.line,
-            quote(&e.name),
-            quote(&e.source),
-            quote(&e.target),
-            e.status,
+        table.push(vec![
+            e.row.to_string(),
+            e.line.to_string(),
+            e.name.clone(),
+            e.source.clone(),
+            e.target.clone(),
+            e.status.to_string(),
             opt(e.value),
             opt(e.attachment),
             opt(e.mean_distance),
@@ -264,9 +260,12 @@ fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
             opt(e.signal_rms),
             e.iterations.map_or(String::new(), |i| i.to_string()),
             e.seconds.map_or(String::new(), |s| format!("{s:.3}")),
-            e.error.as_deref().map_or(String::new(), quote),
-        ));
+            e.error.clone().unwrap_or_default(),
+        ]);
     }
+    // Through the csv crate, with cells a spreadsheet would run as formulas
+    // (`=…`, `+…`, `@…`) shown as text: names and errors come from users' files.
+    let csv = io::table::table_text(&table, true);
     let count = |s: &str| entries.iter().filter(|e| e.status == s).count();
     let json = serde_json::json!({
         "pairs": a.pairs.display().to_string(),

@@ -124,21 +124,18 @@ fn read_atlas(dir: &Path) -> Result<AtlasFolder> {
     }
     let pca_path = dir.join("pca.csv");
     let scores = if pca_path.exists() {
-        let text = std::fs::read_to_string(&pca_path).with_context(|| format!("reading {}", pca_path.display()))?;
-        let mut lines = text.lines();
-        let header: Vec<String> = lines.next().unwrap_or_default().split(',').skip(1).map(str::to_string).collect();
+        let mut lines = io::table::read_table(&pca_path)?.into_iter();
+        let header: Vec<String> = lines.next().map(|r| r.fields.into_iter().skip(1).collect()).unwrap_or_default();
         let mut values = Vec::new();
-        for (k, line) in lines.enumerate() {
-            let cells: Vec<&str> = line.split(',').skip(1).collect();
+        for io::table::Record { line, fields } in lines {
+            let cells = &fields[1.min(fields.len())..];
             if cells.len() != header.len() {
-                bail!("{}:{}: {} scores, the header names {}", pca_path.display(), k + 2, cells.len(), header.len());
+                bail!("{}:{line}: {} scores, the header names {}", pca_path.display(), cells.len(), header.len());
             }
-            for c in cells {
-                values.push(
-                    c.trim()
-                        .parse::<f64>()
-                        .map_err(|_| anyhow::anyhow!("{}:{}: `{c}` is not a number", pca_path.display(), k + 2))?,
-                );
+            for (k, c) in cells.iter().enumerate() {
+                values.push(c.parse::<f64>().map_err(|_| {
+                    anyhow::anyhow!("{}:{line}: column {}: `{c}` is not a number", pca_path.display(), k + 2)
+                })?);
             }
         }
         if values.len() != header.len() * subjects.len() {
@@ -219,7 +216,8 @@ pub fn run(a: Args) -> Result<()> {
         bail!("--alpha: {} is not in (0, 1)", a.alpha);
     }
     let AtlasFolder { template, subjects, scores } = read_atlas(&a.atlas)?;
-    let text = std::fs::read_to_string(&a.covariates).with_context(|| format!("reading {}", a.covariates.display()))?;
+    let bytes = io::read_bytes(&a.covariates)?;
+    let text = String::from_utf8(bytes).with_context(|| format!("{}: not UTF-8 text", a.covariates.display()))?;
     let table = Covariates::parse(&text, &a.covariates.display().to_string())?;
     let names: Vec<Vec<String>> = subjects.iter().map(|s| s.names.clone()).collect();
     let columns = (!a.columns.is_empty()).then_some(a.columns.as_slice());
