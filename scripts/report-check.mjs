@@ -4,6 +4,9 @@
 // (pixels other than the white background), moving the time slider
 // changes the picture, and each scene of the picker draws. Prints one
 // JSON line per report (load time, size, pixels) and exits 1 on a failure.
+// An argument `file::text` also checks that the page shows `text` as
+// text, and every page that no script but its own ran (window.pwned is
+// what the hostile names would set).
 // Run by scripts/report-check.sh, which installs playwright-core.
 import { chromium } from "playwright-core";
 import { statSync } from "node:fs";
@@ -15,7 +18,10 @@ const browser = await chromium.launch({
     "--disable-background-networking", "--disable-component-update", "--disable-sync", "--disable-quic"],
 });
 let failed = 0;
-for (const file of process.argv.slice(2)) {
+for (const arg of process.argv.slice(2)) {
+  const cut = arg.indexOf("::");
+  const file = cut < 0 ? arg : arg.slice(0, cut);
+  const literal = cut < 0 ? null : arg.slice(cut + 2);
   const page = await browser.newPage({ viewport: { width: 1200, height: 900 } });
   const errors = [], requests = [];
   page.on("console", (m) => { if (m.type() === "error") errors.push(m.text()); });
@@ -80,6 +86,13 @@ for (const file of process.argv.slice(2)) {
     await page.click("table.sortable th:nth-child(4)");
     const after = await page.evaluate(() => document.querySelectorAll("table.sortable tbody tr").length);
     if (after !== rows) result.problems.push("sorting lost rows");
+  }
+  if (await page.evaluate(() => window.pwned !== undefined)) result.problems.push("a name in the page ran as a script");
+  if (literal !== null) {
+    result.literal = literal;
+    if (!(await page.evaluate((t) => document.body.innerText.includes(t), literal))) {
+      result.problems.push(`the page does not show ${JSON.stringify(literal)} as text`);
+    }
   }
   if (errors.length) result.problems.push(...errors.map((e) => `console: ${e}`));
   if (requests.length) result.problems.push(...requests.map((u) => `network request: ${u}`));

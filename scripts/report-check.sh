@@ -5,7 +5,8 @@
 # package, installed if missing) by scripts/report-check.mjs through
 # playwright-core (npm, installed under target/report-check): no console
 # error, no network request, the 3-D canvas draws and its time slider
-# moves the picture.
+# moves the picture; hostile names (markup, quotes, `<!--<script>`) show
+# as text and run nothing under the page's hash-only script policy.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! command -v chromium >/dev/null; then
@@ -31,11 +32,26 @@ trap 'rm -rf "$work"' EXIT
 mkdir -p "$work/batch"
 cp "$work/digits/source.ply" "$work/digits/target.ply" "$work/batch/"
 sed -e 's/^max_iterations = [0-9]*$/max_iterations = 2/' -e '/^max_iterations = \[/d' "$work/digits/ratio_100/config.toml" > "$work/batch/config.toml"
-printf 'source,target,name\nsource.ply,target.ply,forth\ntarget.ply,source.ply,back\nsource.ply,missing.ply,broken\n' > "$work/batch/pairs.csv"
+# Names a hostile colleague could choose: markup, quotes, `&`, and
+# `<!--<script>` (which swallows a script element's end if only `</` is
+# escaped). Each must show as text and run nothing (window.pwned unset).
+img='<img src=x onerror=window.pwned=1>'
+cp "$work/digits/source.ply" "$work/batch/$img.ply"
+cat > "$work/batch/pairs.csv" <<'TABLE'
+source,target,name
+source.ply,target.ply,forth
+target.ply,source.ply,back
+source.ply,missing.ply,broken
+<img src=x onerror=window.pwned=1>.ply,target.ply,"x<!--<script>&""'"
+source.ply,target.ply,<script>window.pwned=2</script>
+TABLE
 "$FSHAPE_BIN" batch "$work/batch/pairs.csv" --config "$work/batch/config.toml" --out "$work/batch/out" >/dev/null 2>&1 || true
 node "$check/report-check.mjs" \
     "$work/digits/ratio_100/report.html" \
     "$work/stats-spheres/atlas/report.html" \
-    "$work/batch/out/report.html" \
-    "$work/batch/out/forth/report.html"
+    "$work/batch/out/report.html::x<!--<script>&\"'" \
+    "$work/batch/out/report.html::<script>window.pwned=2</script>" \
+    "$work/batch/out/report.html::$img.ply" \
+    "$work/batch/out/forth/report.html" \
+    "$work/batch/out/x<!--<script>&\"'/report.html::$img"
 echo "reports checked"

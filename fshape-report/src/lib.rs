@@ -214,11 +214,29 @@ pub struct Page {
     pub sections: Vec<String>,
 }
 
-/// The page's HTML. The data's JSON is escaped for a script element
-/// (`</` cannot end it).
+/// The data's JSON as the text of a script element: `<`, `>` and `&` as
+/// `\u003c`, `\u003e`, `\u0026`, so that no name in it can end the
+/// element (`</script>`) or swallow the next one (`<!--<script>`).
+fn script_json(value: &serde_json::Value) -> String {
+    let json = serde_json::to_string(value).expect("plain values");
+    json.replace('<', "\\u003c").replace('>', "\\u003e").replace('&', "\\u0026")
+}
+
+/// The Content-Security-Policy source of an inline script: its SHA-256,
+/// so that the page runs its own script and no other, even one a missed
+/// escape let in.
+fn script_hash(script: &str) -> String {
+    use base64::Engine;
+    use sha2::Digest;
+    format!("'sha256-{}'", base64::engine::general_purpose::STANDARD.encode(sha2::Sha256::digest(script.as_bytes())))
+}
+
+/// The page's HTML. Its one script runs by its hash (no inline script
+/// else can); the data is JSON in a non-running script element.
 pub fn html(page: &Page) -> String {
     let data = serde_json::json!({ "scenes": page.scenes, "view": [page.view.0, page.view.1] });
-    let data = serde_json::to_string(&data).expect("plain values").replace("</", "<\\/");
+    let data = script_json(&data);
+    let js = concat!("\n", include_str!("viewer.js"));
     let viewer = if page.scenes.is_empty() {
         String::new()
     } else {
@@ -238,16 +256,16 @@ pub fn html(page: &Page) -> String {
     };
     format!(
         "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src data:\">\n\
+         <meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; script-src {hash}; style-src 'unsafe-inline'; img-src data:\">\n\
          <title>{title}</title>\n<style>\n{css}</style></head>\n<body>\n<h1>{title}</h1>\n<p class=\"subtitle\">{subtitle}</p>\n{viewer}{sections}\n\
          <p class=\"subtitle\">Written by fshape {version}; every figure is also in the folder's JSON files.</p>\n\
-         <script type=\"application/json\" id=\"fshape-data\">{data}</script>\n<script>\n{js}</script>\n</body></html>\n",
+         <script type=\"application/json\" id=\"fshape-data\">{data}</script>\n<script>{js}</script>\n</body></html>\n",
+        hash = script_hash(js),
         title = escape(&page.title),
         subtitle = escape(&page.subtitle),
         css = include_str!("style.css"),
         sections = page.sections.join("\n"),
         version = env!("CARGO_PKG_VERSION"),
-        js = include_str!("viewer.js"),
     )
 }
 
@@ -695,6 +713,29 @@ mod tests {
         let (small, none) = mesh_data_within(&[&first], 10_000).unwrap();
         assert!(none.is_none());
         assert_eq!(floats(&small.frames[0]).len(), 3 * 2562);
+    }
+
+    #[test]
+    fn the_data_holds_no_markup_and_the_policy_names_the_page_script_alone() {
+        let name = "</script><!--<script>&\"'>";
+        let value = serde_json::json!({ "name": name });
+        let text = script_json(&value);
+        assert!(!text.contains(['<', '>', '&']), "{text}");
+        assert_eq!(serde_json::from_str::<serde_json::Value>(&text).unwrap(), value);
+        let page = html(&Page {
+            title: name.into(),
+            subtitle: String::new(),
+            view: (0.0, 0.0),
+            scenes: vec![],
+            sections: vec![],
+        });
+        assert!(!page.contains("script-src 'unsafe-inline'"), "{page}");
+        // The hash in the policy is that of the text between <script> and </script>.
+        let start = page.rfind("<script>").unwrap() + "<script>".len();
+        let end = page.rfind("</script>").unwrap();
+        assert!(page.contains(&format!("script-src {};", script_hash(&page[start..end]))));
+        // Known vector (FIPS 180-2): SHA-256("abc").
+        assert_eq!(script_hash("abc"), "'sha256-ungWv48Bz+pBQUDeXa4iI7ADYaOWF3qctBD/YfIAFa0='");
     }
 
     #[test]
