@@ -51,7 +51,6 @@ node "$check/report-check.mjs" \
     "$work/stats-spheres/atlas/report.html" \
     "$work/batch/out/report.html::x<!--<script>&\"'" \
     "$work/batch/out/report.html::<script>window.pwned=2</script>" \
-    "$work/batch/out/report.html::$img.ply" \
     "$work/batch/out/forth/report.html" \
     "$work/batch/out/x<!--<script>&\"'/report.html::$img"
 echo "reports checked"

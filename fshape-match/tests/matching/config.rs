@@ -131,3 +131,24 @@ fn the_bunny_setting_is_centred_scaled_and_textured_as_the_issue_states() {
     let r = template.point(7).iter().map(|v| v * v).sum::<f64>().sqrt();
     assert!((r - 0.35).abs() < 1e-12 && template.signal().unwrap().iter().all(|&v| v == 0.0));
 }
+
+/// The fuzz target `config`'s committed corpus, replayed with its
+/// property: a configuration that parses is written to TOML that parses
+/// to the same configuration.
+#[test]
+fn the_config_fuzz_corpus_keeps_its_round_trip() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus/config");
+    let files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+    assert!(files.len() >= 3, "{}: {} inputs", dir.display(), files.len());
+    let mut parsed = 0;
+    for file in files {
+        let data = std::fs::read(&file).unwrap();
+        let Ok(text) = std::str::from_utf8(&data) else { continue };
+        let Ok(config) = Config::parse(text) else { continue };
+        let written = config.to_toml();
+        let back = Config::parse(&written).unwrap_or_else(|e| panic!("{}: {e}\n{written}", file.display()));
+        assert_eq!(back.to_toml(), written, "{}", file.display());
+        parsed += 1;
+    }
+    assert!(parsed >= 3, "the seeds parse");
+}

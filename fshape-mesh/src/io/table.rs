@@ -130,9 +130,10 @@ pub fn table_text(rows: &[Vec<String>], neutral: bool) -> String {
     let mut out = Vec::new();
     for row in rows {
         // Quoted where needed; a row that would read otherwise (a first
-        // cell `#…` is a comment, a tab could make the table look
-        // tab-separated) has every cell quoted.
-        let special = row.first().is_some_and(|c| c.starts_with('#')) || row.iter().any(|c| c.contains('\t'));
+        // cell `#…` is a comment, a leading byte-order mark is dropped, a
+        // tab could make the table look tab-separated) has every cell quoted.
+        let special =
+            row.first().is_some_and(|c| c.starts_with(['#', '\u{feff}'])) || row.iter().any(|c| c.contains('\t'));
         let style = if special { csv::QuoteStyle::Always } else { csv::QuoteStyle::Necessary };
         let mut w = csv::WriterBuilder::new().flexible(true).quote_style(style).from_writer(&mut out);
         let cells = row.iter().map(|c| if neutral { neutralise(c) } else { Cow::Borrowed(c.as_str()) });
