@@ -25,27 +25,27 @@ fn covariates_text(covariates: &Bound<'_, PyAny>, n: usize) -> PyResult<(String,
             if cells.len() != n {
                 return Err(err(format!("covariates: column `{name}` has {} values for {n} subjects", cells.len())));
             }
-            if let Some(c) = cells.iter().find(|c| c.contains(',') || c.contains('\n')) {
-                return Err(err(format!("covariates: column `{name}`: `{c}` holds a comma or a line break")));
+            if let Some(c) = cells.iter().find(|c| c.contains(['\n', '\r'])) {
+                return Err(err(format!("covariates: column `{name}`: `{c}` holds a line break")));
             }
             columns.push((name, cells));
         }
-        let mut text = std::iter::once("subject".to_string())
-            .chain(columns.iter().map(|c| c.0.clone()))
-            .collect::<Vec<_>>()
-            .join(",");
-        text.push('\n');
-        for i in 0..n {
-            let row: Vec<String> =
-                std::iter::once(i.to_string()).chain(columns.iter().map(|c| c.1[i].clone())).collect();
-            text.push_str(&(row.join(",") + "\n"));
-        }
+        // Written through the table writer: a comma or a quote in a level
+        // (`Smith, J`) is quoted, and reads back as it was.
+        let mut rows =
+            vec![std::iter::once("subject".to_string()).chain(columns.iter().map(|c| c.0.clone())).collect()];
+        rows.extend(
+            (0..n).map(|i| std::iter::once(i.to_string()).chain(columns.iter().map(|c| c.1[i].clone())).collect()),
+        );
+        let text = fshape_mesh::io::table::table_text(&rows, false);
         return Ok((text, "covariates".into()));
     }
     let path: std::path::PathBuf = covariates
         .extract()
         .map_err(|_| err("covariates: expected a path to a CSV table or a dict {column: values}"))?;
-    let text = std::fs::read_to_string(&path).map_err(|e| err(format!("{}: {e}", path.display())))?;
+    // Bounded like every input: a device or folder is refused.
+    let bytes = fshape_mesh::io::read_bytes(&path).map_err(|e| err(e.to_string()))?;
+    let text = String::from_utf8(bytes).map_err(|_| err(format!("{}: not UTF-8 text", path.display())))?;
     Ok((text, path.display().to_string()))
 }
 
