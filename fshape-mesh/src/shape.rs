@@ -92,13 +92,41 @@ pub enum ShapeError {
 /// assert_eq!(s.total_volume(), 0.5);
 /// # Ok::<(), fshape_mesh::ShapeError>(())
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+///
+/// A shape may carry a **mask**: one weight in [0, 1] per vertex saying how
+/// much its signal value counts (0: the vertex has no value, as HCP's
+/// medial wall; 1: a full value; between: a soft edge). The geometry is
+/// all real; only the signal is masked. At a vertex of mask 0 the signal
+/// is stored as NaN whatever was given (nothing may read it), so that two
+/// shapes differing only there are the same shape.
+#[derive(Clone, Debug)]
 pub struct FShape {
     dim: usize,
     kind: CellKind,
     points: Vec<f64>,
     cells: Vec<usize>,
     signal: Option<Vec<f64>>,
+    mask: Option<Vec<f64>>,
+}
+
+/// Equal coordinates, cells, mask and signal, a NaN signal value (a masked
+/// vertex's) equal to a NaN.
+impl PartialEq for FShape {
+    fn eq(&self, other: &Self) -> bool {
+        let same = |a: &[f64], b: &[f64]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
+        };
+        self.dim == other.dim
+            && self.kind == other.kind
+            && self.points == other.points
+            && self.cells == other.cells
+            && self.mask == other.mask
+            && match (&self.signal, &other.signal) {
+                (Some(a), Some(b)) => same(a, b),
+                (None, None) => true,
+                _ => false,
+            }
+    }
 }
 
 impl FShape {
@@ -123,22 +151,67 @@ impl FShape {
         if !cells.len().is_multiple_of(kind.n_corners()) {
             return Err(ShapeError::CellsLength { len: cells.len(), kind: kind.name(), corners: kind.n_corners() });
         }
-        let problems = validate::blocking_problems(dim, kind, &points, &cells, signal.as_deref());
+        FShape::checked(dim, kind, points, cells, signal, None)
+    }
+
+    fn checked(
+        dim: usize,
+        kind: CellKind,
+        points: Vec<f64>,
+        cells: Vec<usize>,
+        mut signal: Option<Vec<f64>>,
+        mask: Option<Vec<f64>>,
+    ) -> Result<Self, ShapeError> {
+        let problems = validate::blocking_problems(dim, kind, &points, &cells, signal.as_deref(), mask.as_deref());
         if !problems.is_empty() {
             return Err(ShapeError::Invalid { problems });
         }
-        Ok(FShape { dim, kind, points, cells, signal })
+        if let (Some(f), Some(m)) = (&mut signal, &mask) {
+            for (v, w) in f.iter_mut().zip(m) {
+                if *w == 0.0 {
+                    *v = f64::NAN;
+                }
+            }
+        }
+        Ok(FShape { dim, kind, points, cells, signal, mask })
     }
 
-    /// Replaces (or removes) the signal, checking its length and values.
+    /// Replaces (or removes) the signal, checking its length and values
+    /// (NaN is accepted at masked vertices only); the mask is kept.
     pub fn with_signal(self, signal: Option<Vec<f64>>) -> Result<Self, ShapeError> {
-        FShape::try_new(self.dim, self.kind, self.points, self.cells, signal)
+        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, self.mask)
+    }
+
+    /// Replaces (or removes) the mask (see [`FShape`]): one weight in
+    /// [0, 1] per vertex. The signal must be finite where the mask is
+    /// positive, and is set to NaN where it is 0.
+    ///
+    /// ```
+    /// use fshape_mesh::{CellKind, FShape};
+    /// let s = FShape::try_new(2, CellKind::Triangle, vec![0., 0., 1., 0., 0., 1.], vec![0, 1, 2], None)?;
+    /// let s = s.with_signal_and_mask(Some(vec![1.0, f64::NAN, 3.0]), Some(vec![1.0, 0.0, 0.5]))?;
+    /// assert!(s.signal().unwrap()[1].is_nan() && s.mask().unwrap()[2] == 0.5);
+    /// # Ok::<(), fshape_mesh::ShapeError>(())
+    /// ```
+    pub fn with_mask(self, mask: Option<Vec<f64>>) -> Result<Self, ShapeError> {
+        FShape::checked(self.dim, self.kind, self.points, self.cells, self.signal, mask)
+    }
+
+    /// Replaces the signal and the mask together (a signal with missing
+    /// values and the mask that says where they are).
+    pub fn with_signal_and_mask(self, signal: Option<Vec<f64>>, mask: Option<Vec<f64>>) -> Result<Self, ShapeError> {
+        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, mask)
     }
 
     /// Replaces the vertex positions (same count, same dimension), as when a
-    /// shape moves along a deformation.
+    /// shape moves along a deformation; signal and mask are kept.
     pub fn with_points(self, points: Vec<f64>) -> Result<Self, ShapeError> {
-        FShape::try_new(self.dim, self.kind, points, self.cells, self.signal)
+        FShape::checked(self.dim, self.kind, points, self.cells, self.signal, self.mask)
+    }
+
+    /// The mask, one weight in [0, 1] per vertex, if any (see [`FShape`]).
+    pub fn mask(&self) -> Option<&[f64]> {
+        self.mask.as_deref()
     }
 
     /// Ambient dimension n (2 or 3).
@@ -200,7 +273,8 @@ impl FShape {
         self.signal.as_deref()
     }
 
-    /// Takes the parts apart: `(dim, kind, points, cells, signal)`.
+    /// Takes the parts apart: `(dim, kind, points, cells, signal)` (the
+    /// mask, if any, is dropped: read it with [`FShape::mask`] first).
     pub fn into_parts(self) -> (usize, CellKind, Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
         (self.dim, self.kind, self.points, self.cells, self.signal)
     }

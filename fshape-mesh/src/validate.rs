@@ -35,6 +35,20 @@ pub enum Finding {
         /// Vertex index.
         vertex: usize,
     },
+    /// A mask value is not a number in [0, 1]. Error.
+    MaskValue {
+        /// Vertex index.
+        vertex: usize,
+        /// The value.
+        value: f64,
+    },
+    /// The mask does not have one value per vertex. Error.
+    MaskLength {
+        /// Number of vertices.
+        expected: usize,
+        /// Number of mask values.
+        found: usize,
+    },
     /// The signal does not have one value per vertex. Error.
     SignalLength {
         /// Number of vertices.
@@ -116,6 +130,8 @@ impl Finding {
             Finding::NonFiniteCoordinate { .. }
             | Finding::NonFiniteSignal { .. }
             | Finding::SignalLength { .. }
+            | Finding::MaskValue { .. }
+            | Finding::MaskLength { .. }
             | Finding::IndexOutOfRange { .. }
             | Finding::RepeatedIndex { .. } => Severity::Error,
             _ => Severity::Warning,
@@ -129,6 +145,8 @@ impl Finding {
             Finding::NonFiniteCoordinate { .. } => "non_finite_coordinate",
             Finding::NonFiniteSignal { .. } => "non_finite_signal",
             Finding::SignalLength { .. } => "signal_length",
+            Finding::MaskValue { .. } => "mask_value",
+            Finding::MaskLength { .. } => "mask_length",
             Finding::IndexOutOfRange { .. } => "index_out_of_range",
             Finding::RepeatedIndex { .. } => "repeated_index",
             Finding::ZeroVolumeCell { .. } => "zero_volume_cell",
@@ -152,6 +170,12 @@ impl fmt::Display for Finding {
             }
             Finding::SignalLength { expected, found } => {
                 write!(f, "the signal has {found} values for {expected} vertices")
+            }
+            Finding::MaskValue { vertex, value } => {
+                write!(f, "vertex {vertex} has the mask value {value}; a mask holds weights in [0, 1]")
+            }
+            Finding::MaskLength { expected, found } => {
+                write!(f, "the mask has {found} values for {expected} vertices")
             }
             Finding::IndexOutOfRange { cell, index, n_vertices } => {
                 write!(f, "cell {cell} uses vertex {index}, but there are only {n_vertices} vertices")
@@ -260,6 +284,7 @@ pub(crate) fn blocking_problems(
     points: &[f64],
     cells: &[usize],
     signal: Option<&[f64]>,
+    mask: Option<&[f64]>,
 ) -> Vec<Finding> {
     let n_vertices = points.len() / dim;
     let mut out = Vec::new();
@@ -268,12 +293,28 @@ pub(crate) fn blocking_problems(
             out.push(Finding::NonFiniteCoordinate { vertex });
         }
     }
+    if let Some(m) = mask {
+        if m.len() != n_vertices {
+            out.push(Finding::MaskLength { expected: n_vertices, found: m.len() });
+        }
+        out.extend(
+            m.iter()
+                .enumerate()
+                .filter(|(_, w)| !(0.0..=1.0).contains(*w))
+                .map(|(vertex, &value)| Finding::MaskValue { vertex, value }),
+        );
+    }
     if let Some(f) = signal {
         if f.len() != n_vertices {
             out.push(Finding::SignalLength { expected: n_vertices, found: f.len() });
         }
+        // A masked vertex (weight 0) has no value: anything is accepted there.
+        let masked = |v: usize| mask.is_some_and(|m| m.get(v) == Some(&0.0));
         out.extend(
-            f.iter().enumerate().filter(|(_, x)| !x.is_finite()).map(|(vertex, _)| Finding::NonFiniteSignal { vertex }),
+            f.iter()
+                .enumerate()
+                .filter(|&(v, x)| !x.is_finite() && !masked(v))
+                .map(|(vertex, _)| Finding::NonFiniteSignal { vertex }),
         );
     }
     for (cell, c) in cells.chunks_exact(kind.n_corners()).enumerate() {
@@ -306,7 +347,8 @@ fn cell_key(c: &[usize]) -> ([usize; 3], bool) {
 }
 
 pub(crate) fn validate(shape: &FShape) -> Validation {
-    let mut problems = blocking_problems(shape.dim(), shape.kind(), shape.points(), shape.cells(), shape.signal());
+    let mut problems =
+        blocking_problems(shape.dim(), shape.kind(), shape.points(), shape.cells(), shape.signal(), shape.mask());
     let d = shape.kind().dim() as i32;
     let tol = ZERO_VOLUME_REL * shape.bounding_box().diagonal().powi(d);
     for t in 0..shape.n_cells() {

@@ -75,7 +75,64 @@ pub fn inner_product_grad(
     inner(x, y, k, true, true).map(|(v, g)| (v, g.expect("requested")))
 }
 
+/// With a mask on either side, the inner product of the two parts
+/// ([`CellFeatures`]): ⟨X,Y⟩ = ⟨X_f, Y_f⟩ + ⟨X_g, Y_g⟩ with k_f on the
+/// functional parts and no signal factor on the geometric ones, that is
+/// the kernel k_p k_t (m m' k_f + (1 − m)(1 − m')): a sum of products of
+/// positive definite kernels, so A stays a squared distance. The parts go
+/// through the same pair engine as unmasked measures; an unmasked side
+/// counts as share 1 everywhere, and all-ones masks give the same bits as
+/// none.
 fn inner(
+    x: &CellFeatures,
+    y: &CellFeatures,
+    k: &VarifoldKernel,
+    grad: bool,
+    parallel: bool,
+) -> Result<(f64, Option<FeatureGrad>), VarifoldError> {
+    if x.mask().is_none() && y.mask().is_none() {
+        return inner_plain(x, y, k, grad, parallel);
+    }
+    compatible(x, y, k)?;
+    let whole = |f: &CellFeatures| -> [(CellFeatures, Vec<usize>); 2] {
+        f.split().unwrap_or_else(|| {
+            let plain = f.clone().with_mask(None).expect("removing a mask");
+            let empty = CellFeatures::from_parts(f.dim(), vec![], vec![], vec![], None).expect("no cells");
+            [(plain, (0..f.len()).collect()), (empty, vec![])]
+        })
+    };
+    let ([(xf, xfi), (xg, xgi)], [(yf, _), (yg, _)]) = (whole(x), whole(y));
+    let geometric = k.geometric();
+    let mut value = 0.0;
+    let n = x.len();
+    let (d, du) = (x.dim(), x.dir_len());
+    let mut g =
+        FeatureGrad { centre: vec![0.0; n * d], dir: vec![0.0; n * du], weight: vec![0.0; n], signal: vec![0.0; n] };
+    let share = x.mask();
+    for (xp, idx, yp, kp, functional) in [(&xf, &xfi, &yf, k, true), (&xg, &xgi, &yg, &geometric, false)] {
+        if xp.is_empty() || yp.is_empty() {
+            continue;
+        }
+        let (v, gp) = inner_plain(xp, yp, kp, grad, parallel)?;
+        value += v;
+        let Some(gp) = gp else { continue };
+        for (i, &t) in idx.iter().enumerate() {
+            // The part's mass is m r (or (1 − m) r): its derivative in r.
+            let m = share.map_or(1.0, |m| if functional { m[t] } else { 1.0 - m[t] });
+            g.weight[t] += m * gp.weight[i];
+            for c in 0..d {
+                g.centre[t * d + c] += gp.centre[i * d + c];
+            }
+            for c in 0..du {
+                g.dir[t * du + c] += gp.dir[i * du + c];
+            }
+            g.signal[t] += gp.signal[i];
+        }
+    }
+    Ok((value, grad.then_some(g)))
+}
+
+fn inner_plain(
     x: &CellFeatures,
     y: &CellFeatures,
     k: &VarifoldKernel,

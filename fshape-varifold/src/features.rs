@@ -15,6 +15,14 @@ use crate::VarifoldError;
 /// - `weight`: the cell's d-volume r_τ (length or area).
 /// - `signal`: the mean of the corners' signal values, if the shape has a
 ///   signal.
+/// - `mask`: with a masked shape, each cell's functional share m_τ ∈ [0, 1],
+///   the smallest of its corners' mask weights, so that one masked corner
+///   cannot bring its (missing) value into the cell's mean. A cell of share
+///   0 has signal 0 here, never read.
+///
+/// A masked measure is two measures: the functional varifold of the masses
+/// m_τ r_τ and the plain varifold of the masses (1 − m_τ) r_τ, compared
+/// part with part (see [`crate::inner_product`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CellFeatures {
     dim: usize,
@@ -23,6 +31,7 @@ pub struct CellFeatures {
     dir: Vec<f64>,
     weight: Vec<f64>,
     signal: Option<Vec<f64>>,
+    mask: Option<Vec<f64>>,
 }
 
 /// A gradient with respect to the features of [`CellFeatures`], laid out
@@ -61,8 +70,9 @@ impl CellFeatures {
     /// construction; a signal value that is NaN or infinite is refused here
     /// with its vertex index.
     pub fn of(shape: &FShape) -> Result<CellFeatures, VarifoldError> {
+        let vertex_mask = shape.mask();
         if let Some(f) = shape.signal()
-            && let Some(i) = f.iter().position(|v| !v.is_finite())
+            && let Some(i) = (0..f.len()).position(|v| !f[v].is_finite() && vertex_mask.is_none_or(|m| m[v] > 0.0))
         {
             return Err(VarifoldError::NonFiniteSignal { vertex: i, value: f[i] });
         }
@@ -93,10 +103,67 @@ impl CellFeatures {
                 }
             }
         }
-        let signal = shape
-            .signal()
-            .map(|f| shape.cell_iter().map(|cell| cell.iter().map(|&v| f[v]).sum::<f64>() / nc as f64).collect());
-        Ok(CellFeatures { dim, du, centre, dir, weight, signal })
+        let mask: Option<Vec<f64>> =
+            vertex_mask.map(|m| shape.cell_iter().map(|cell| cell.iter().map(|&v| m[v]).fold(1.0, f64::min)).collect());
+        let signal = shape.signal().map(|f| {
+            shape
+                .cell_iter()
+                .enumerate()
+                .map(|(t, cell)| {
+                    // A masked cell's corners are not read.
+                    if mask.as_ref().is_some_and(|m| m[t] == 0.0) {
+                        0.0
+                    } else {
+                        cell.iter().map(|&v| f[v]).sum::<f64>() / nc as f64
+                    }
+                })
+                .collect()
+        });
+        Ok(CellFeatures { dim, du, centre, dir, weight, signal, mask })
+    }
+
+    /// The same cells with a functional share per cell in [0, 1] (see
+    /// [`CellFeatures`]); `None` removes it.
+    pub fn with_mask(mut self, mask: Option<Vec<f64>>) -> Result<CellFeatures, VarifoldError> {
+        if let Some(m) = &mask {
+            if m.len() != self.len() {
+                return Err(VarifoldError::Dimension { what: "mask", expected: self.len(), found: m.len() });
+            }
+            if let Some(t) = m.iter().position(|w| !(0.0..=1.0).contains(w)) {
+                return Err(VarifoldError::Feature { what: "mask", cell: t, value: m[t] });
+            }
+        }
+        self.mask = mask;
+        Ok(self)
+    }
+
+    /// The cells' functional shares, if masked.
+    pub fn mask(&self) -> Option<&[f64]> {
+        self.mask.as_deref()
+    }
+
+    /// A masked measure's two parts: the cells of positive share with
+    /// masses m_τ r_τ and their signal, and the cells of share below 1 with
+    /// masses (1 − m_τ) r_τ and no signal, each with the indices of its
+    /// cells here. `None` without a mask.
+    pub(crate) fn split(&self) -> Option<[(CellFeatures, Vec<usize>); 2]> {
+        let m = self.mask.as_deref()?;
+        let part = |keep: &dyn Fn(f64) -> bool, share: &dyn Fn(f64) -> f64, signal: bool| {
+            let idx: Vec<usize> = (0..self.len()).filter(|&t| keep(m[t])).collect();
+            let pick =
+                |v: &[f64], w: usize| idx.iter().flat_map(|&t| v[t * w..(t + 1) * w].to_vec()).collect::<Vec<f64>>();
+            let features = CellFeatures {
+                dim: self.dim,
+                du: self.du,
+                centre: pick(&self.centre, self.dim),
+                dir: pick(&self.dir, self.du),
+                weight: idx.iter().map(|&t| share(m[t]) * self.weight[t]).collect(),
+                signal: if signal { self.signal.as_ref().map(|f| idx.iter().map(|&t| f[t]).collect()) } else { None },
+                mask: None,
+            };
+            (features, idx)
+        };
+        Some([part(&|w| w > 0.0, &|w| w, true), part(&|w| w < 1.0, &|w| 1.0 - w, false)])
     }
 
     /// Builds features directly (for measures that do not come from a mesh,
@@ -137,7 +204,7 @@ impl CellFeatures {
                 return Err(VarifoldError::Feature { what, cell: i / w, value: v[i] });
             }
         }
-        Ok(CellFeatures { dim, du, centre, dir, weight, signal })
+        Ok(CellFeatures { dim, du, centre, dir, weight, signal, mask: None })
     }
 
     /// Number of cells.

@@ -89,6 +89,12 @@ impl VarifoldKernel {
     pub fn grass(&self) -> GrassKernel {
         self.grass
     }
+
+    /// The same kernel without its signal factor (k_f = 1): the kernel of
+    /// a masked measure's geometric part.
+    pub(crate) fn geometric(&self) -> VarifoldKernel {
+        VarifoldKernel { signal: SignalKernel::Constant, ..self.clone() }
+    }
 }
 
 impl SignalKernel {

@@ -4,6 +4,8 @@
 mod convergence;
 #[path = "varifold/derivatives.rs"]
 mod derivatives;
+#[path = "varifold/masks.rs"]
+mod masks;
 #[path = "varifold/oracle.rs"]
 mod oracle;
 #[path = "varifold/properties.rs"]

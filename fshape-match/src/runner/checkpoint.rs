@@ -268,6 +268,12 @@ impl Fnv {
         self.eat(&s.points().iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
         self.eat(&s.cells().iter().flat_map(|c| (*c as u64).to_le_bytes()).collect::<Vec<u8>>());
         self.eat(&s.signal().unwrap_or(&[]).iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+        // A mask enters only when present, so unmasked inputs keep their
+        // fingerprints (and their checkpoints) from before masks existed.
+        if let Some(m) = s.mask() {
+            self.eat(b"mask");
+            self.eat(&m.iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
+        }
     }
 
     pub(crate) fn hex(&self) -> String {

@@ -90,3 +90,35 @@ fn curve_topology() {
     assert_eq!(t.misoriented_facets, vec![[0, 0]]);
     assert_eq!(t.n_boundary_loops, 3, "three free end points");
 }
+
+#[test]
+fn a_mask_allows_missing_values_where_it_is_zero_and_nowhere_else() {
+    let s = fshape_mesh::generate::icosphere(1, 1.0);
+    let n = s.n_vertices();
+    let mut m = vec![1.0; n];
+    m[3] = 0.0;
+    m[4] = 0.5;
+    let mut f = vec![2.0; n];
+    f[3] = f64::NAN;
+    let a = s.clone().with_signal_and_mask(Some(f.clone()), Some(m.clone())).unwrap();
+    assert!(a.signal().unwrap()[3].is_nan() && a.mask().unwrap()[4] == 0.5);
+    // Whatever was given at a masked vertex, it is stored as NaN: the same shape.
+    f[3] = 1e300;
+    let b = s.clone().with_signal_and_mask(Some(f.clone()), Some(m.clone())).unwrap();
+    assert_eq!(a, b);
+    assert!(b.signal().unwrap()[3].is_nan());
+    // NaN where the mask is positive, a mask outside [0, 1] or of the wrong length: refused, with the vertex.
+    f[4] = f64::NAN;
+    let e = s.clone().with_signal_and_mask(Some(f), Some(m.clone())).unwrap_err().to_string();
+    assert!(e.contains("vertex 4"), "{e}");
+    let mut bad = m.clone();
+    bad[7] = 1.5;
+    let e = s.clone().with_mask(Some(bad)).unwrap_err().to_string();
+    assert!(e.contains("vertex 7 has the mask value 1.5"), "{e}");
+    let e = s.clone().with_mask(Some(vec![1.0; n - 1])).unwrap_err().to_string();
+    assert!(e.contains(&format!("the mask has {} values for {n} vertices", n - 1)), "{e}");
+    // The mask moves with the points and stays with a new signal.
+    let moved = a.clone().with_points(a.points().iter().map(|x| 2.0 * x).collect()).unwrap();
+    assert_eq!(moved.mask(), a.mask());
+    assert_eq!(moved.with_signal(Some(vec![0.0; n])).unwrap().mask(), Some(&m[..]));
+}
