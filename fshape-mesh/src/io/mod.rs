@@ -19,6 +19,7 @@ mod cursor;
 pub mod freesurfer;
 pub mod gifti;
 pub mod image;
+pub mod label;
 pub mod mtx;
 pub mod obj;
 pub mod ply;
