@@ -319,11 +319,18 @@ impl Problem {
         let mut z = vec![0.0; l.len()];
         z[l.x()].copy_from_slice(self.template.points());
         z[l.f()].copy_from_slice(self.template.signal().expect("set in new"));
+        // A masked vertex's signal (NaN: no value) starts at 0 and is never
+        // read: the attachment leaves masked cells' signal out and the
+        // dynamics do not read f.
+        for v in z[l.f()].iter_mut().filter(|v| v.is_nan()) {
+            *v = 0.0;
+        }
         z[l.mom()].copy_from_slice(p0);
+        let pf = self.unmasked(pf);
         match self.model.kind() {
-            ModelKind::Metamorphosis => z[l.pf()].copy_from_slice(pf),
+            ModelKind::Metamorphosis => z[l.pf()].copy_from_slice(&pf),
             ModelKind::Tangential => {
-                for (a, b) in z[l.f()].iter_mut().zip(pf) {
+                for (a, b) in z[l.f()].iter_mut().zip(pf.iter()) {
                     *a += b;
                 }
             }
@@ -332,13 +339,36 @@ impl Problem {
         z
     }
 
+    /// p^f (or ζ) with its masked entries set to 0: the signal control is
+    /// zero where the template's mask is 0 (the signal there has no value),
+    /// whatever the caller gives; the gradient is projected the same way.
+    fn unmasked<'a>(&self, pf: &'a [f64]) -> std::borrow::Cow<'a, [f64]> {
+        match self.template.mask() {
+            Some(m) if m.contains(&0.0) => {
+                std::borrow::Cow::Owned(pf.iter().zip(m).map(|(p, w)| if *w == 0.0 { 0.0 } else { *p }).collect())
+            }
+            _ => std::borrow::Cow::Borrowed(pf),
+        }
+    }
+
+    /// Zeroes a gradient's masked entries (the adjoint of [`Problem::unmasked`]).
+    fn project_masked(&self, g: &mut [f64]) {
+        if let Some(m) = self.template.mask() {
+            for (g, w) in g.iter_mut().zip(m) {
+                if *w == 0.0 {
+                    *g = 0.0;
+                }
+            }
+        }
+    }
+
     /// Shoots from the template with momenta p_0 (P × n) and p^f (P; for
     /// the tangential model the signal residual ζ, for LDDMM ignored).
     pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
         self.check(p0, pf)?;
         let mut traj = self.shoot_from(self.initial(p0, pf))?;
         if self.model.kind() == ModelKind::Tangential {
-            traj.zeta = pf.to_vec();
+            traj.zeta = self.unmasked(pf).into_owned();
         }
         Ok(traj)
     }
@@ -445,7 +475,7 @@ impl Problem {
         let att = self.attachment()?;
         let traj = self.shoot(p0, pf)?;
         let mut t = traj.timings;
-        let (es, ges) = self.signal_energy(pf, &mut t)?;
+        let (es, ges) = self.signal_energy(&self.unmasked(pf), &mut t)?;
         let last = self.model.steps();
         let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
         let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
@@ -512,12 +542,16 @@ impl Problem {
         // the momentum's slope at t = 0 with the sign changed; the
         // tangential model's (γ_f/2)ζᵀD(x_0)ζ adds (γ_f/2)∂_x(ζᵀDζ).
         // ∂J/∂f_0 = λ_f: H does not depend on f (f_0 + ζ for tangential).
+        let mut grad_pf = grad_pf;
+        self.project_masked(&mut grad_pf);
         let mut grad_x: Vec<f64> = lam[l.x()].iter().zip(&k0[l.mom()]).map(|(a, b)| a - b).collect();
         if let (ModelKind::Tangential, Some(fem)) = (self.model.kind(), &self.fem) {
-            let g = timed(&mut t.fem, || fem.grad(self.template.points(), pf, pf))?;
+            let pf = self.unmasked(pf);
+            let g = timed(&mut t.fem, || fem.grad(self.template.points(), &pf, &pf))?;
             axpy(&mut grad_x, 0.5 * self.model.gamma_f(), &g);
         }
-        let grad_f = lam[l.f()].to_vec();
+        let mut grad_f = lam[l.f()].to_vec();
+        self.project_masked(&mut grad_f);
         Ok(Gradient {
             objective: obj,
             p0: grad_p,

@@ -205,3 +205,78 @@ fn the_pullback_of_an_end_costate_matches_central_differences() {
     let err = problem.pullback(&traj, &a[1..], &b).unwrap_err().to_string();
     assert!(err.contains("end co-state of x"), "{err}");
 }
+
+/// `shape` masked on a band (mask 0 where x > 0.3, a soft edge of weights
+/// 0.5 beside it, 1 elsewhere), its signal there set to `value`.
+fn banded(shape: &FShape, value: f64) -> FShape {
+    let d = shape.dim();
+    let m: Vec<f64> = shape
+        .points()
+        .chunks_exact(d)
+        .map(|p| {
+            if p[0] > 0.3 {
+                0.0
+            } else if p[0] > 0.15 {
+                0.5
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let f: Vec<f64> = shape.signal().unwrap().iter().zip(&m).map(|(f, w)| if *w == 0.0 { value } else { *f }).collect();
+    shape.clone().with_signal_and_mask(Some(f), Some(m)).unwrap()
+}
+
+#[test]
+fn with_masks_the_gradient_is_exact_and_masked_values_are_never_read() {
+    let (template, target) = surfaces();
+    let (p0, pf) = momenta(&template, 0.3, 1);
+    let mut rng = SplitMix64(9);
+    for kind in ["metamorphosis", "tangential"] {
+        for norm in ["l2-lumped", "h1"] {
+            let m = model(
+                &format!("kind = \"{kind}\"\nnorm = \"{norm}\"\nlength = 0.5\ngamma_f = 0.5\ngamma_w = 2.0"),
+                "",
+                "rk4",
+                5,
+            );
+            let run = |value: f64| {
+                let problem = Problem::new(&banded(&template, value), m.clone())
+                    .unwrap()
+                    .with_target(&banded(&target, value), attachment())
+                    .unwrap();
+                problem.objective_grad(&p0, &pf).unwrap()
+            };
+            let label = format!("{kind}, {norm}");
+            let g = run(f64::NAN);
+            // p^f's gradient is 0 where the template is masked: its signal
+            // momentum is held at 0 there.
+            let mask = banded(&template, 0.0).mask().unwrap().to_vec();
+            assert!(mask.contains(&0.0) && mask.contains(&1.0) && mask.contains(&0.5), "{label}: the band");
+            for (v, w) in mask.iter().enumerate() {
+                if *w == 0.0 {
+                    assert_eq!((g.pf[v], g.f0[v]), (0.0, 0.0), "{label}: vertex {v}");
+                }
+            }
+            // The same bits whatever the masked values are, and whatever p^f is given there.
+            let bits = |g: &fshape_shoot::Gradient| {
+                let t = &g.trajectory;
+                let last = t.steps();
+                let mut b: Vec<u64> =
+                    [g.objective.value].iter().chain(&g.p0).chain(&g.pf).map(|v| v.to_bits()).collect();
+                b.extend(t.points(last).iter().map(|v| v.to_bits()));
+                b
+            };
+            for value in [0.0, 1e300] {
+                assert_eq!(bits(&run(value)), bits(&g), "{label}: masked values {value} were read");
+            }
+            let problem = Problem::new(&banded(&template, 0.0), m.clone())
+                .unwrap()
+                .with_target(&banded(&target, 0.0), attachment())
+                .unwrap();
+            let noisy: Vec<f64> = pf.iter().zip(&mask).map(|(p, w)| if *w == 0.0 { 123.0 } else { *p }).collect();
+            assert_eq!(bits(&problem.objective_grad(&p0, &noisy).unwrap()), bits(&g), "{label}: masked p^f was read");
+            check(&problem, &p0, &pf, &label, &mut rng);
+        }
+    }
+}
