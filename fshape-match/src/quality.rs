@@ -456,7 +456,8 @@ fn dirichlet_energies(shape: &FShape) -> Option<Vec<f64>> {
         // dfᵀ G⁻¹ df × area, area = ½√det.
         if det > 0.0 { (g22 * d1 * d1 - 2.0 * g12 * d1 * d2 + g11 * d2 * d2) / det * 0.5 * det.sqrt() } else { 0.0 }
     };
-    Some(shape.cells().chunks_exact(k).enumerate().map(energy).collect())
+    // A cell with a masked corner (NaN: no value) carries no gradient.
+    Some(shape.cells().chunks_exact(k).enumerate().map(energy).map(|e| if e.is_finite() { e } else { 0.0 }).collect())
 }
 
 /// Whether a closest point of `target` lies on its boundary (an edge of a
@@ -538,6 +539,8 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
                 let fs = signal_at(shape, c.cell, c.bary).unwrap_or(0.0);
                 ((fs - ft).abs(), ys.weights[i])
             })
+            // A masked cell on either side has no value (NaN): not counted.
+            .map(|(e, w)| if e.is_finite() { (e, w) } else { (0.0, 0.0) })
             .collect();
         // The rms over the samples `keep` selects, None if they have no area.
         let rms = |keep: &dyn Fn(&Closest) -> bool| {
@@ -579,10 +582,20 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         let kept: Vec<bool> = dx.iter().map(keep).collect();
         // Folded from +0: an empty f64 sum is −0, which JSON would show.
         let area = kept.iter().zip(&xs.weights).filter(|(k, _)| **k).fold(0.0, |a, (_, w)| a + w);
-        let rms = shape_errors.as_ref().filter(|_| area > 0.0).map(|e| {
-            let sum: f64 = e.iter().zip(&xs.weights).zip(&kept).filter(|(_, k)| **k).map(|((e, w), _)| w * e * e).sum();
-            (sum / area).sqrt() / range
-        });
+        let rms = shape_errors
+            .as_ref()
+            .filter(|_| area > 0.0)
+            .map(|e| {
+                // Masked samples (NaN: no value on one side) are left out.
+                let (sum, valued) = e
+                    .iter()
+                    .zip(&xs.weights)
+                    .zip(&kept)
+                    .filter(|((e, _), k)| **k && e.is_finite())
+                    .fold((0.0, 0.0), |(s, a), ((e, w), _)| (s + w * e * e, a + w));
+                (sum / valued).sqrt() / range
+            })
+            .filter(|v: &f64| v.is_finite());
         let roughness = match (&energies, target_density) {
             (Some(energies), Some(density)) if area > 0.0 => {
                 let share = kept.chunks_exact(samples_per_cell).map(|k| k.iter().filter(|k| **k).count() as f64);

@@ -345,3 +345,25 @@ fn shapes_of_different_kinds_have_no_quality() {
     let e = quality(&perturbed_icosphere(1, 0.0, 1), &random_curve(3, 10, 1)).unwrap_err();
     assert!(e.to_string().contains("differ"), "{e}");
 }
+
+#[test]
+fn masked_values_count_in_no_signal_error() {
+    // The shifted squares again, with the half x > 0.5 masked on both and
+    // its values wild there: the errors are those of the unmasked part, |c|.
+    let mask =
+        |s: &FShape| -> Vec<f64> { s.points().chunks_exact(3).map(|p| if p[0] > 0.5 { 0.0 } else { 1.0 }).collect() };
+    let wild = |s: FShape| {
+        let m = mask(&s);
+        let f: Vec<f64> = s.signal().unwrap().iter().zip(&m).map(|(f, w)| if *w == 0.0 { 1e6 } else { *f }).collect();
+        s.with_signal_and_mask(Some(f), Some(m)).unwrap()
+    };
+    let (target, shape) = (wild(square_at(0.0, 0.0)), wild(square_at(0.01, 0.1)));
+    let q = quality(&shape, &target).unwrap();
+    for v in [q.signal_rms, q.signal_rms_on_shape] {
+        let v = v.unwrap();
+        // Range: x over the unmasked part, [-1, 0.5] at the vertices.
+        assert!((v - 0.1 / q.signal_range).abs() < 1e-9, "{v} ({q:?})");
+    }
+    assert!((q.signal_range - 1.5).abs() < 0.05, "{}", q.signal_range);
+    assert!(q.signal_roughness.unwrap().is_finite());
+}
