@@ -144,12 +144,33 @@ pub struct Signals {
     /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
     #[arg(long)]
     pub target_signal: Option<PathBuf>,
+    /// The source's mask: a FreeSurfer .label (its vertices count, the
+    /// rest is masked) or a per-vertex column of weights in [0, 1]. A
+    /// masked vertex's signal counts nowhere; its geometry still does.
+    #[arg(long)]
+    pub source_mask: Option<PathBuf>,
+    /// The target's mask (as --source-mask).
+    #[arg(long)]
+    pub target_mask: Option<PathBuf>,
+    /// Accept NaN in signal files as missing values: each masks its vertex
+    /// (HCP's maps are NaN on the medial wall).
+    #[arg(long)]
+    pub allow_missing: bool,
 }
 
 impl Signals {
     /// The source's and the target's signal files.
     pub fn files(&self) -> (Option<&std::path::Path>, Option<&std::path::Path>) {
         (self.source_signal.as_deref(), self.target_signal.as_deref())
+    }
+
+    /// The source's and the target's masking.
+    pub fn masking(&self) -> (crate::inputs::Masking<'_>, crate::inputs::Masking<'_>) {
+        let allow_missing = self.allow_missing;
+        (
+            crate::inputs::Masking { mask: self.source_mask.as_deref(), allow_missing },
+            crate::inputs::Masking { mask: self.target_mask.as_deref(), allow_missing },
+        )
     }
 }
 

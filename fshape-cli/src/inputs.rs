@@ -47,12 +47,58 @@ pub fn message(e: &anyhow::Error) -> String {
 /// Reads a mesh and, if given, replaces its signal by a signal file's (CSV
 /// column, GIfTI data array, FreeSurfer curv or MGH).
 pub fn load(path: &Path, signal_name: Option<String>, signal: Option<&Path>) -> Result<FShape> {
+    load_masked(path, signal_name, signal, &Masking::default())
+}
+
+/// How a shape's signal is masked: a mask file, and whether a signal
+/// file's NaN mark vertices without a value.
+#[derive(Clone, Debug, Default)]
+pub struct Masking<'a> {
+    /// A mask file: a FreeSurfer `.label` (its vertices 1, the rest 0) or
+    /// a per-vertex column of weights in [0, 1] (CSV, GIfTI, curv, MGH).
+    pub mask: Option<&'a Path>,
+    /// NaN in the signal file masks its vertex (HCP's medial wall).
+    pub allow_missing: bool,
+}
+
+/// A mask file's weights for a surface of `n` vertices.
+pub fn read_mask(path: &Path, n: usize) -> Result<Vec<f64>> {
+    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if name.ends_with(".label") || name.ends_with(".label.gz") {
+        let label = io::label::read_label(path)?;
+        return label.mask(n).with_context(|| format!("{}", path.display()));
+    }
+    let column = io::read_signal_for(path, Some(n), false)?;
+    if column.values.len() != n {
+        bail!("{}: the mask has {} values for {n} vertices", path.display(), column.values.len());
+    }
+    Ok(column.values)
+}
+
+/// [`load`] with a mask: the mask file's weights, with 0 wherever the
+/// signal file has NaN when missing values are allowed.
+pub fn load_masked(path: &Path, signal_name: Option<String>, signal: Option<&Path>, m: &Masking) -> Result<FShape> {
     let shape = io::read_mesh(path, &ReadOptions { signal_name })?;
-    let Some(csv) = signal else { return Ok(shape) };
-    let column = io::read_signal_for(csv, Some(shape.n_vertices()))?;
+    let n = shape.n_vertices();
+    let mut mask = m.mask.map(|p| read_mask(p, n)).transpose()?;
+    let Some(file) = signal else {
+        return match mask {
+            Some(mask) => shape.with_mask(Some(mask)).with_context(|| format!("masking {}", path.display())),
+            None => Ok(shape),
+        };
+    };
+    let column = io::read_signal_for(file, Some(n), m.allow_missing)?;
+    if column.values.iter().any(|v| v.is_nan()) {
+        let weights = mask.get_or_insert_with(|| vec![1.0; n]);
+        for (w, v) in weights.iter_mut().zip(&column.values) {
+            if v.is_nan() {
+                *w = 0.0;
+            }
+        }
+    }
     shape
-        .with_signal(Some(column.values))
-        .with_context(|| format!("attaching the signal of {} to {}", csv.display(), path.display()))
+        .with_signal_and_mask(Some(column.values), mask)
+        .with_context(|| format!("attaching the signal of {} to {}", file.display(), path.display()))
 }
 
 /// Warns when `--resume` reads a format-3 checkpoint: it has no checksum,

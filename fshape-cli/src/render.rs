@@ -145,7 +145,14 @@ pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
     let (lo, hi) = view.range;
     let colour = |v: f64, light: f64| -> [u8; 3] {
         let t = (v - lo) / (hi - lo);
-        let c = if view.diverging { blue_white_red(t) } else { viridis(t) };
+        // A masked vertex's signal (NaN: no value) is grey.
+        let c = if v.is_nan() {
+            [0.75; 3]
+        } else if view.diverging {
+            blue_white_red(t)
+        } else {
+            viridis(t)
+        };
         std::array::from_fn(|k| (255.0 * c[k] * light).round().clamp(0.0, 255.0) as u8)
     };
     let mut put = |x: usize, y: usize, z: f64, c: [u8; 3]| {

@@ -1669,3 +1669,56 @@ fn match_writes_a_self_contained_report_that_fshape_report_writes_again() {
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("not an fshape match, atlas or batch folder"));
 }
+
+#[test]
+fn hcp_thickness_as_shipped_is_read_with_its_medial_wall_masked() {
+    let (mesh, thick) = (repo("data/conte69_32k/lh.midthickness.ply.gz"), repo("data/conte69_32k/lh.thickness.csv.gz"));
+    // As shipped, NaN on the medial wall: refused, saying how to accept it.
+    let o = fshape(&["info", &mesh, "--signal", &thick]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--allow-missing"), "{}", String::from_utf8_lossy(&o.stderr));
+    // With --allow-missing: the 3 221 wall vertices are masked, the signal summary is the cortex's.
+    let v = json(&fshape(&["info", &mesh, "--signal", &thick, "--allow-missing", "--json"]));
+    assert_eq!((v["mask"]["masked"].as_u64(), v["mask"]["unmasked"].as_u64()), (Some(3221), Some(32492 - 3221)));
+    assert!(v["signal"]["min"].as_f64().unwrap() > 1.0, "{v}");
+    // The same wall as a FreeSurfer label of the cortex: the label's vertices count, the rest is masked.
+    let text = String::from_utf8(
+        std::io::Read::bytes(flate2::read::GzDecoder::new(std::fs::File::open(&thick).unwrap()))
+            .collect::<Result<Vec<u8>, _>>()
+            .unwrap(),
+    )
+    .unwrap();
+    let cortex: Vec<usize> =
+        text.lines().skip(1).enumerate().filter(|(_, l)| l.trim() != "nan").map(|(k, _)| k).collect();
+    let mut label = format!("#!ascii label  , from subject conte69 vox2ras=TkReg\n{}\n", cortex.len());
+    for v in &cortex {
+        label.push_str(&format!("{v} 0 0 0 0\n"));
+    }
+    let path = tmp("lh.cortex.label");
+    std::fs::write(&path, label).unwrap();
+    let w = json(&fshape(&[
+        "info",
+        &mesh,
+        "--signal",
+        &thick,
+        "--allow-missing",
+        "--mask",
+        path.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(w["mask"], v["mask"]);
+    // A masked shape against itself: no signal error, the wall left out.
+    let q = json(&fshape(&[
+        "quality",
+        &mesh,
+        &mesh,
+        "--signal",
+        &thick,
+        "--target-signal",
+        &thick,
+        "--allow-missing",
+        "--json",
+    ]));
+    // (closest points found to rounding: 1e-16 of the range)
+    assert!(q["signal_rms"].as_f64().unwrap() < 1e-12, "{q}");
+}

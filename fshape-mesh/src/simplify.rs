@@ -382,10 +382,14 @@ impl FShape {
         // × 1 % of the diagonal, so that its quadric adds to the plane's.
         let s: Vec<f64> = match self.signal() {
             Some(f) if signal_weight > 0.0 => {
-                let mean = f.iter().sum::<f64>() / n.max(1) as f64;
-                let sd = (f.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n.max(1) as f64).sqrt();
+                // Over the values there are: a masked vertex's (NaN) counts
+                // as the mean, no signal feature to keep.
+                let valued = f.iter().filter(|v| !v.is_nan()).count().max(1) as f64;
+                let mean = f.iter().filter(|v| !v.is_nan()).sum::<f64>() / valued;
+                let sd =
+                    (f.iter().filter(|v| !v.is_nan()).map(|v| (v - mean) * (v - mean)).sum::<f64>() / valued).sqrt();
                 let scale = if sd > 0.0 { signal_weight * 0.01 * self.bounding_box().diagonal() / sd } else { 0.0 };
-                f.iter().map(|v| v * scale).collect()
+                f.iter().map(|v| if v.is_nan() { mean * scale } else { v * scale }).collect()
             }
             _ => vec![0.0; n],
         };
@@ -481,7 +485,10 @@ impl FShape {
             .flat_map(|(t, _)| t.map(|w| index[w as usize]))
             .collect();
         let signal = self.signal().map(|f| kept.iter().map(|&i| f[i]).collect());
-        let shape = FShape::try_new(self.dim(), CellKind::Triangle, points, cells, signal)?;
+        let mask = self.mask().map(|m| kept.iter().map(|&i| m[i]).collect());
+        // The kept vertices keep their values and their mask weights.
+        let shape =
+            FShape::try_new(self.dim(), CellKind::Triangle, points, cells, None)?.with_signal_and_mask(signal, mask)?;
         Ok(Simplified { shape, kept })
     }
 }

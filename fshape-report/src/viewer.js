@@ -22,7 +22,12 @@
     const cells = await inflate(m.cells, Uint32Array);
     const frames = await Promise.all(m.frames.map((f) => inflate(f, Float32Array)));
     const signals = m.signals ? await Promise.all(m.signals.map((f) => inflate(f, Float32Array))) : null;
-    return { kind: m.kind, planar: m.planar, cells, frames, signals, n: frames[0].length / 3 };
+    // A masked vertex's signal is NaN (no value): drawn grey, through a
+    // value far below the range (the fragment shader greys v < -0.5).
+    let lo = Infinity, hi = -Infinity;
+    for (const f of signals || []) for (const v of f) if (v === v) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+    const masked = lo <= hi ? lo - 100 * Math.max(hi - lo, 1e-6) : -100;
+    return { kind: m.kind, planar: m.planar, cells, frames, signals, masked, n: frames[0].length / 3 };
   }
   function lerp(arrays, s) {
     const k = Math.min(arrays.length - 1, Math.floor(s)), u = s - k;
@@ -65,7 +70,7 @@
       v = (f - range.x) / (range.y - range.x);
     }`;
   const fs = `precision mediump float; varying float v; varying float light; uniform sampler2D cmap; uniform float alpha;
-    void main() { vec3 col = texture2D(cmap, vec2(clamp(v, 0.0, 1.0), 0.5)).rgb; gl_FragColor = vec4(col * light, alpha); }`;
+    void main() { vec3 col = v < -0.5 ? vec3(0.75) : texture2D(cmap, vec2(clamp(v, 0.0, 1.0), 0.5)).rgb; gl_FragColor = vec4(col * light, alpha); }`;
   function shader(type, src) {
     const sh = gl.createShader(type); gl.shaderSource(sh, src); gl.compileShader(sh);
     if (!gl.getShaderParameter(sh, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(sh));
@@ -94,7 +99,7 @@
       gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, m.gl.i); gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, m.cells, gl.STATIC_DRAW);
     }
     if (m.gl.at === position) return;
-    const x = lerp(m.frames, position), f = m.signals ? lerp(m.signals, position) : new Float32Array(m.n);
+    const x = lerp(m.frames, position), f = m.signals ? Float32Array.from(lerp(m.signals, position), (v) => (v === v ? v : m.masked)) : new Float32Array(m.n);
     for (const [buf, values] of [[m.gl.p, x], [m.gl.n, m.planar ? new Float32Array(x.length) : normals(m, x)], [m.gl.f, f]]) {
       gl.bindBuffer(gl.ARRAY_BUFFER, buf); gl.bufferData(gl.ARRAY_BUFFER, values, gl.DYNAMIC_DRAW);
     }
@@ -196,7 +201,7 @@
       let range = s.range;
       if (!range) {
         let a = Infinity, b = -Infinity;
-        for (const f of (m.signals || []).concat(companion && companion.signals ? companion.signals : [])) for (const v of f) { a = Math.min(a, v); b = Math.max(b, v); }
+        for (const f of (m.signals || []).concat(companion && companion.signals ? companion.signals : [])) for (const v of f) if (v === v) { a = Math.min(a, v); b = Math.max(b, v); }
         range = a < b ? [a, b] : [a === Infinity ? 0 : a, (a === Infinity ? 0 : a) + 1];
       }
       scenes.push({ name: s.name, labels: s.labels, note: s.note, mesh: m, companion, companionName: s.companion_name, centre, radius, range });

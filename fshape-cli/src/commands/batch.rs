@@ -294,6 +294,7 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
     }
     let resume = dir.join("checkpoint.bin").exists();
     let result = crate::commands::matching::run_with(&crate::commands::matching::MatchArgs {
+        masking: Default::default(),
         source: &row.source,
         target: &row.target,
         signals: (row.source_signal.as_deref(), row.target_signal.as_deref()),

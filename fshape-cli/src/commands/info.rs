@@ -6,7 +6,7 @@ use anyhow::Result;
 use fshape_mesh::{FShape, Finding, Severity};
 use serde::Serialize;
 
-use crate::inputs::load;
+use crate::inputs::load_masked;
 
 /// `fshape info`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -20,13 +20,20 @@ pub struct Args {
     /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness) or .mgh/.mgz.
     #[arg(long)]
     pub signal: Option<PathBuf>,
+    /// A mask: a FreeSurfer .label or a per-vertex column of weights in [0, 1].
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Accept NaN in the signal file as missing values (each masks its vertex).
+    #[arg(long)]
+    pub allow_missing: bool,
     /// Print JSON for scripts.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    info(&a.file, a.signal_name, a.signal.as_deref(), a.json)
+    let masking = crate::inputs::Masking { mask: a.mask.as_deref(), allow_missing: a.allow_missing };
+    info(&a.file, a.signal_name, a.signal.as_deref(), &masking, a.json)
 }
 
 #[derive(Serialize)]
@@ -43,6 +50,14 @@ struct SignalSummary {
     mean: f64,
 }
 
+/// How many vertices a mask leaves without a value, in part, or whole.
+#[derive(Serialize)]
+struct MaskSummary {
+    masked: usize,
+    partial: usize,
+    unmasked: usize,
+}
+
 #[derive(Serialize)]
 struct Info {
     path: String,
@@ -55,6 +70,7 @@ struct Info {
     bbox_diagonal: f64,
     total_volume: f64,
     signal: Option<SignalSummary>,
+    mask: Option<MaskSummary>,
     closed: bool,
     boundary_loops: usize,
     components: usize,
@@ -94,10 +110,16 @@ fn summary(path: &Path, s: &FShape) -> Info {
         bbox_min: bbox.min,
         bbox_max: bbox.max,
         total_volume: s.total_volume(),
-        signal: s.signal().filter(|f| !f.is_empty()).map(|f| SignalSummary {
+        // Over the values there are (a masked vertex's is NaN).
+        signal: s.signal().filter(|f| f.iter().any(|v| !v.is_nan())).map(|f| SignalSummary {
             min: f.iter().copied().fold(f64::INFINITY, f64::min),
             max: f.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-            mean: f.iter().sum::<f64>() / f.len() as f64,
+            mean: f.iter().filter(|v| !v.is_nan()).sum::<f64>() / f.iter().filter(|v| !v.is_nan()).count() as f64,
+        }),
+        mask: s.mask().map(|m| MaskSummary {
+            masked: m.iter().filter(|w| **w == 0.0).count(),
+            partial: m.iter().filter(|w| **w > 0.0 && **w < 1.0).count(),
+            unmasked: m.iter().filter(|w| **w == 1.0).count(),
         }),
         closed: topo.is_closed(),
         boundary_loops: topo.n_boundary_loops,
@@ -108,8 +130,14 @@ fn summary(path: &Path, s: &FShape) -> Info {
     }
 }
 
-fn info(path: &Path, signal_name: Option<String>, signal: Option<&Path>, json: bool) -> Result<()> {
-    let shape = load(path, signal_name, signal)?;
+fn info(
+    path: &Path,
+    signal_name: Option<String>,
+    signal: Option<&Path>,
+    masking: &crate::inputs::Masking,
+    json: bool,
+) -> Result<()> {
+    let shape = load_masked(path, signal_name, signal, masking)?;
     let i = summary(path, &shape);
     if json {
         println!("{}", serde_json::to_string_pretty(&i)?);
@@ -122,6 +150,12 @@ fn info(path: &Path, signal_name: Option<String>, signal: Option<&Path>, json: b
     match &i.signal {
         Some(f) => println!("  signal: min {:.6}, max {:.6}, mean {:.6}", f.min, f.max, f.mean),
         None => println!("  signal: none"),
+    }
+    if let Some(m) = &i.mask {
+        println!(
+            "  mask: {} vertices masked (no signal value), {} partly (weight in (0, 1)), {} not",
+            m.masked, m.partial, m.unmasked
+        );
     }
     println!(
         "  {}, {} component(s), {} boundary loop(s), Euler characteristic {}",

@@ -47,6 +47,7 @@ pub fn run(a: Args) -> Result<()> {
         source: &a.source,
         target: &a.target,
         signals: a.signals.files(),
+        masking: a.signals.masking(),
         config: &a.run.config,
         out: &a.run.out,
         resume: a.run.resume,
@@ -67,6 +68,8 @@ pub struct MatchArgs<'a> {
     pub target: &'a Path,
     /// Per-vertex signal CSVs of the source and the target.
     pub signals: (Option<&'a Path>, Option<&'a Path>),
+    /// Their masks.
+    pub masking: (crate::inputs::Masking<'a>, crate::inputs::Masking<'a>),
     pub config: &'a Path,
     pub out: &'a Path,
     pub resume: bool,
@@ -141,8 +144,8 @@ fn name_the_target(e: MatchError, target: &Path) -> anyhow::Error {
 
 pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let config = Config::read(a.config)?;
-    let source = crate::inputs::load(a.source, a.signal_name.clone(), a.signals.0)?;
-    let target = crate::inputs::load(a.target, a.signal_name.clone(), a.signals.1)?;
+    let source = crate::inputs::load_masked(a.source, a.signal_name.clone(), a.signals.0, &a.masking.0)?;
+    let target = crate::inputs::load_masked(a.target, a.signal_name.clone(), a.signals.1, &a.masking.1)?;
     let session = match Session::new(&source, &target, &config) {
         Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,

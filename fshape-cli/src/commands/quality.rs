@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
-use crate::inputs::load;
+use crate::inputs::load_masked;
 
 /// `fshape quality`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -21,19 +21,14 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    quality(&a.source, &a.target, a.signals.signal_name.clone(), a.signals.files(), a.json)
+    quality(&a.source, &a.target, &a.signals, a.json)
 }
 
 /// `fshape quality`: the match quality of one file against another.
-fn quality(
-    source: &Path,
-    target: &Path,
-    signal_name: Option<String>,
-    signals: (Option<&Path>, Option<&Path>),
-    json: bool,
-) -> Result<()> {
-    let x = load(source, signal_name.clone(), signals.0)?;
-    let y = load(target, signal_name, signals.1)?;
+fn quality(source: &Path, target: &Path, signals: &crate::args::Signals, json: bool) -> Result<()> {
+    let (files, masking) = (signals.files(), signals.masking());
+    let x = load_masked(source, signals.signal_name.clone(), files.0, &masking.0)?;
+    let y = load_masked(target, signals.signal_name.clone(), files.1, &masking.1)?;
     let q = fshape_match::quality(&x, &y)
         .with_context(|| format!("the quality of {} against {}", source.display(), target.display()))?;
     if json {

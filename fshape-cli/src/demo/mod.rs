@@ -93,6 +93,7 @@ fn run_match(
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
     io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
     crate::commands::matching::run_with(&crate::commands::matching::MatchArgs {
+        masking: Default::default(),
         source,
         target,
         signals: (None, None),

@@ -92,8 +92,11 @@ pub fn parse_signal_from(
         return Err(bad(at, "a single column (no comma)", name.as_bytes()));
     }
     let mut values = Vec::with_capacity(expected.unwrap_or(0));
-    let what =
-        if allow_missing { "a number or `nan`" } else { "a finite number (missing values are not accepted here)" };
+    let what = if allow_missing {
+        "a number or `nan`"
+    } else {
+        "a finite number (missing values are not accepted here; --allow-missing masks their vertices)"
+    };
     while let Some(at) = next(&mut buf, &mut line_no)? {
         let t = buf.trim_ascii();
         if t.is_empty() {

@@ -69,11 +69,18 @@ pub fn parse_label(data: &[u8]) -> Result<Label, ParseError> {
     if count.saturating_mul(10) > cur.remaining() + 1 {
         return Err(ParseError {
             at,
-            kind: ParseErrorKind::Truncated { what: "label vertices", claimed: count as u64, available: cur.remaining() },
+            kind: ParseErrorKind::Truncated {
+                what: "label vertices",
+                claimed: count as u64,
+                available: cur.remaining(),
+            },
         });
     }
-    let mut label =
-        Label { vertices: Vec::with_capacity(count), points: Vec::with_capacity(3 * count), values: Vec::with_capacity(count) };
+    let mut label = Label {
+        vertices: Vec::with_capacity(count),
+        points: Vec::with_capacity(3 * count),
+        values: Vec::with_capacity(count),
+    };
     cur.line();
     for _ in 0..count {
         let at = cur.mark();
@@ -81,13 +88,16 @@ pub fn parse_label(data: &[u8]) -> Result<Label, ParseError> {
             return Err(ParseError { at, kind: ParseErrorKind::Eof { expected: "a label vertex line" } });
         };
         let fields: Vec<&str> = line.split_ascii_whitespace().collect();
-        let bad = |expected| ParseError { at, kind: ParseErrorKind::BadToken { expected, found: lossy(line.as_bytes()) } };
+        let bad =
+            |expected| ParseError { at, kind: ParseErrorKind::BadToken { expected, found: lossy(line.as_bytes()) } };
         let [v, x, y, z, value] = fields[..] else {
             return Err(bad("five fields: vertex x y z value"));
         };
         label.vertices.push(v.parse::<usize>().map_err(|_| bad("a vertex index (a whole number from 0)"))?);
         for t in [x, y, z] {
-            label.points.push(t.parse::<f64>().ok().filter(|c| c.is_finite()).ok_or_else(|| bad("finite coordinates"))?);
+            label
+                .points
+                .push(t.parse::<f64>().ok().filter(|c| c.is_finite()).ok_or_else(|| bad("finite coordinates"))?);
         }
         label.values.push(value.parse::<f64>().map_err(|_| bad("a number as the value"))?);
     }

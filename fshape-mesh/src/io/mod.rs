@@ -512,13 +512,19 @@ impl SignalFormat {
 /// FreeSurfer curv file or an MGH/MGZ file (chosen by [`SignalFormat::detect`]).
 /// Values must be finite.
 pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
-    read_signal_for(path, None)
+    read_signal_for(path, None, false)
 }
 
 /// [`read_signal`] for a mesh of `n_vertices` vertices: a CSV column is
 /// read as a stream and refused at its first value past that count, so a
-/// runaway file costs no more than the values expected.
-pub fn read_signal_for(path: &Path, n_vertices: Option<usize>) -> Result<csv::SignalColumn, ReadError> {
+/// runaway file costs no more than the values expected. With
+/// `allow_missing`, NaN (a missing value, as HCP writes on the medial
+/// wall) is accepted; infinities never are.
+pub fn read_signal_for(
+    path: &Path,
+    n_vertices: Option<usize>,
+    allow_missing: bool,
+) -> Result<csv::SignalColumn, ReadError> {
     let input = source::open(path, Expect::Signal)?;
     let parse = |source| ReadError::Parse { path: path.into(), source };
     if let Some(f) = Format::sniff(&input.prefix).filter(|&f| f != Format::Gifti) {
@@ -532,7 +538,7 @@ pub fn read_signal_for(path: &Path, n_vertices: Option<usize>) -> Result<csv::Si
     }
     if SignalFormat::detect(&input.prefix, path) == SignalFormat::Csv {
         let mut reader = std::io::BufReader::new(std::io::Cursor::new(input.prefix).chain(input.rest));
-        let column = csv::parse_signal_from(&mut reader, false, n_vertices).map_err(|e| match e {
+        let column = csv::parse_signal_from(&mut reader, allow_missing, n_vertices).map_err(|e| match e {
             csv::StreamError::Io(source) => ReadError::Io { path: path.into(), source },
             csv::StreamError::Parse(source) => parse(source),
         })?;
@@ -556,7 +562,7 @@ pub fn read_signal_for(path: &Path, n_vertices: Option<usize>) -> Result<csv::Si
         SignalFormat::Curv => csv::SignalColumn { name: stem(), values: freesurfer::parse_curv(&data).map_err(parse)? },
         SignalFormat::Mgh => csv::SignalColumn { name: stem(), values: freesurfer::parse_mgh(&data).map_err(parse)? },
     };
-    if let Some(k) = column.values.iter().position(|v| !v.is_finite()) {
+    if let Some(k) = column.values.iter().position(|v| !v.is_finite() && !(allow_missing && v.is_nan())) {
         return Err(ReadError::NonFinite { path: path.into(), vertex: k, value: column.values[k] });
     }
     Ok(column)
