@@ -762,6 +762,7 @@ pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseEr
         points: std::mem::take(&mut g.arrays[p].values),
         cells,
         signal: signal.map(|k| std::mem::take(&mut g.arrays[k].values)),
+        mask: None,
         scalars: labels,
     })
 }

@@ -357,6 +357,8 @@ pub(crate) struct RawMesh {
     pub(crate) points: Vec<f64>,
     pub(crate) cells: Vec<usize>,
     pub(crate) signal: Option<Vec<f64>>,
+    /// The vertex mask (PLY property `mask`), if the file has one.
+    pub(crate) mask: Option<Vec<f64>>,
     /// Names of every per-vertex scalar in the file.
     pub(crate) scalars: Vec<String>,
 }
@@ -367,8 +369,12 @@ impl RawMesh {
             return Err(ReadError::SignalNotFound { path: path.into(), name: name.clone(), available: self.scalars });
         }
         let kind = if self.cell_size == Some(2) { CellKind::Segment } else { CellKind::Triangle };
-        FShape::try_new(self.dim, kind, self.points, self.cells, self.signal)
-            .map_err(|source| ReadError::Shape { path: path.into(), source })
+        let shape = match self.mask {
+            None => FShape::try_new(self.dim, kind, self.points, self.cells, self.signal),
+            mask => FShape::try_new(self.dim, kind, self.points, self.cells, None)
+                .and_then(|s| s.with_signal_and_mask(self.signal, mask)),
+        };
+        shape.map_err(|source| ReadError::Shape { path: path.into(), source })
     }
 }
 

@@ -8,7 +8,7 @@
 //! two-vertex faces make a curve) or, when there is no face, from an `edge`
 //! element's `vertex1`, `vertex2` (a curve). Other elements are skipped.
 //!
-//! Write: `double` coordinates and signal, `list uchar int vertex_indices`
+//! Write: `double` coordinates, signal and mask (a masked shape's), `list uchar int vertex_indices`
 //! faces (or an `edge` element for curves). A planar shape is written with
 //! z = 0 and the header comment `fshape planar`, which this reader honours.
 //! MeshLab and ParaView read these files.
@@ -301,10 +301,13 @@ fn read_vertices(
     let y = el.find("y").ok_or_else(|| missing("vertex property `y`"))?;
     let z = el.find("z");
     let s = el.find(signal_name).filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)));
+    // fshape writes a masked shape's mask as the property `mask`.
+    let m = el.find("mask").filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)) && signal_name != "mask");
     raw.dim = if z.is_some() { 3 } else { 2 };
     let n = el.count as usize;
     raw.points = Vec::with_capacity(n * raw.dim);
     let mut signal = s.map(|_| Vec::with_capacity(n));
+    let mut mask = m.map(|_| Vec::with_capacity(n));
     let mut vals = vec![0.0; el.props.len()];
     for _ in 0..n {
         for (k, p) in el.props.iter().enumerate() {
@@ -326,8 +329,12 @@ fn read_vertices(
         if let (Some(sig), Some(s)) = (signal.as_mut(), s) {
             sig.push(vals[s]);
         }
+        if let (Some(mask), Some(m)) = (mask.as_mut(), m) {
+            mask.push(vals[m]);
+        }
     }
     raw.signal = signal;
+    raw.mask = mask;
     Ok(())
 }
 
@@ -454,6 +461,9 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
     if shape.signal().is_some() {
         writeln!(w, "property double signal")?;
     }
+    if shape.mask().is_some() {
+        writeln!(w, "property double mask")?;
+    }
     match shape.kind() {
         CellKind::Triangle => writeln!(w, "element face {}\nproperty list uchar int vertex_indices", shape.n_cells())?,
         CellKind::Segment => {
@@ -467,14 +477,15 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         let z = if shape.dim() == 3 { p[2] } else { 0.0 };
         let vals = [p[0], p[1], z];
         let sig = shape.signal().map(|f| f[v]);
+        let mask = shape.mask().map(|m| m[v]);
         if ascii {
             write!(w, "{:e} {:e} {:e}", vals[0], vals[1], vals[2])?;
-            if let Some(s) = sig {
+            for s in sig.iter().chain(&mask) {
                 write!(w, " {s:e}")?;
             }
             writeln!(w)?;
         } else {
-            for x in vals.iter().chain(sig.as_ref()) {
+            for x in vals.iter().chain(sig.as_ref()).chain(mask.as_ref()) {
                 w.write_all(&x.to_le_bytes())?;
             }
         }

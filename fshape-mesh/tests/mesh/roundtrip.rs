@@ -340,3 +340,20 @@ fn vtkio_reads_our_point_fields_and_our_csv_reader_reads_our_vector_csv() {
     let pvd = fshape_mesh::io::vtk::collection(&[(0.0, "state_000.vtk"), (0.5, "a&b.vtk")]);
     assert!(pvd.contains("timestep=\"0.5\" part=\"0\" file=\"a&amp;b.vtk\""), "{pvd}");
 }
+
+#[test]
+fn a_masked_shape_round_trips_through_ply_with_its_mask() {
+    use fshape_mesh::io::{Encoding, Format, ReadOptions, parse_mesh, write_to};
+    let s = fshape_mesh::generate::icosphere(1, 1.0);
+    let n = s.n_vertices();
+    let m: Vec<f64> = (0..n).map(|v| [0.0, 0.5, 1.0][v % 3]).collect();
+    let f: Vec<f64> = (0..n).map(|v| v as f64).collect();
+    let s = s.with_signal_and_mask(Some(f), Some(m)).unwrap();
+    for enc in [Encoding::Ascii, Encoding::Binary] {
+        let mut bytes = Vec::new();
+        write_to(&mut bytes, &s, Format::Ply, enc).unwrap();
+        let back = parse_mesh(&bytes, Format::Ply, &ReadOptions::default(), std::path::Path::new("m.ply")).unwrap();
+        assert_eq!(back, s, "{enc:?}");
+        assert_eq!(back.mask(), s.mask());
+    }
+}
