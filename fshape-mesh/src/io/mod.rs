@@ -568,7 +568,7 @@ pub fn read_signal_for(
         SignalFormat::Curv => csv::SignalColumn { name: stem(), values: freesurfer::parse_curv(&data).map_err(parse)? },
         SignalFormat::Mgh => csv::SignalColumn { name: stem(), values: freesurfer::parse_mgh(&data).map_err(parse)? },
     };
-    if let Some(k) = column.values.iter().position(|v| !v.is_finite() && !(allow_missing && v.is_nan())) {
+    if let Some(k) = column.values.iter().position(|v| !(v.is_finite() || allow_missing && v.is_nan())) {
         return Err(ReadError::NonFinite { path: path.into(), vertex: k, value: column.values[k] });
     }
     Ok(column)
