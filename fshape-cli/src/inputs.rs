@@ -105,9 +105,7 @@ pub fn load_masked(path: &Path, signal_name: Option<String>, signal: Option<&Pat
 /// so damage in it would go unnoticed (it is read, and written back as
 /// the current format). Reads the header only.
 pub fn warn_if_unchecked(checkpoint: &Path) {
-    let mut head = [0u8; 20];
-    let read = std::fs::File::open(checkpoint).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head));
-    if read.is_ok() && u32::from_le_bytes([head[16], head[17], head[18], head[19]]) == fshape_match::UNCHECKED_FORMAT {
+    if fshape_match::Checkpoint::file_format(checkpoint) == Some(fshape_match::UNCHECKED_FORMAT) {
         eprintln!(
             "warning: {} is a format-{} checkpoint, without a checksum: it is read as it is, and a damaged byte \
              in it would go unnoticed; the checkpoints written from now on carry one",

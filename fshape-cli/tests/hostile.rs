@@ -155,65 +155,31 @@ fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
     big.into_inner().unwrap().sync_all().unwrap();
 
     let small_s = small.to_str().unwrap();
+    // `fshape info SMALL --signal FILE`: the hostile file as a signal.
+    let signal = |file: &str| vec!["info".to_string(), small_s.into(), "--signal".into(), file.into()];
     let cases: Vec<(&str, Vec<String>, &str)> = vec![
         ("exec", vec!["info".into(), "/dev/zero".into()], "device"),
         ("exec", vec!["info".into(), p("zero.ply")], "device"),
         ("exec", vec!["info".into(), p("folder.ply")], "folder"),
-        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("zero.bin")], "device"),
-        (
-            "exec",
-            vec!["info".into(), small_s.into(), "--signal".into(), p("abs_zero.shape.gii")],
-            "outside the .gii's folder",
-        ),
-        (
-            "exec",
-            vec!["info".into(), small_s.into(), "--signal".into(), p("up.shape.gii")],
-            "outside the .gii's folder",
-        ),
-        (
-            "exec",
-            vec!["info".into(), small_s.into(), "--signal".into(), p("link_zero.shape.gii")],
-            "not a regular file",
-        ),
-        (
-            "exec",
-            vec!["info".into(), small_s.into(), "--signal".into(), p("link_random.shape.gii")],
-            "not a regular file",
-        ),
-        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("fifo.shape.gii")], "not a regular file"),
-        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("short.shape.gii")], "external data file"),
-        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("offset.shape.gii")], "external data file"),
-        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("huge_dim.shape.gii")], "FSHAPE_MAX_VALUES"),
+        ("exec", signal(&p("zero.bin")), "device"),
+        ("exec", signal(&p("abs_zero.shape.gii")), "outside the .gii's folder"),
+        ("exec", signal(&p("up.shape.gii")), "outside the .gii's folder"),
+        ("exec", signal(&p("link_zero.shape.gii")), "not a regular file"),
+        ("exec", signal(&p("link_random.shape.gii")), "not a regular file"),
+        ("exec", signal(&p("fifo.shape.gii")), "not a regular file"),
+        ("exec", signal(&p("short.shape.gii")), "external data file"),
+        ("exec", signal(&p("offset.shape.gii")), "external data file"),
+        ("exec", signal(&p("huge_dim.shape.gii")), "FSHAPE_MAX_VALUES"),
         ("exec", vec!["info".into(), p("huge_count.ply")], "4000000000"),
-        ("exec", vec!["info".into(), small_s.into(), "--signal".into(), p("lh.thickness")], "2147483647"),
+        ("exec", signal(&p("lh.thickness")), "2147483647"),
         ("exec", vec!["info".into(), p("bomb.ply.gz")], "decompresses to more than"),
-        (
-            "exec",
-            vec!["info".into(), small_s.into(), "--signal".into(), p("bomb.csv.gz")],
-            "past the mesh's 4 vertices (value 5 is here)",
-        ),
-        (
-            "exec",
-            vec!["info".into(), small_s.into(), "--signal".into(), p("runaway.csv")],
-            "past the mesh's 4 vertices (value 5 is here)",
-        ),
+        ("exec", signal(&p("bomb.csv.gz")), "past the mesh's 4 vertices (value 5 is here)"),
+        ("exec", signal(&p("runaway.csv")), "past the mesh's 4 vertices (value 5 is here)"),
         // Pipes are read, with a look at their first bytes.
         ("cat /dev/zero |", vec!["info".into(), "/dev/stdin".into()], "unknown format"),
-        (
-            "cat /dev/zero |",
-            vec!["info".into(), small_s.into(), "--signal".into(), "/dev/stdin".into()],
-            "expected a signal file",
-        ),
-        (
-            "cat /dev/urandom |",
-            vec!["info".into(), small_s.into(), "--signal".into(), "/dev/stdin".into()],
-            "expected a signal file",
-        ),
-        (
-            "(echo thickness; yes 1) |",
-            vec!["info".into(), small_s.into(), "--signal".into(), "/dev/stdin".into()],
-            "past the mesh's 4 vertices (value 5 is here)",
-        ),
+        ("cat /dev/zero |", signal("/dev/stdin"), "expected a signal file"),
+        ("cat /dev/urandom |", signal("/dev/stdin"), "expected a signal file"),
+        ("(echo thickness; yes 1) |", signal("/dev/stdin"), "past the mesh's 4 vertices (value 5 is here)"),
         ("exec", vec!["checkpoint".into(), "/dev/zero".into()], "device"),
     ];
     let mut failures = Vec::new();

@@ -94,14 +94,7 @@ fn inner(
         return inner_plain(x, y, k, grad, parallel);
     }
     compatible(x, y, k)?;
-    let whole = |f: &CellFeatures| -> [(CellFeatures, Vec<usize>); 2] {
-        f.split().unwrap_or_else(|| {
-            let plain = f.clone().with_mask(None).expect("removing a mask");
-            let empty = CellFeatures::from_parts(f.dim(), vec![], vec![], vec![], None).expect("no cells");
-            [(plain, (0..f.len()).collect()), (empty, vec![])]
-        })
-    };
-    let ([(xf, xfi), (xg, xgi)], [(yf, _), (yg, _)]) = (whole(x), whole(y));
+    let ([(xf, xfi), (xg, xgi)], [(yf, _), (yg, _)]) = (x.split(), y.split());
     let geometric = k.geometric();
     let mut value = 0.0;
     let n = x.len();

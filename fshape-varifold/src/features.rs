@@ -142,28 +142,28 @@ impl CellFeatures {
         self.mask.as_deref()
     }
 
-    /// A masked measure's two parts: the cells of positive share with
-    /// masses m_τ r_τ and their signal, and the cells of share below 1 with
+    /// A measure's two parts: the cells of positive share with masses
+    /// m_τ r_τ and their signal, and the cells of share below 1 with
     /// masses (1 − m_τ) r_τ and no signal, each with the indices of its
-    /// cells here. `None` without a mask.
-    pub(crate) fn split(&self) -> Option<[(CellFeatures, Vec<usize>); 2]> {
-        let m = self.mask.as_deref()?;
-        let part = |keep: &dyn Fn(f64) -> bool, share: &dyn Fn(f64) -> f64, signal: bool| {
-            let idx: Vec<usize> = (0..self.len()).filter(|&t| keep(m[t])).collect();
-            let pick =
-                |v: &[f64], w: usize| idx.iter().flat_map(|&t| v[t * w..(t + 1) * w].to_vec()).collect::<Vec<f64>>();
+    /// cells here. Without a mask every share is 1: all cells in the first
+    /// part, none in the second.
+    pub(crate) fn split(&self) -> [(CellFeatures, Vec<usize>); 2] {
+        let share = |t: usize| self.mask.as_ref().map_or(1.0, |m| m[t]);
+        let part = |keep: &dyn Fn(f64) -> bool, mass: &dyn Fn(f64) -> f64, signal: bool| {
+            let idx: Vec<usize> = (0..self.len()).filter(|&t| keep(share(t))).collect();
+            let pick = |v: &[f64], w: usize| idx.iter().flat_map(|&t| v[t * w..(t + 1) * w].iter().copied()).collect();
             let features = CellFeatures {
                 dim: self.dim,
                 du: self.du,
                 centre: pick(&self.centre, self.dim),
                 dir: pick(&self.dir, self.du),
-                weight: idx.iter().map(|&t| share(m[t]) * self.weight[t]).collect(),
+                weight: idx.iter().map(|&t| mass(share(t)) * self.weight[t]).collect(),
                 signal: if signal { self.signal.as_ref().map(|f| idx.iter().map(|&t| f[t]).collect()) } else { None },
                 mask: None,
             };
             (features, idx)
         };
-        Some([part(&|w| w > 0.0, &|w| w, true), part(&|w| w < 1.0, &|w| 1.0 - w, false)])
+        [part(&|w| w > 0.0, &|w| w, true), part(&|w| w < 1.0, &|w| 1.0 - w, false)]
     }
 
     /// Builds features directly (for measures that do not come from a mesh,

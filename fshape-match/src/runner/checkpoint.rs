@@ -197,6 +197,17 @@ impl Checkpoint {
         Ok(checkpoint)
     }
 
+    /// The format number in a checkpoint file's header (its first 20
+    /// bytes), or `None` if the file is not one (to warn before resuming
+    /// a format-3 file without reading all of it).
+    pub fn file_format(path: &Path) -> Option<u32> {
+        let mut head = [0u8; 20];
+        let (mut file, _) = fshape_mesh::io::open_file(path).ok()?;
+        std::io::Read::read_exact(&mut file, &mut head).ok()?;
+        let format = head.strip_prefix(CHECKPOINT_MAGIC)?;
+        Some(u32::from_le_bytes(format.try_into().ok()?))
+    }
+
     /// [`Checkpoint::from_bytes`] of a file; errors name it.
     pub fn read(path: &Path) -> Result<Checkpoint, MatchError> {
         // Bounded like every input: a device or folder is refused.

@@ -593,4 +593,13 @@ fn a_format_3_checkpoint_without_checksum_is_read_and_continues_as_format_4() {
     assert_eq!(session.checkpoint().format, CHECKPOINT_FORMAT);
     // With its checksum, a format-3 header is damage (the format says no checksum).
     assert!(Checkpoint::from_bytes(&v4).unwrap_err().to_string().contains("4 bytes follow its end"));
+    // The header alone tells the format, for the program's warning before it resumes.
+    let file = std::env::temp_dir().join(format!("fshape-format-{}.bin", std::process::id()));
+    for (bytes, format) in
+        [(v3.to_vec(), Some(3)), (good.to_bytes().unwrap(), Some(CHECKPOINT_FORMAT)), (b"ply\n".to_vec(), None)]
+    {
+        std::fs::write(&file, bytes).unwrap();
+        assert_eq!(Checkpoint::file_format(&file), format);
+    }
+    std::fs::remove_file(&file).unwrap();
 }

@@ -28,7 +28,7 @@ pub mod table;
 pub mod vtk;
 
 use source::Expect;
-pub use source::{EXPANSION, EXPANSION_FLOOR, Limits, PIPE_BYTES, limits, set_limits};
+pub use source::{EXPANSION, EXPANSION_FLOOR, Limits, PIPE_BYTES, limits, open_file, set_limits};
 
 /// Where in a file a parse error happened.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -175,7 +175,7 @@ fn capped(inner: impl Read + 'static, cap: u64, message: String) -> Box<dyn Read
 
 /// Refuses what is not a regular file or a pipe, by its metadata, before
 /// opening it; returns the file and, for a regular file, its size.
-pub(crate) fn open_file(path: &Path) -> io::Result<(File, Option<u64>)> {
+pub fn open_file(path: &Path) -> io::Result<(File, Option<u64>)> {
     let meta = std::fs::metadata(path)?;
     let kind = meta.file_type();
     if kind.is_dir() {
