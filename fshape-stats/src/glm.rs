@@ -431,6 +431,54 @@ pub fn test_maps(
     })
 }
 
+/// [`test_maps`] on the vertices `tested` marks (a template's unmasked
+/// vertices): the others are left out of everything — their values in
+/// `maps` are not read (NaN is fine there), they do not enter the maximum
+/// statistic, and TFCE's graph is the mesh without them
+/// ([`MeshGraph::restricted`]), so no cluster crosses them. Every
+/// per-vertex output is NaN there.
+pub fn test_maps_within(
+    design: &Design,
+    contrast: &Contrast,
+    maps: &[f64],
+    tested: &[bool],
+    graph: Option<&MeshGraph>,
+    inference: &Inference,
+) -> Result<MapTest, StatsError> {
+    let m = tested.len();
+    if maps.len() != design.n * m {
+        return Err(StatsError::Maps {
+            message: format!("maps: {} values for {} subjects × {m}", maps.len(), design.n),
+        });
+    }
+    if graph.is_some_and(|g| g.len() != m) {
+        return Err(StatsError::Inference { message: format!("TFCE needs the mesh of the {m} vertices") });
+    }
+    let kept: Vec<usize> = (0..m).filter(|&v| tested[v]).collect();
+    if kept.is_empty() {
+        return Err(StatsError::Maps { message: "every vertex is masked: nothing to test".into() });
+    }
+    let compact: Vec<f64> = maps.chunks_exact(m).flat_map(|row| kept.iter().map(|&v| row[v])).collect();
+    let graph = graph.map(|g| g.restricted(tested));
+    let test = test_maps(design, contrast, &compact, kept.len(), graph.as_ref(), inference)?;
+    let expand = |values: Vec<f64>| {
+        let mut full = vec![f64::NAN; m];
+        for (&v, x) in kept.iter().zip(values) {
+            full[v] = x;
+        }
+        full
+    };
+    Ok(MapTest {
+        statistic: expand(test.statistic),
+        effect: expand(test.effect),
+        p_uncorrected: expand(test.p_uncorrected),
+        p_fwe: expand(test.p_fwe),
+        tfce: test.tfce.map(expand),
+        tfce_p_fwe: test.tfce_p_fwe.map(expand),
+        ..test
+    })
+}
+
 /// Tests `contrast` on the subjects' `scores` (n × `k`, subject-major):
 /// the Hotelling–Lawley trace with Freedman–Lane permutations.
 pub fn test_scores(

@@ -40,7 +40,7 @@ pub mod maps;
 pub mod tfce;
 
 pub use design::{Contrast, Covariates, Design, Term};
-pub use glm::{Inference, MapTest, ScoresTest, StatKind, Tail, test_maps, test_scores};
+pub use glm::{Inference, MapTest, ScoresTest, StatKind, Tail, test_maps, test_maps_within, test_scores};
 pub use maps::{MapKind, subject_map, vertex_normals};
 pub use tfce::{MeshGraph, TfceParams};
 

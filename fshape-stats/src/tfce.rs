@@ -63,6 +63,27 @@ impl MeshGraph {
         MeshGraph { offsets, neighbours: pairs.into_iter().map(|(_, v)| v).collect(), areas: shape.vertex_volumes() }
     }
 
+    /// The graph of the vertices `keep` marks, numbered in order among
+    /// them: an edge stays when both its ends are kept, each kept vertex
+    /// keeps its area. A cluster cannot cross a vertex outside (a masked
+    /// medial wall separates what lies on either side of it).
+    pub fn restricted(&self, keep: &[bool]) -> MeshGraph {
+        assert_eq!(keep.len(), self.len(), "one flag per vertex");
+        let mut renumber = vec![usize::MAX; keep.len()];
+        let mut count = 0;
+        for (v, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
+            renumber[v] = count;
+            count += 1;
+        }
+        let (mut offsets, mut neighbours, mut areas) = (vec![0], Vec::new(), Vec::with_capacity(count));
+        for v in (0..keep.len()).filter(|&v| keep[v]) {
+            neighbours.extend(self.neighbours(v).iter().filter(|&&u| keep[u]).map(|&u| renumber[u]));
+            offsets.push(neighbours.len());
+            areas.push(self.areas[v]);
+        }
+        MeshGraph { offsets, neighbours, areas }
+    }
+
     /// Vertices.
     pub fn len(&self) -> usize {
         self.areas.len()

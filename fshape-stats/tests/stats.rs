@@ -4,7 +4,10 @@
 
 use fshape_mesh::FShape;
 use fshape_mesh::generate::{SplitMix64, icosphere};
-use fshape_stats::{Covariates, Design, Inference, MeshGraph, StatKind, TfceParams, test_maps, test_scores};
+use fshape_stats::tfce::tfce;
+use fshape_stats::{
+    Covariates, Design, Inference, MeshGraph, StatKind, TfceParams, test_maps, test_maps_within, test_scores,
+};
 
 fn two_groups(n: usize) -> Design {
     let x = (0..n).flat_map(|i| [1.0, f64::from(u8::from(i >= n / 2))]).collect();
@@ -166,39 +169,103 @@ fn bound(alpha: f64, datasets: usize) -> f64 {
     alpha + 2.33 * (alpha * (1.0 - alpha) / datasets as f64).sqrt()
 }
 
+/// The vertices of `sphere` outside a cap around −z (a medial wall's
+/// stand-in: a fifth of the sphere).
+fn outside_wall(sphere: &FShape) -> Vec<bool> {
+    (0..sphere.n_vertices()).map(|v| sphere.point(v)[2] > -0.6).collect()
+}
+
 #[test]
-fn under_no_effect_the_family_wise_false_positive_rate_is_five_percent() {
+fn under_no_effect_the_family_wise_false_positive_rate_is_five_percent_with_a_masked_wall() {
     let sphere = icosphere(2, 1.0);
     let graph = MeshGraph::new(&sphere);
+    let tested = outside_wall(&sphere);
     let datasets = 1000;
     let (mut max_t, mut tfce) = (0, 0);
     for d in 0..datasets {
-        let (design, maps) = population(&sphere, 16, 0.0, [0.0, 0.0, 1.0], 1000 + d as u64);
+        let (design, mut maps) = population(&sphere, 16, 0.0, [0.0, 0.0, 1.0], 1000 + d as u64);
+        // The wall's values are not read: NaN there would be refused.
+        for (k, x) in maps.iter_mut().enumerate() {
+            if !tested[k % tested.len()] {
+                *x = f64::NAN;
+            }
+        }
         let inference = Inference {
             permutations: 100,
             seed: d as u64,
             tfce: Some(TfceParams { steps: 50, ..TfceParams::default() }),
             ..Inference::default()
         };
-        let test = test_maps(
-            &design,
-            &design.contrast("group").unwrap(),
-            &maps,
-            sphere.n_vertices(),
-            Some(&graph),
-            &inference,
-        )
-        .unwrap();
+        let test =
+            test_maps_within(&design, &design.contrast("group").unwrap(), &maps, &tested, Some(&graph), &inference)
+                .unwrap();
+        assert!(test.p_fwe.iter().zip(&tested).all(|(p, t)| p.is_nan() != *t));
         max_t += usize::from(test.p_fwe.iter().any(|&p| p <= 0.05));
         tfce += usize::from(test.tfce_p_fwe.unwrap().iter().any(|&p| p <= 0.05));
     }
     let (max_t, tfce) = (max_t as f64 / datasets as f64, tfce as f64 / datasets as f64);
-    eprintln!("family-wise false-positive rate over {datasets} nulls: max-t {max_t}, TFCE {tfce}");
+    eprintln!("family-wise false-positive rate over {datasets} nulls, wall masked: max-t {max_t}, TFCE {tfce}");
     // A correct test sits at 5 %: not above (beyond chance), and not far
     // below (a test that never rejects would pass the first check alone).
     for rate in [max_t, tfce] {
         assert!(rate <= bound(0.05, datasets), "{rate}");
         assert!(rate >= 0.05 - (bound(0.05, datasets) - 0.05), "{rate}");
+    }
+}
+
+#[test]
+fn a_masked_vertex_is_never_read_and_no_cluster_crosses_it() {
+    let sphere = icosphere(2, 1.0);
+    let graph = MeshGraph::new(&sphere);
+    let m = sphere.n_vertices();
+    // A masked belt |z| < 0.3 between two caps.
+    let tested: Vec<bool> = (0..m).map(|v| sphere.point(v)[2].abs() >= 0.3).collect();
+    let (design, maps) = population(&sphere, 12, 1.5, [0.0, 0.0, 1.0], 5);
+    let inference = Inference { permutations: 64, seed: 2, tfce: Some(TfceParams::default()), ..Inference::default() };
+    let contrast = design.contrast("group").unwrap();
+    let with = |fill: f64| {
+        let mut maps = maps.clone();
+        for (k, x) in maps.iter_mut().enumerate() {
+            if !tested[k % m] {
+                *x = fill;
+            }
+        }
+        test_maps_within(&design, &contrast, &maps, &tested, Some(&graph), &inference).unwrap()
+    };
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let reference = with(0.0);
+    for fill in [f64::NAN, 1e300, -7.0] {
+        let other = with(fill);
+        assert_eq!(bits(&reference.statistic), bits(&other.statistic));
+        assert_eq!(bits(reference.tfce.as_ref().unwrap()), bits(other.tfce.as_ref().unwrap()));
+        assert_eq!(bits(&reference.max_null), bits(&other.max_null));
+    }
+    // TFCE on the belted sphere: a plateau on each cap. The north cap's
+    // enhancement does not see the south one (their clusters are apart),
+    // unlike on the whole sphere with the belt at the plateau's height.
+    let north = |v: usize| sphere.point(v)[2] >= 0.3;
+    let caps: Vec<f64> = (0..m).map(|v| if tested[v] { 1.0 } else { 0.0 }).collect();
+    let kept: Vec<usize> = (0..m).filter(|&v| tested[v]).collect();
+    let restricted = graph.restricted(&tested);
+    let params = TfceParams::default();
+    let enhance = |s: &[f64], g: &MeshGraph| {
+        let mut out = vec![0.0; s.len()];
+        tfce(s, g, params, &mut out);
+        out
+    };
+    let both = enhance(&kept.iter().map(|&v| caps[v]).collect::<Vec<_>>(), &restricted);
+    let north_only = enhance(&kept.iter().map(|&v| if north(v) { 1.0 } else { 0.0 }).collect::<Vec<_>>(), &restricted);
+    let joined = enhance(&vec![1.0; m], &graph);
+    let areas = sphere.vertex_volumes();
+    let north_area: f64 = (0..m).filter(|&v| north(v)).map(|v| areas[v]).sum();
+    for (k, &v) in kept.iter().enumerate() {
+        if north(v) {
+            assert_eq!(both[k].to_bits(), north_only[k].to_bits());
+            // E = 1, H = 2, one threshold band: ∫_0^1 e h² dh = e / 3 (as the sum at
+            // 100 steps gives it, within its step).
+            assert!((both[k] - north_area / 3.0).abs() < 0.02 * north_area, "{} vs {}", both[k], north_area / 3.0);
+            assert!(joined[v] > 1.5 * both[k]);
+        }
     }
 }
 

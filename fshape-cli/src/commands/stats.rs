@@ -4,7 +4,9 @@
 //! at every vertex with permutations (FWE-corrected by the maximum
 //! statistic, TFCE as an option) and on the momenta's principal scores
 //! (Hotelling–Lawley), and writes the maps (GIfTI, PLY), pictures, a
-//! table and summary.json.
+//! table and summary.json. The template's masked vertices (its mask's
+//! zeros: a medial wall) are left out of every test: NaN in the maps,
+//! grey in the pictures, outside TFCE's graph.
 
 use std::path::{Path, PathBuf};
 
@@ -205,6 +207,8 @@ struct Summary<'a> {
     contrast: &'a fshape_stats::Contrast,
     inference: &'a Inference,
     alpha: f64,
+    /// The template's masked vertices, left out of every test.
+    masked_vertices: usize,
     maps: Vec<MapSummary>,
     multivariate: Option<ScoresSummary>,
     seconds: f64,
@@ -255,9 +259,14 @@ pub fn run(a: Args) -> Result<()> {
     }
     let graph = MeshGraph::new(&template);
     let areas = template.vertex_volumes();
-    let total_area: f64 = areas.iter().sum();
     let n = subjects.len();
     let m = template.n_vertices();
+    // The template's masked vertices (weight 0: a medial wall) are outside
+    // every test, geometric maps included: the region a study is about is
+    // the one its maps have values on.
+    let tested: Vec<bool> = template.mask().map_or_else(|| vec![true; m], |w| w.iter().map(|&w| w > 0.0).collect());
+    let masked_vertices = tested.iter().filter(|t| !**t).count();
+    let total_area: f64 = areas.iter().zip(&tested).filter(|(_, t)| **t).map(|(a, _)| a).sum();
     let mut outputs: Vec<(String, Vec<u8>)> = Vec::new();
     let mut map_summaries = Vec::new();
     let (azimuth, elevation) = a.view.camera.pair();
@@ -268,7 +277,7 @@ pub fn run(a: Args) -> Result<()> {
                 .with_context(|| format!("subject {i} ({})", s.names[1]))?;
             maps.extend(map);
         }
-        let test = fshape_stats::test_maps(&design, &contrast, &maps, m, Some(&graph), &inference)?;
+        let test = fshape_stats::test_maps_within(&design, &contrast, &maps, &tested, Some(&graph), &inference)?;
         let name = kind.name();
         let stat_name = if test.kind == StatKind::T { "t" } else { "f" };
         let mut files = Vec::new();
@@ -310,7 +319,10 @@ pub fn run(a: Args) -> Result<()> {
             min_p_fwe: p.iter().copied().fold(1.0, f64::min),
         };
         let tested = |v: f64| if test.kind == StatKind::T && !a.one_sided { v.abs() } else { v };
-        let peak = (0..m).max_by(|&x, &y| tested(test.statistic[x]).total_cmp(&tested(test.statistic[y]))).unwrap_or(0);
+        let peak = (0..m)
+            .filter(|&v| !test.statistic[v].is_nan())
+            .max_by(|&x, &y| tested(test.statistic[x]).total_cmp(&tested(test.statistic[y])))
+            .unwrap_or(0);
         map_summaries.push(MapSummary {
             map: name,
             description: kind.describe(),
@@ -373,6 +385,7 @@ pub fn run(a: Args) -> Result<()> {
         contrast: &contrast,
         inference: &inference,
         alpha: a.alpha,
+        masked_vertices,
         maps: map_summaries,
         multivariate,
         seconds: start.elapsed().as_secs_f64(),
@@ -415,7 +428,9 @@ pub fn run(a: Args) -> Result<()> {
 /// seen from the camera and from behind.
 fn picture(template: &FShape, test: &MapTest, p: &[f64], alpha: f64, azimuth: f64, elevation: f64) -> Result<Vec<u8>> {
     let bound = test.statistic.iter().fold(0.0f64, |b, v| b.max(v.abs()));
-    let shown: Vec<f64> = test.statistic.iter().zip(p).map(|(t, q)| if *q <= alpha { *t } else { 0.0 }).collect();
+    // Masked vertices stay NaN (drawn grey) in both rows.
+    let shown: Vec<f64> =
+        test.statistic.iter().zip(p).map(|(t, q)| if *q <= alpha || t.is_nan() { *t } else { 0.0 }).collect();
     let all = template.clone().with_signal(Some(test.statistic.clone()))?;
     let thresholded = template.clone().with_signal(Some(shown))?;
     let azimuths: &[f64] = if template.dim() == 3 { &[azimuth, azimuth + 180.0] } else { &[azimuth] };
