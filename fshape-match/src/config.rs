@@ -28,6 +28,7 @@
 //! kernel_signal = "gaussian:0.5"    # omit for a purely geometric term
 //! kernel_grass = "binet"            # (default binet)
 //! tolerance = 1e-6                  # truncation of k_p (default: exact)
+//! masked_geometry = true            # a masked region's geometry counts (default true)
 //!
 //! [optimizer]                       # matching only; every key optional
 //! method = "lbfgs"                  # lbfgs | gradient-descent          (default lbfgs)
@@ -387,6 +388,20 @@ pub struct AttachmentSection {
     /// Truncation tolerance of k_p (default exact).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tolerance: Option<f64>,
+    /// Whether a masked region's geometry counts in the attachment
+    /// (default true: a medial wall is real surface, only its signal is
+    /// missing; false leaves it free to lie anywhere).
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub masked_geometry: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+// serde's skip_serializing_if passes a reference.
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 fn binet() -> GrassKernelSpec {
@@ -682,7 +697,7 @@ impl Config {
         if let Some(tol) = a.tolerance {
             k = k.truncated(tol).map_err(|e| bad("attachment.tolerance", e.to_string()))?;
         }
-        Ok(k)
+        Ok(k.with_masked_geometry(a.masked_geometry))
     }
 
     /// The stages of the coarse-to-fine schedule (`[schedule] kernel_geom`

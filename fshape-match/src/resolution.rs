@@ -298,6 +298,24 @@ pub fn prolongate(
     Ok((q0, qf))
 }
 
+/// `coarse`'s signal (and mask) read at `fine`'s vertices as [`sample`]
+/// reads values. With a mask m the signal read is the mask-weighted
+/// mean Σ bᵢ mᵢ fᵢ / Σ bᵢ mᵢ of the closest cell's corners (b the
+/// barycentric weights), so a masked corner's missing value never
+/// enters; the mask read is Σ bᵢ mᵢ, 0 (and the signal NaN) where every
+/// corner is masked, a soft edge in between.
+pub fn sample_signal(coarse: &FShape, fine: &FShape) -> Result<(Vec<f64>, Option<Vec<f64>>), MatchError> {
+    let signal = coarse.signal().ok_or_else(|| MatchError::InvalidInput("resampling: no signal to read".into()))?;
+    let Some(mask) = coarse.mask() else {
+        return Ok((sample(coarse, fine, signal, 1)?, None));
+    };
+    let pairs: Vec<f64> = signal.iter().zip(mask).flat_map(|(&f, &m)| [if m > 0.0 { m * f } else { 0.0 }, m]).collect();
+    let read = sample(coarse, fine, &pairs, 2)?;
+    let (signal, mask) =
+        read.chunks_exact(2).map(|r| if r[1] > 0.0 { (r[0] / r[1], r[1].min(1.0)) } else { (f64::NAN, 0.0) }).unzip();
+    Ok((signal, Some(mask)))
+}
+
 /// The piecewise-linear function of `coarse` with `width` values per
 /// vertex (`values`, vertex-major) read at every vertex of `fine`, at its
 /// closest point on `coarse`: `width` values per fine vertex.

@@ -79,7 +79,9 @@ pub fn inner_product_grad(
 /// ([`CellFeatures`]): ⟨X,Y⟩ = ⟨X_f, Y_f⟩ + ⟨X_g, Y_g⟩ with k_f on the
 /// functional parts and no signal factor on the geometric ones, that is
 /// the kernel k_p k_t (m m' k_f + (1 − m)(1 − m')): a sum of products of
-/// positive definite kernels, so A stays a squared distance. The parts go
+/// positive definite kernels, so A stays a squared distance (without the
+/// geometric term when [`VarifoldKernel::masked_geometry`] is off: k_p k_t
+/// m m' k_f alone, still positive definite). The parts go
 /// through the same pair engine as unmasked measures; an unmasked side
 /// counts as share 1 everywhere, and all-ones masks give the same bits as
 /// none.
@@ -103,7 +105,7 @@ fn inner(
         FeatureGrad { centre: vec![0.0; n * d], dir: vec![0.0; n * du], weight: vec![0.0; n], signal: vec![0.0; n] };
     let share = x.mask();
     for (xp, idx, yp, kp, functional) in [(&xf, &xfi, &yf, k, true), (&xg, &xgi, &yg, &geometric, false)] {
-        if xp.is_empty() || yp.is_empty() {
+        if xp.is_empty() || yp.is_empty() || (!functional && !k.masked_geometry()) {
             continue;
         }
         let (v, gp) = inner_plain(xp, yp, kp, grad, parallel)?;

@@ -52,6 +52,9 @@ pub struct VarifoldKernel {
     position: Kernel,
     signal: SignalKernel,
     grass: GrassKernel,
+    /// Whether a masked region's geometry counts (the geometric part of a
+    /// masked measure, [`crate::CellFeatures`]); true unless set.
+    masked_geometry: bool,
 }
 
 impl VarifoldKernel {
@@ -66,13 +69,27 @@ impl VarifoldKernel {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn try_new(position: Kernel, signal: SignalKernel, grass: GrassKernel) -> Result<Self, VarifoldError> {
-        Ok(VarifoldKernel { position, signal: signal.checked()?, grass: grass.checked()? })
+        Ok(VarifoldKernel { position, signal: signal.checked()?, grass: grass.checked()?, masked_geometry: true })
     }
 
     /// The same kernel with k_p smoothly truncated at tolerance τ
     /// ([`Kernel::truncated`]).
     pub fn truncated(&self, tol: f64) -> Result<Self, VarifoldError> {
         Ok(VarifoldKernel { position: self.position.truncated(tol)?, ..self.clone() })
+    }
+
+    /// The same kernel where a masked region's geometry counts or not:
+    /// with `false` the attachment of masked measures is the fvarifold of
+    /// the mask-weighted masses alone (still a squared distance), and
+    /// what is masked is free to lie anywhere. Unmasked measures are not
+    /// concerned.
+    pub fn with_masked_geometry(self, counts: bool) -> Self {
+        VarifoldKernel { masked_geometry: counts, ..self }
+    }
+
+    /// Whether a masked region's geometry counts (default true).
+    pub fn masked_geometry(&self) -> bool {
+        self.masked_geometry
     }
 
     /// k_p.

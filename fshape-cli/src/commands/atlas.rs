@@ -21,8 +21,9 @@ use crate::render::{self, SIZE, View};
 pub struct Args {
     /// The subjects' meshes (with a `signal` vertex property).
     pub subjects: Vec<PathBuf>,
-    /// A list of subjects, one per line: `mesh[,signal file]`, paths
-    /// relative to the list (read before the positional ones).
+    /// A list of subjects, one per line: `mesh[,signal file[,mask file]]`
+    /// (a mask as for `fshape match --source-mask`), paths relative to the
+    /// list (read before the positional ones).
     #[arg(long = "subjects")]
     pub list: Option<PathBuf>,
     /// The initial template (default: the first subject). Without a
@@ -30,6 +31,15 @@ pub struct Args {
     /// share its vertices).
     #[arg(long)]
     pub template: Option<PathBuf>,
+    /// The initial template's mask (as --source-mask of `fshape match`).
+    /// Without one, a template that takes the subjects' mean signal is
+    /// masked where none of them has a value.
+    #[arg(long)]
+    pub template_mask: Option<PathBuf>,
+    /// Accept NaN in signal files as missing values: each masks its
+    /// vertex.
+    #[arg(long)]
+    pub allow_missing: bool,
     #[command(flatten)]
     pub run: crate::args::Run,
     /// Vertex property of every mesh to read as the signal.
@@ -52,6 +62,8 @@ pub fn run(a: Args) -> Result<()> {
         subjects: &a.subjects,
         list: a.list.as_deref(),
         template: a.template.as_deref(),
+        template_mask: a.template_mask.as_deref(),
+        allow_missing: a.allow_missing,
         config: &a.run.config,
         out: &a.run.out,
         resume: a.run.resume,
@@ -67,10 +79,14 @@ pub fn run(a: Args) -> Result<()> {
 pub struct AtlasArgs<'a> {
     /// The subjects' mesh files (after those of `--subjects`).
     pub subjects: &'a [PathBuf],
-    /// A list file: one subject per line, `mesh[,signal.csv]`.
+    /// A list file: one subject per line, `mesh[,signal[,mask]]`.
     pub list: Option<&'a Path>,
     /// The initial template (default: the first subject).
     pub template: Option<&'a Path>,
+    /// Its mask.
+    pub template_mask: Option<&'a Path>,
+    /// NaN in a signal file masks its vertex.
+    pub allow_missing: bool,
     pub config: &'a Path,
     pub out: &'a Path,
     pub resume: bool,
@@ -148,30 +164,36 @@ struct Summary<'a> {
     files: Vec<String>,
 }
 
-/// The subjects' (mesh, signal CSV) paths: the list file's, then the
-/// positional ones.
-fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<(PathBuf, Option<PathBuf>)>> {
+/// A subject's files: its mesh, its signal and its mask.
+struct SubjectFiles {
+    mesh: PathBuf,
+    signal: Option<PathBuf>,
+    mask: Option<PathBuf>,
+}
+
+/// The subjects' files: the list file's, then the positional ones.
+fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<SubjectFiles>> {
     let mut paths = Vec::new();
     if let Some(list) = a.list {
         let base = list.parent().unwrap_or(Path::new("."));
         for io::table::Record { line, fields } in io::table::read_table(list)? {
-            let (mesh, signal) = match &fields[..] {
-                [mesh] => (mesh, None),
-                [mesh, signal] => (mesh, Some(signal).filter(|s| !s.is_empty())),
+            let optional = |k: usize| fields.get(k).filter(|s| !s.is_empty()).map(|s| base.join(s));
+            let mesh = match &fields[..] {
+                [mesh] | [mesh, _] | [mesh, _, _] => mesh,
                 _ => bail!(
-                    "{}:{line}: expected `mesh[,signal.csv]`, found {} cells: {}",
+                    "{}:{line}: expected `mesh[,signal[,mask]]`, found {} cells: {}",
                     list.display(),
                     fields.len(),
                     fields.join(" | ")
                 ),
             };
             if mesh.is_empty() {
-                bail!("{}:{line}: no mesh named (expected `mesh[,signal.csv]`)", list.display());
+                bail!("{}:{line}: no mesh named (expected `mesh[,signal[,mask]]`)", list.display());
             }
-            paths.push((base.join(mesh), signal.map(|s| base.join(s))));
+            paths.push(SubjectFiles { mesh: base.join(mesh), signal: optional(1), mask: optional(2) });
         }
     }
-    paths.extend(a.subjects.iter().map(|p| (p.clone(), None)));
+    paths.extend(a.subjects.iter().map(|p| SubjectFiles { mesh: p.clone(), signal: None, mask: None }));
     if paths.is_empty() {
         bail!("no subjects: give their files, or --subjects LIST");
     }
@@ -205,11 +227,16 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
     let paths = subject_paths(a)?;
     let subjects: Vec<FShape> = paths
         .iter()
-        .map(|(mesh, signal)| crate::inputs::load(mesh, a.signal_name.clone(), signal.as_deref()))
+        .map(|s| {
+            let masking = crate::inputs::Masking { mask: s.mask.as_deref(), allow_missing: a.allow_missing };
+            crate::inputs::load_masked(&s.mesh, a.signal_name.clone(), s.signal.as_deref(), &masking)
+        })
         .collect::<Result<_>>()?;
+    let template_masking = crate::inputs::Masking { mask: a.template_mask, allow_missing: a.allow_missing };
     let (template_path, template) = match a.template {
-        Some(p) => (p.to_path_buf(), crate::inputs::load(p, a.signal_name.clone(), None)?),
-        None => (paths[0].0.clone(), subjects[0].clone()),
+        Some(p) => (p.to_path_buf(), crate::inputs::load_masked(p, a.signal_name.clone(), None, &template_masking)?),
+        None if a.template_mask.is_some() => bail!("--template-mask needs --template (the first subject has its own)"),
+        None => (paths[0].mesh.clone(), subjects[0].clone()),
     };
     let template = fshape_match::atlas::initial_template(template, &subjects)?;
     let atlas = match Atlas::new(&template, &subjects, &config) {
@@ -283,7 +310,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         .collect::<Result<_, _>>()?;
     let mut matched = Vec::new();
     let mut subject_summaries = Vec::new();
-    for (i, (s, (path, _))) in result.subjects.iter().zip(&paths).enumerate() {
+    for (i, (s, SubjectFiles { mesh: path, .. })) in result.subjects.iter().zip(&paths).enumerate() {
         let dir = format!("subject_{i:03}");
         push(format!("{dir}/p0.csv"), io::csv::vectors_text(names, &s.p0).into_bytes());
         if kind != ModelKind::Lddmm {

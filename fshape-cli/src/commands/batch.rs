@@ -24,8 +24,9 @@ use serde::Serialize;
 #[derive(clap::Args)]
 pub struct Args {
     /// The pairs: a header naming the columns (source, target, and
-    /// optionally source_signal, target_signal, name), then one pair per
-    /// line; paths relative to the table, `#` comments.
+    /// optionally source_signal, target_signal, source_mask, target_mask,
+    /// name), then one pair per line; paths relative to the table, `#`
+    /// comments.
     pub pairs: PathBuf,
     /// The configuration of every registration (as for `fshape match`).
     #[arg(long)]
@@ -51,6 +52,10 @@ pub struct Args {
     /// Vertex property of every mesh to read as the signal.
     #[arg(long)]
     pub signal_name: Option<String>,
+    /// Accept NaN in signal files as missing values: each masks its
+    /// vertex.
+    #[arg(long)]
+    pub allow_missing: bool,
     #[command(flatten)]
     pub view: crate::args::View,
     #[command(flatten)]
@@ -70,6 +75,7 @@ pub fn run(a: Args) -> Result<()> {
         shard,
         index_only: a.index_only,
         signal_name: a.signal_name,
+        allow_missing: a.allow_missing,
         times: &a.times.times,
         view: a.view.camera.pair(),
         verbosity: a.report.verbosity(),
@@ -89,6 +95,8 @@ pub struct BatchArgs<'a> {
     /// Only write the index.
     pub index_only: bool,
     pub signal_name: Option<String>,
+    /// NaN in a signal file masks its vertex.
+    pub allow_missing: bool,
     pub times: &'a [f64],
     pub view: (f64, f64),
     /// How each row reports its progress (its lines start with its name).
@@ -106,15 +114,18 @@ struct Row {
     target: PathBuf,
     source_signal: Option<PathBuf>,
     target_signal: Option<PathBuf>,
+    source_mask: Option<PathBuf>,
+    target_mask: Option<PathBuf>,
     /// Why the row cannot run, if it cannot (the others still do).
     invalid: Option<String>,
 }
 
-const COLUMNS: [&str; 5] = ["source", "target", "source_signal", "target_signal", "name"];
+const COLUMNS: [&str; 7] = ["source", "target", "source_signal", "target_signal", "source_mask", "target_mask", "name"];
 
 /// Reads the table: `#` comments and blank lines skipped, a header naming
 /// its columns (`source` and `target` required; `source_signal`,
-/// `target_signal` and `name` optional, in any order), then one pair per
+/// `target_signal`, `source_mask`, `target_mask` and `name` optional, in
+/// any order), then one pair per
 /// line, paths relative to the table. A malformed row is returned with
 /// `invalid` set; a malformed header or an unreadable file is an error.
 fn read_pairs(path: &Path) -> Result<Vec<Row>> {
@@ -149,6 +160,8 @@ fn read_pairs(path: &Path) -> Result<Vec<Row>> {
             target: field(Some(target)).map_or_else(PathBuf::new, |f| base.join(f)),
             source_signal: field(col("source_signal")).map(|s| base.join(s)),
             target_signal: field(col("target_signal")).map(|s| base.join(s)),
+            source_mask: field(col("source_mask")).map(|s| base.join(s)),
+            target_mask: field(col("target_mask")).map(|s| base.join(s)),
             invalid: None,
         };
         row.invalid = if fields.len() != columns.len() {
@@ -294,7 +307,10 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
     }
     let resume = dir.join("checkpoint.bin").exists();
     let result = crate::commands::matching::run_with(&crate::commands::matching::MatchArgs {
-        masking: Default::default(),
+        masking: (
+            crate::inputs::Masking { mask: row.source_mask.as_deref(), allow_missing: a.allow_missing },
+            crate::inputs::Masking { mask: row.target_mask.as_deref(), allow_missing: a.allow_missing },
+        ),
         source: &row.source,
         target: &row.target,
         signals: (row.source_signal.as_deref(), row.target_signal.as_deref()),

@@ -60,6 +60,7 @@ fn attachment(geom: f64, signal: f64, tolerance: Option<f64>) -> Result<Attachme
         kernel_signal: Some(SignalKernelSpec::parse(&format!("gaussian:{signal}"))?),
         kernel_grass: GrassKernelSpec::parse("binet")?,
         tolerance,
+        masked_geometry: true,
     })
 }
 
@@ -118,6 +119,8 @@ fn run_atlas(list: &Path, template: &Path, config: &Path, out: &Path, view: (f64
         subjects: &[],
         list: Some(list),
         template: Some(template),
+        template_mask: None,
+        allow_missing: false,
         config,
         out,
         resume: false,

@@ -83,7 +83,7 @@ impl Level {
             Some(_) => vec![0.0; self.template.points().len()],
             None => self.template.points().iter().map(|v| v / self.metric.length).collect(),
         };
-        x.extend(self.template.signal().expect("levels carry a signal").iter().map(|v| v / self.metric.signal));
+        x.extend(known(self.template.signal().expect("levels carry a signal")).map(|v| v / self.metric.signal));
         x.resize(x.len() + subjects * self.unknowns.len(), 0.0);
         x
     }
@@ -162,13 +162,13 @@ impl Population {
             .points()
             .chunks_exact(dim)
             .zip(was.points().chunks_exact(dim))
-            .zip(now.signal().expect("set").iter().zip(was.signal().expect("set")))
+            .zip(known(now.signal().expect("set")).zip(known(was.signal().expect("set"))))
             .flat_map(|((a, b), (f, g))| a.iter().zip(b).map(|(a, b)| a - b).chain([f - g]))
             .collect();
         let change = sample(was, fine0, &change, dim + 1)?;
         let signal: Vec<f64> = change
             .chunks_exact(dim + 1)
-            .zip(fine0.signal().expect("levels carry a signal"))
+            .zip(known(fine0.signal().expect("levels carry a signal")))
             .map(|(d, f)| f + d[dim])
             .collect();
         let (mut x, points) = match (&level.hyper, &coarse.hyper_p0) {
@@ -213,4 +213,11 @@ impl Population {
         let coarse = self.solution(from, x)?;
         self.prolongate(to, &coarse)
     }
+}
+
+/// A signal as unknowns: a masked vertex (NaN, no value) enters as 0. Its
+/// gradient is 0 (the shooting projects it), so it stays 0, and the
+/// template takes NaN there again when the unknowns become a shape.
+fn known(signal: &[f64]) -> impl Iterator<Item = f64> + '_ {
+    signal.iter().map(|&v| if v.is_nan() { 0.0 } else { v })
 }

@@ -71,22 +71,52 @@ use crate::{Config, MatchError, StageRecord};
 /// template without a signal gets the subjects' mean signal, vertex by
 /// vertex when every subject has the template's vertex count, else their
 /// overall mean; with a signal, or when no subject has one, it is kept.
+///
+/// Masks: a subject's signal counts with its mask's weight (its masked
+/// vertices not at all). The template keeps a mask it was given;
+/// otherwise, when the subjects share its vertices and one of them is
+/// masked, its mask is the largest of theirs vertex by vertex, so a
+/// vertex is masked where no subject has a value (the medial wall of a
+/// population on one standard mesh, such as fs_LR 32k). A vertex of the
+/// template's mask without any subject's value takes the overall mean.
 pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape, MatchError> {
     if template.signal().is_some() {
         return Ok(template);
     }
     let n = template.n_vertices();
-    let signals: Vec<&[f64]> = subjects.iter().filter_map(|s| s.signal()).collect();
-    if signals.is_empty() {
+    let with: Vec<(&[f64], Option<&[f64]>)> =
+        subjects.iter().filter_map(|s| s.signal().map(|f| (f, s.mask()))).collect();
+    if with.is_empty() {
         return Ok(template);
     }
-    let mean = if signals.iter().all(|f| f.len() == n) {
-        (0..n).map(|v| signals.iter().map(|f| f[v]).sum::<f64>() / signals.len() as f64).collect()
-    } else {
-        let (sum, count) = signals.iter().fold((0.0, 0usize), |(s, c), f| (s + f.iter().sum::<f64>(), c + f.len()));
-        vec![sum / count.max(1) as f64; n]
-    };
-    Ok(template.with_signal(Some(mean))?)
+    let weight = |m: Option<&[f64]>, v: usize| m.map_or(1.0, |m| m[v]);
+    let (sum, total) = with.iter().fold((0.0, 0.0), |acc, (f, m)| {
+        f.iter().enumerate().fold(acc, |(s, t), (v, x)| {
+            let w = weight(*m, v);
+            if w > 0.0 { (s + w * x, t + w) } else { (s, t) }
+        })
+    });
+    let overall = if total > 0.0 { sum / total } else { 0.0 };
+    if !with.iter().all(|(f, _)| f.len() == n) {
+        let signal = vec![overall; n];
+        return Ok(template.with_signal(Some(signal))?);
+    }
+    let own = template.mask().map(<[f64]>::to_vec);
+    let largest = with
+        .iter()
+        .any(|(_, m)| m.is_some())
+        .then(|| (0..n).map(|v| with.iter().map(|(_, m)| weight(*m, v)).fold(0.0, f64::max)).collect::<Vec<f64>>());
+    let mask = own.or(largest);
+    let signal = (0..n)
+        .map(|v| {
+            let (s, t) = with.iter().fold((0.0, 0.0), |(s, t), (f, m)| {
+                let w = weight(*m, v);
+                if w > 0.0 { (s + w * f[v], t + w) } else { (s, t) }
+            });
+            if t > 0.0 { s / t } else { overall }
+        })
+        .collect();
+    Ok(template.with_signal_and_mask(Some(signal), mask)?)
 }
 
 /// One subject's part of an atlas result.
@@ -259,8 +289,9 @@ impl Staged for Population {
             return Ok(template);
         }
         let source = &self.stages.start;
-        let signal = crate::resolution::sample(source, &template, source.signal().expect("set in new"), 1)?;
-        Ok(template.with_signal(Some(signal))?)
+        let (signal, mask) = crate::resolution::sample_signal(source, &template)?;
+        let mask = template.mask().map(<[f64]>::to_vec).or(mask);
+        Ok(template.with_signal_and_mask(Some(signal), mask)?)
     }
 
     fn len_at(&self, k: usize) -> usize {

@@ -662,3 +662,75 @@ fn with_prealign_every_subject_is_moved_onto_the_initial_template_first() {
     }
     assert!(result.energies.value < result.stages[0].initial.value);
 }
+
+/// The template's mesh with its signal and a polar cap z > 0.6 masked
+/// (the medial wall's stand-in), the signal there set to `fill`.
+fn masked_on_template(signal_scale: f64, fill: f64) -> FShape {
+    let t = template();
+    let mask: Vec<f64> = t.points().chunks_exact(3).map(|p| if p[2] > 0.6 { 0.0 } else { 1.0 }).collect();
+    let f: Vec<f64> =
+        t.signal().unwrap().iter().zip(&mask).map(|(f, m)| if *m == 0.0 { fill } else { signal_scale * f }).collect();
+    t.with_signal_and_mask(Some(f), Some(mask)).unwrap()
+}
+
+#[test]
+fn a_masked_population_gives_its_mask_to_the_template_and_its_wall_is_never_read() {
+    // On the template's mesh: two subjects masked on the cap, one not.
+    let bare = || template().with_signal(None).unwrap();
+    let subjects = |fill: f64| vec![masked_on_template(1.0, fill), masked_on_template(3.0, fill), template()];
+    let initial = fshape_match::atlas::initial_template(bare(), &subjects(f64::NAN)).unwrap();
+    // Every vertex has a value in the third subject: nothing is masked,
+    // and the cap's signal is the third subject's alone.
+    let truth = template();
+    let (f, f0) = (initial.signal().unwrap(), truth.signal().unwrap());
+    let cap: Vec<bool> = initial.points().chunks_exact(3).map(|p| p[2] > 0.6).collect();
+    assert!(initial.mask().unwrap().iter().all(|m| *m == 1.0));
+    for v in 0..f.len() {
+        let want = if cap[v] { f0[v] } else { (1.0 + 3.0 + 1.0) * f0[v] / 3.0 };
+        assert!((f[v] - want).abs() <= 1e-15 * want.abs().max(1.0), "vertex {v}: {} against {want}", f[v]);
+    }
+    // Without the third, the cap is masked on the template too.
+    let two = |fill: f64| subjects(fill)[..2].to_vec();
+    let initial = fshape_match::atlas::initial_template(bare(), &two(f64::NAN)).unwrap();
+    let mask = initial.mask().unwrap();
+    assert!(cap.iter().zip(mask).all(|(c, m)| *m == if *c { 0.0 } else { 1.0 }));
+
+    // J and its gradient do not read a masked value, and the template's
+    // masked signal has no gradient.
+    let config = config("metamorphosis", "h1");
+    let eval = |fill: f64| {
+        let mut atlas = Atlas::new(&initial, &two(fill), &config).unwrap();
+        let x = random_point(&mut atlas, 0.2, 3);
+        let (j, g) = atlas.value_grad(0, &x).unwrap();
+        (x, j, g)
+    };
+    let (x, j, g) = eval(f64::NAN);
+    assert!(j.is_finite() && x.iter().all(|v| v.is_finite()));
+    for fill in [0.0, 1e300] {
+        let (_, j2, g2) = eval(fill);
+        assert_eq!((j.to_bits(), bits(&g)), (j2.to_bits(), bits(&g2)), "masked values {fill}");
+    }
+    let pn = 3 * initial.n_vertices();
+    for v in (0..initial.n_vertices()).filter(|&v| cap[v]) {
+        assert_eq!(g[pn + v], 0.0, "the masked vertex {v}'s signal has a gradient");
+    }
+    let mut atlas = Atlas::new(&initial, &two(f64::NAN), &config).unwrap();
+    let mut rng = SplitMix64(8);
+    let cell = std::cell::RefCell::new(&mut atlas);
+    let c = check_gradient(
+        |z| cell.borrow_mut().value_grad(0, z).unwrap().0,
+        &x,
+        &g,
+        &random_direction(x.len(), &mut rng),
+        1e-5,
+    );
+    assert!(c.rel_error < 1e-6, "{c:?}");
+
+    // A run ends with the mask on the template and on every matched state.
+    let mut atlas = Atlas::new(&initial, &two(f64::NAN), &config).unwrap();
+    assert_eq!(atlas.run(&mut ()).unwrap(), Outcome::Finished);
+    let result = atlas.result().unwrap();
+    assert_eq!(result.template.mask(), initial.mask());
+    assert!(result.template.signal().unwrap().iter().zip(&cap).all(|(f, c)| f.is_nan() == *c));
+    assert!(result.energies.value.is_finite());
+}
