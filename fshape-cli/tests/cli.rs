@@ -1722,3 +1722,133 @@ fn hcp_thickness_as_shipped_is_read_with_its_medial_wall_masked() {
     // (closest points found to rounding: 1e-16 of the range)
     assert!(q["signal_rms"].as_f64().unwrap() < 1e-12, "{q}");
 }
+
+#[test]
+fn a_masked_population_goes_through_atlas_stats_and_batch_with_its_wall_left_out() {
+    use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
+    // Four ellipsoids on one mesh, a cap z > 0.3 as their medial wall:
+    // the first two carry NaN there in a signal file (--allow-missing),
+    // the last two a signal of their own and a mask column.
+    let dir = tmp("masked_population");
+    std::fs::create_dir_all(&dir).unwrap();
+    let sphere = fshape_mesh::generate::icosphere(2, 0.5);
+    let n = sphere.n_vertices();
+    let wall: Vec<bool> = sphere.points().chunks_exact(3).map(|p| p[2] > 0.3).collect();
+    let walled = wall.iter().filter(|w| **w).count();
+    let column = |name: &str, values: &mut dyn Iterator<Item = f64>| -> String {
+        std::iter::once(format!("{name}\n")).chain(values.map(|v| format!("{v}\n"))).collect()
+    };
+    let mut list = String::new();
+    for i in 0..4 {
+        let a = 1.0 + 0.1 * i as f64;
+        let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [a * p[0], p[1], p[2] / a]).collect();
+        let f: Vec<f64> = pts.chunks_exact(3).map(|p| p[0] + 0.2 * f64::from(i / 2)).collect();
+        let mesh = sphere.clone().with_points(pts).unwrap();
+        if i < 2 {
+            write_mesh(&dir.join(format!("s{i}.ply")), &mesh, Encoding::Binary).unwrap();
+            let mut nan = f.iter().zip(&wall).map(|(f, w)| if *w { f64::NAN } else { *f });
+            std::fs::write(dir.join(format!("s{i}.csv")), column("thickness", &mut nan)).unwrap();
+            list.push_str(&format!("s{i}.ply,s{i}.csv\n"));
+        } else {
+            write_mesh(&dir.join(format!("s{i}.ply")), &mesh.with_signal(Some(f)).unwrap(), Encoding::Binary).unwrap();
+            let mut mask = wall.iter().map(|w| if *w { 0.0 } else { 1.0 });
+            std::fs::write(dir.join(format!("m{i}.csv")), column("mask", &mut mask)).unwrap();
+            list.push_str(&format!("s{i}.ply,,m{i}.csv\n"));
+        }
+    }
+    std::fs::write(dir.join("list.csv"), list).unwrap();
+    let config = dir.join("atlas.toml");
+    std::fs::write(
+        &config,
+        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.4]\n[integrator]\nsteps = 5\n\
+         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+         [optimizer]\nmax_iterations = 4\n",
+    )
+    .unwrap();
+    let s = |p: PathBuf| p.display().to_string();
+    let (list, config, atlas) = (s(dir.join("list.csv")), s(config), s(dir.join("atlas")));
+    let template = s(dir.join("s0.ply"));
+    let run = |args: &[&str]| {
+        let o = fshape(args);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    // NaN without --allow-missing: refused, naming the file.
+    let o = fshape(&["atlas", "--subjects", &list, "--config", &config, "--out", &atlas]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("s0.csv") && err.contains("--allow-missing"), "{err}");
+    // The template (the first subject's mesh, no signal) takes the mean
+    // signal and the wall as its mask; the matched states keep it.
+    run(&[
+        "atlas",
+        "--subjects",
+        &list,
+        "--template",
+        &template,
+        "--allow-missing",
+        "--config",
+        &config,
+        "--out",
+        &atlas,
+    ]);
+    let read = |p: PathBuf| read_mesh(&p, &ReadOptions::default()).unwrap();
+    let t = read(dir.join("atlas/template.ply"));
+    let masked: Vec<bool> = t.mask().unwrap().iter().map(|m| *m == 0.0).collect();
+    assert_eq!(masked, wall);
+    assert!(read(dir.join("atlas/subject_003/matched.ply")).mask().is_some());
+    // Stats: the wall is outside every test, NaN in the maps.
+    let covariates = dir.join("covariates.csv");
+    std::fs::write(&covariates, "subject,group\n0,a\n1,a\n2,b\n3,b\n").unwrap();
+    let out = dir.join("stats");
+    run(&[
+        "stats",
+        &atlas,
+        "--covariates",
+        &s(covariates),
+        "--contrast",
+        "group",
+        "--permutations",
+        "24",
+        "--maps",
+        "signal,area",
+        "--out",
+        &s(out.clone()),
+    ]);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["masked_vertices"].as_u64(), Some(walled as u64));
+    for map in ["signal", "area"] {
+        let stat = read(out.join(format!("{map}_t.ply")));
+        let f = stat.signal().unwrap();
+        assert!((0..n).all(|v| f[v].is_nan() == wall[v]), "{map}: NaN exactly on the wall");
+    }
+    // A batch row with mask columns registers with both walls masked; a
+    // mask of the wrong length fails its row alone, naming the file.
+    std::fs::write(
+        dir.join("pairs.csv"),
+        "source,target,source_signal,target_mask,name\n\
+         s0.ply,s3.ply,s0.csv,m3.csv,masked\n\
+         s0.ply,s3.ply,s0.csv,list.csv,short\n",
+    )
+    .unwrap();
+    let match_config = dir.join("match.toml");
+    std::fs::write(&match_config, std::fs::read_to_string(dir.join("atlas.toml")).unwrap()).unwrap();
+    let batch = dir.join("batch");
+    let o = fshape(&[
+        "batch",
+        &s(dir.join("pairs.csv")),
+        "--config",
+        &s(match_config),
+        "--allow-missing",
+        "--out",
+        &s(batch.clone()),
+    ]);
+    assert!(!o.status.success());
+    let end = std::fs::read_dir(batch.join("masked")).unwrap().filter_map(|e| e.ok()).map(|e| e.path()).find(|p| {
+        p.file_name().unwrap().to_string_lossy().starts_with("state_") && p.extension().is_some_and(|e| e == "ply")
+    });
+    let end = read(end.expect("a state PLY"));
+    assert_eq!(end.mask().unwrap().iter().map(|m| *m == 0.0).collect::<Vec<_>>(), wall);
+    let error = std::fs::read_to_string(batch.join("short/error.txt")).unwrap();
+    assert!(error.contains("list.csv"), "{error}");
+}
