@@ -44,9 +44,11 @@ class FShapeError(ValueError):
 
 class FShape:
     """A functional shape: vertices (n x d, d = 2 or 3), cells (m x 2
-    segments or m x 3 triangles) and an optional signal (one value per
-    vertex). Immutable; every value is checked on creation (finite
-    coordinates and signal, indices in range, no repeated index in a cell).
+    segments or m x 3 triangles), an optional signal (one value per vertex)
+    and an optional mask (a weight in [0, 1] per vertex; where it is 0 the
+    signal has no value and is NaN). Immutable; every value is checked on
+    creation (finite coordinates, a finite signal where the mask is
+    positive, indices in range, no repeated index in a cell).
     """
 
     def __init__(
@@ -54,6 +56,7 @@ class FShape:
         points: npt.ArrayLike,
         cells: npt.ArrayLike,
         signal: Optional[npt.ArrayLike] = None,
+        mask: Optional[npt.ArrayLike] = None,
     ) -> None: ...
     @property
     def points(self) -> npt.NDArray[np.float64]:
@@ -65,6 +68,9 @@ class FShape:
     def signal(self) -> Optional[npt.NDArray[np.float64]]:
         """The signal, one value per vertex, or None."""
     @property
+    def mask(self) -> Optional[npt.NDArray[np.float64]]:
+        """The mask, one weight in [0, 1] per vertex, or None."""
+    @property
     def dim(self) -> int:
         """The ambient dimension, 2 or 3."""
     @property
@@ -74,8 +80,11 @@ class FShape:
     def n_vertices(self) -> int: ...
     @property
     def n_cells(self) -> int: ...
+    def with_mask(self, mask: Optional[npt.ArrayLike]) -> "FShape":
+        """The same shape with another mask (or none); the signal is NaN where
+        the mask is 0 and must be finite elsewhere."""
     def with_signal(self, signal: Optional[npt.ArrayLike]) -> "FShape":
-        """The same shape with another signal (or none)."""
+        """The same shape with another signal (or none); a mask is kept."""
     def validate(self) -> "Validation":
         """Errors and warnings, each with its code and a message naming the
         vertex or cell (unused vertices, zero-area cells, boundaries...)."""
@@ -225,9 +234,16 @@ def write_mesh(
     with ascii=True), byte order and index order; the other formats refuse
     these options."""
 
-def read_signal(path: Union[str, "PathLike[str]"]) -> Tuple[str, npt.NDArray[np.float64]]:
+def read_signal(
+    path: Union[str, "PathLike[str]"], allow_missing: bool = False
+) -> Tuple[str, npt.NDArray[np.float64]]:
     """Reads a per-vertex signal (CSV column, GIfTI .shape.gii/.func.gii,
-    FreeSurfer curv such as lh.thickness, .mgh/.mgz): (name, values)."""
+    FreeSurfer curv such as lh.thickness, .mgh/.mgz): (name, values). With
+    allow_missing, NaN (HCP's medial wall) is accepted as a missing value."""
+
+def read_mask(path: Union[str, "PathLike[str]"], n_vertices: int) -> npt.NDArray[np.float64]:
+    """Reads a mask for a surface of n_vertices vertices: a FreeSurfer .label
+    (its vertices 1, the rest 0) or a per-vertex column of weights in [0, 1]."""
 
 def write_signal(
     path: Union[str, "PathLike[str]"], values: npt.ArrayLike, name: str = "signal", faces: int = 0
@@ -356,3 +372,18 @@ def report(
     the stages and the configuration. `source` and `target` as given to
     `match`, `result` what it returned; `view` the camera's azimuth and
     elevation in degrees."""
+
+def read_label(
+    path: Union[str, "PathLike[str]"],
+) -> Tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Reads a FreeSurfer label file: (vertices, points k x 3, values), as
+    nibabel's read_label(path, read_scalars=True) reads the first and last."""
+
+def write_label(
+    path: Union[str, "PathLike[str]"],
+    vertices: npt.ArrayLike,
+    points: Optional[npt.ArrayLike] = None,
+    values: Optional[npt.ArrayLike] = None,
+    subject: str = "",
+) -> None:
+    """Writes a FreeSurfer label file (coordinates and values default to 0)."""

@@ -61,26 +61,12 @@ pub struct Masking<'a> {
     pub allow_missing: bool,
 }
 
-/// A mask file's weights for a surface of `n` vertices.
-pub fn read_mask(path: &Path, n: usize) -> Result<Vec<f64>> {
-    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    if name.ends_with(".label") || name.ends_with(".label.gz") {
-        let label = io::label::read_label(path)?;
-        return label.mask(n).with_context(|| format!("{}", path.display()));
-    }
-    let column = io::read_signal_for(path, Some(n), false)?;
-    if column.values.len() != n {
-        bail!("{}: the mask has {} values for {n} vertices", path.display(), column.values.len());
-    }
-    Ok(column.values)
-}
-
 /// [`load`] with a mask: the mask file's weights, with 0 wherever the
 /// signal file has NaN when missing values are allowed.
 pub fn load_masked(path: &Path, signal_name: Option<String>, signal: Option<&Path>, m: &Masking) -> Result<FShape> {
     let shape = io::read_mesh(path, &ReadOptions { signal_name })?;
     let n = shape.n_vertices();
-    let mut mask = m.mask.map(|p| read_mask(p, n)).transpose()?;
+    let mut mask = m.mask.map(|p| io::read_mask(p, n)).transpose()?;
     let Some(file) = signal else {
         return match mask {
             Some(mask) => shape.with_mask(Some(mask)).with_context(|| format!("masking {}", path.display())),

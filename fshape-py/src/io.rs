@@ -59,11 +59,26 @@ pub(crate) fn write_mesh(
 
 /// Reads a per-vertex signal: a one-column CSV, a GIfTI data file
 /// (.shape.gii, .func.gii), a FreeSurfer curv file (lh.thickness) or
-/// .mgh/.mgz. Returns (name, values).
+/// .mgh/.mgz. Returns (name, values). With `allow_missing`, NaN (HCP's
+/// medial wall) is accepted as a missing value.
 #[pyfunction]
-pub(crate) fn read_signal<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(String, Bound<'py, PyArray1<f64>>)> {
-    let c = py.detach(|| io::read_signal(&path)).map_err(err)?;
+#[pyo3(signature = (path, allow_missing = false))]
+pub(crate) fn read_signal<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    allow_missing: bool,
+) -> PyResult<(String, Bound<'py, PyArray1<f64>>)> {
+    let c = py.detach(|| io::read_signal_for(&path, None, allow_missing)).map_err(err)?;
     Ok((c.name, c.values.into_pyarray(py)))
+}
+
+/// Reads a mask for a surface of `n_vertices` vertices: a FreeSurfer
+/// .label (its vertices 1, the rest 0) or a per-vertex column of weights
+/// in [0, 1] (CSV, GIfTI, curv, MGH).
+#[pyfunction]
+pub(crate) fn read_mask<'py>(py: Python<'py>, path: PathBuf, n_vertices: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let m = py.detach(|| io::read_mask(&path, n_vertices)).map_err(err)?;
+    Ok(m.into_pyarray(py))
 }
 
 /// Writes a per-vertex signal in the format its name says (.csv, .gii,
@@ -80,4 +95,58 @@ pub(crate) fn write_signal(
 ) -> PyResult<()> {
     let v: Vec<f64> = values.as_array().iter().copied().collect();
     py.detach(|| io::write_signal(&path, name, &v, faces)).map_err(err)
+}
+
+/// Reads a FreeSurfer label file: (vertices, points, values), the
+/// vertices as listed (indices from 0), their coordinates (k × 3) and
+/// their values, as nibabel's `read_label(path, read_scalars=True)` reads
+/// the first and last.
+#[pyfunction]
+#[expect(clippy::type_complexity, reason = "the three arrays of a label, as Python returns them")]
+pub(crate) fn read_label<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, numpy::PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
+    let l = py.detach(|| io::label::read_label(&path)).map_err(err)?;
+    let vertices: Vec<i64> = l.vertices.iter().map(|&v| v as i64).collect();
+    Ok((vertices.into_pyarray(py), crate::conversions::rows(py, l.points, 3), l.values.into_pyarray(py)))
+}
+
+/// Writes a FreeSurfer label file: its vertices (indices from 0), their
+/// coordinates (k × 3, default 0) and values (default 0); `subject` goes
+/// in the comment line.
+#[pyfunction]
+#[pyo3(signature = (path, vertices, points = None, values = None, subject = ""))]
+pub(crate) fn write_label(
+    py: Python<'_>,
+    path: PathBuf,
+    vertices: PyArrayLike1<'_, i64, AllowTypeChange>,
+    points: Option<numpy::PyArrayLike2<'_, f64, AllowTypeChange>>,
+    values: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
+    subject: &str,
+) -> PyResult<()> {
+    let mut list = Vec::with_capacity(vertices.as_array().len());
+    for (k, &v) in vertices.as_array().iter().enumerate() {
+        list.push(usize::try_from(v).map_err(|_| err(format!("vertices: entry {k} is the negative index {v}")))?);
+    }
+    let k = list.len();
+    let points: Vec<f64> = match points {
+        Some(p) if p.as_array().dim() != (k, 3) => {
+            return Err(err(format!("points: {:?} for {k} vertices (expected {k} x 3)", p.as_array().dim())));
+        }
+        Some(p) => p.as_array().iter().copied().collect(),
+        None => vec![0.0; 3 * k],
+    };
+    let values: Vec<f64> = match values {
+        Some(v) if v.as_array().len() != k => {
+            return Err(err(format!("values: {} for {k} vertices", v.as_array().len())));
+        }
+        Some(v) => v.as_array().iter().copied().collect(),
+        None => vec![0.0; k],
+    };
+    if let Some(x) = points.iter().chain(&values).find(|x| !x.is_finite()) {
+        return Err(err(format!("a label's coordinates and values must be finite (found {x})")));
+    }
+    let label = io::label::Label { vertices: list, points, values };
+    py.detach(|| io::label::write_label(&path, &label, subject)).map_err(err)
 }

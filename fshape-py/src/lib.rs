@@ -41,6 +41,9 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(io::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(io::write_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(io::read_signal, m)?)?;
+    m.add_function(wrap_pyfunction!(io::read_mask, m)?)?;
+    m.add_function(wrap_pyfunction!(io::read_label, m)?)?;
+    m.add_function(wrap_pyfunction!(io::write_label, m)?)?;
     m.add_function(wrap_pyfunction!(io::write_signal, m)?)?;
     m.add_function(wrap_pyfunction!(measures::signal_norm, m)?)?;
     m.add_function(wrap_pyfunction!(measures::attachment, m)?)?;

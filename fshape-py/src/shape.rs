@@ -10,8 +10,10 @@ use crate::conversions::rows;
 use crate::err;
 
 /// A functional shape: vertices (n × d, d = 2 or 3), cells (m × 2
-/// segments or m × 3 triangles, vertex indices) and an optional signal
-/// (one value per vertex). Immutable; every value is checked on creation.
+/// segments or m × 3 triangles, vertex indices), an optional signal (one
+/// value per vertex) and an optional mask (a weight in [0, 1] per vertex:
+/// where it is 0 the signal has no value and is NaN). Immutable; every
+/// value is checked on creation.
 #[pyclass(name = "FShape", module = "fshape", frozen)]
 #[derive(Clone)]
 pub(crate) struct PyFShape {
@@ -21,11 +23,12 @@ pub(crate) struct PyFShape {
 #[pymethods]
 impl PyFShape {
     #[new]
-    #[pyo3(signature = (points, cells, signal = None))]
+    #[pyo3(signature = (points, cells, signal = None, mask = None))]
     fn new(
         points: PyArrayLike2<'_, f64, AllowTypeChange>,
         cells: PyArrayLike2<'_, i64, AllowTypeChange>,
         signal: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
+        mask: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
     ) -> PyResult<Self> {
         let p = points.as_array();
         let c = cells.as_array();
@@ -41,7 +44,10 @@ impl PyFShape {
                 .push(usize::try_from(v).map_err(|_| err(format!("cells: cell {t} has the negative index {v}")))?);
         }
         let signal = signal.map(|s| s.as_array().iter().copied().collect());
-        let inner = FShape::try_new(dim, kind, p.iter().copied().collect(), flat_cells, signal).map_err(err)?;
+        let mask = mask.map(|m| m.as_array().iter().copied().collect());
+        let inner = FShape::try_new(dim, kind, p.iter().copied().collect(), flat_cells, None)
+            .and_then(|s| s.with_signal_and_mask(signal, mask))
+            .map_err(err)?;
         Ok(PyFShape { inner })
     }
 
@@ -63,6 +69,12 @@ impl PyFShape {
     #[getter]
     fn signal<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
         self.inner.signal().map(|f| PyArray1::from_slice(py, f))
+    }
+
+    /// The mask (one weight in [0, 1] per vertex), or None.
+    #[getter]
+    fn mask<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.inner.mask().map(|m| PyArray1::from_slice(py, m))
     }
 
     /// The ambient dimension (2 or 3).
@@ -89,7 +101,15 @@ impl PyFShape {
         self.inner.n_cells()
     }
 
-    /// The same shape with another signal (or none).
+    /// The same shape with another mask (or none); the signal is NaN
+    /// where the mask is 0 and must be finite elsewhere.
+    #[pyo3(signature = (mask))]
+    fn with_mask(&self, mask: Option<PyArrayLike1<'_, f64, AllowTypeChange>>) -> PyResult<Self> {
+        let m = mask.map(|s| s.as_array().iter().copied().collect());
+        Ok(PyFShape { inner: self.inner.clone().with_mask(m).map_err(err)? })
+    }
+
+    /// The same shape with another signal (or none); a mask is kept.
     #[pyo3(signature = (signal))]
     fn with_signal(&self, signal: Option<PyArrayLike1<'_, f64, AllowTypeChange>>) -> PyResult<Self> {
         let f = signal.map(|s| s.as_array().iter().copied().collect());
@@ -138,7 +158,12 @@ impl PyFShape {
             self.inner.n_cells(),
             self.inner.kind().name(),
             self.inner.dim(),
-            if self.inner.signal().is_some() { "with a signal" } else { "no signal" }
+            match (self.inner.signal(), self.inner.mask()) {
+                (Some(_), Some(_)) => "with a signal and a mask",
+                (Some(_), None) => "with a signal",
+                (None, Some(_)) => "no signal, a mask",
+                (None, None) => "no signal",
+            }
         )
     }
 

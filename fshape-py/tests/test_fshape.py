@@ -491,3 +491,59 @@ def test_report_writes_one_self_contained_page_of_the_registration(tmp_path):
     assert "How close it came" in page
     with pytest.raises(fshape.FShapeError, match="geodesic has 12 vertices"):
         fshape.report(path, fshape.FShape(src.points[:4], [[0, 1, 2], [1, 2, 3]]), tgt, r)
+
+
+def test_a_mask_travels_with_the_shape_and_a_masked_match_reads_no_masked_value(tmp_path):
+    src, tgt = sphere_pair()
+    cap = src.points[:, 2] > 0.3
+    mask = np.where(cap, 0.0, 1.0)
+    filled = lambda s, v: np.where(cap, v, s.signal)
+    masked = fshape.FShape(src.points, src.cells, filled(src, np.nan), mask)
+    assert np.array_equal(masked.mask, mask) and np.isnan(masked.signal[cap]).all()
+    assert "mask" in repr(masked)
+    # with_signal keeps the mask and stores NaN under it, whatever is given there.
+    again = masked.with_signal(filled(src, 1e300))
+    assert np.array_equal(again.mask, mask) and np.isnan(again.signal[cap]).all()
+    with pytest.raises(fshape.FShapeError, match="vertex"):
+        fshape.FShape(src.points, src.cells, np.where(cap, src.signal, np.nan), mask)
+    # Nothing masked is read: the same bits with NaN, 0 or 1e300 under the masks.
+    config = dict(CONFIG, optimizer={"max_iterations": 4}, schedule={"kernel_geom": ["gaussian:0.1"]})
+    runs = []
+    for v in (np.nan, 0.0, 1e300):
+        s = fshape.FShape(src.points, src.cells, filled(src, v), mask)
+        t = fshape.FShape(tgt.points, tgt.cells, np.where(cap, v, tgt.signal), mask)
+        runs.append(fshape.match(s, t, config))
+    for r in runs[1:]:
+        assert r["energies"]["value"] == runs[0]["energies"]["value"]
+        assert np.array_equal(r["p0"], runs[0]["p0"]) and np.array_equal(r["pf"], runs[0]["pf"])
+    assert np.all(runs[0]["pf"][cap] == 0.0)
+    assert np.array_equal(runs[0]["matched"].mask, mask)
+    # HCP's thickness as shipped: NaN on the medial wall, accepted when asked.
+    thickness = DATA / "conte69_32k" / "lh.thickness.csv.gz"
+    with pytest.raises(fshape.FShapeError, match="allow-missing"):
+        fshape.read_signal(thickness)
+    _, values = fshape.read_signal(thickness, allow_missing=True)
+    assert values.shape == (32492,) and np.isnan(values).sum() == 3221
+
+
+def test_freesurfer_labels_read_and_write_as_nibabel_reads_them(tmp_path):
+    rng = np.random.default_rng(3)
+    vertices = np.sort(rng.choice(500, size=120, replace=False))
+    points = rng.normal(scale=40.0, size=(120, 3)).round(3)
+    values = rng.random(120)
+    # As FreeSurfer writes a label (its fixed formats); nibabel and fshape
+    # read the same arrays, and the mask is the label's vertices.
+    lines = ["#!ascii label  , from subject bert vox2ras=TkReg", str(len(vertices))]
+    lines += [f"{v}  {p[0]:.3f}  {p[1]:.3f}  {p[2]:.3f} {x:.10f}" for v, p, x in zip(vertices, points, values)]
+    (tmp_path / "lh.cortex.label").write_text("\n".join(lines) + "\n")
+    nv, ns = nib.freesurfer.read_label(tmp_path / "lh.cortex.label", read_scalars=True)
+    fv, fp, fs = fshape.read_label(tmp_path / "lh.cortex.label")
+    assert np.array_equal(fv, nv) and np.array_equal(fs, ns) and np.array_equal(fp, points)
+    m = fshape.read_mask(tmp_path / "lh.cortex.label", 500)
+    assert np.array_equal(m, np.isin(np.arange(500), nv).astype(float))
+    with pytest.raises(fshape.FShapeError, match="vertex"):
+        fshape.read_mask(tmp_path / "lh.cortex.label", int(vertices.max()))
+    # What fshape writes, nibabel reads back.
+    fshape.write_label(tmp_path / "out.label", vertices, points, values, subject="bert")
+    wv, ws = nib.freesurfer.read_label(tmp_path / "out.label", read_scalars=True)
+    assert np.array_equal(wv, vertices) and np.array_equal(ws, values)

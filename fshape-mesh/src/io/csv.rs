@@ -95,7 +95,7 @@ pub fn parse_signal_from(
     let what = if allow_missing {
         "a number or `nan`"
     } else {
-        "a finite number (missing values are not accepted here; --allow-missing masks their vertices)"
+        "a finite number (missing values are not accepted here; allowing them, with --allow-missing or allow_missing=True, masks their vertices)"
     };
     while let Some(at) = next(&mut buf, &mut line_no)? {
         let t = buf.trim_ascii();

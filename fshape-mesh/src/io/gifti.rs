@@ -755,6 +755,8 @@ pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseEr
     let scalars: Vec<usize> = (0..g.arrays.len()).filter(|&k| g.arrays[k].per_vertex(Some(n))).collect();
     let labels = scalars.iter().map(|&k| g.arrays[k].label(k)).collect();
     let signal = scalars.iter().find(|&&k| g.arrays[k].name() == Some(signal_name)).copied();
+    let mask = scalars.iter().find(|&&k| g.arrays[k].name() == Some("mask") && signal_name != "mask").copied();
+    let mask = mask.map(|k| std::mem::take(&mut g.arrays[k].values));
     // The arrays are ours: move the values out rather than copy them.
     Ok(RawMesh {
         dim: 3,
@@ -762,7 +764,7 @@ pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseEr
         points: std::mem::take(&mut g.arrays[p].values),
         cells,
         signal: signal.map(|k| std::mem::take(&mut g.arrays[k].values)),
-        mask: None,
+        mask,
         scalars: labels,
     })
 }
@@ -902,6 +904,9 @@ pub fn surface_arrays(shape: &FShape, signal_name: &str) -> io::Result<Vec<DataA
     if let Some(f) = shape.signal() {
         arrays.push(signal_array(signal_name, f));
     }
+    if let Some(m) = shape.mask() {
+        arrays.push(signal_array("mask", m));
+    }
     Ok(arrays)
 }
 
@@ -918,7 +923,8 @@ pub fn signal_array(name: &str, values: &[f64]) -> DataArray {
 
 /// Writes a surface file (`.gii`, optionally `.gz`) with the writer's
 /// options, atomically; the signal, if any, is a SHAPE array named
-/// `signal`.
+/// `signal` (NaN where masked), and a masked shape's mask one named
+/// `mask`.
 pub fn write_file(path: &std::path::Path, shape: &FShape, opts: WriteOptions) -> Result<(), super::WriteError> {
     let io = |source| super::WriteError::Io { path: path.into(), source };
     if super::Format::from_path(path).map(|f| f.0) != Some(super::Format::Gifti) {

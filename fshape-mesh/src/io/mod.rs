@@ -213,6 +213,17 @@ pub enum ReadError {
         /// Its value.
         value: f64,
     },
+    /// A per-vertex file (a signal, a mask) whose count is not the
+    /// surface's.
+    #[error("{path}: {found} values for a surface of {expected} vertices", path = .path.display())]
+    Count {
+        /// The file.
+        path: PathBuf,
+        /// Values in it.
+        found: usize,
+        /// The surface's vertices.
+        expected: usize,
+    },
     /// The signal property the caller named is not in the file.
     #[error("{path}: no per-vertex scalar named `{name}` (available: {avail})", path = .path.display(), avail = list(.available))]
     SignalNotFound {
@@ -519,6 +530,24 @@ impl SignalFormat {
 /// Values must be finite.
 pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
     read_signal_for(path, None, false)
+}
+
+/// A mask for a surface of `n_vertices` vertices: a FreeSurfer `.label`
+/// (its vertices 1, the rest 0; [`label::Label::mask`]) or a per-vertex
+/// column of weights in [0, 1] in any format [`read_signal`] reads (the
+/// weights' range is checked when the mask joins its shape).
+pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> {
+    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if name.ends_with(".label") || name.ends_with(".label.gz") {
+        return label::read_label(path)?
+            .mask(n_vertices)
+            .map_err(|source| ReadError::Parse { path: path.into(), source });
+    }
+    let column = read_signal_for(path, Some(n_vertices), false)?;
+    if column.values.len() != n_vertices {
+        return Err(ReadError::Count { path: path.into(), found: column.values.len(), expected: n_vertices });
+    }
+    Ok(column.values)
 }
 
 /// [`read_signal`] for a mesh of `n_vertices` vertices: a CSV column is

@@ -5,10 +5,12 @@
 //! classic count-prefixed layout or the 5.1 `OFFSETS`/`CONNECTIVITY` layout;
 //! `VERTICES` are ignored. The signal is the `POINT_DATA` array (`SCALARS`
 //! with one component, or a one-component `FIELD` array) with the caller's
-//! name (default `signal`). Other attributes and all `CELL_DATA` are skipped.
+//! name (default `signal`); an array named `mask` is a masked shape's mask.
+//! Other attributes and all `CELL_DATA` are skipped.
 //!
 //! Write: version 4.2 (what fshapesTk and ParaView exchange), `double`
-//! points, `int` cells, `SCALARS signal double 1`. A planar shape gets
+//! points, `int` cells, `SCALARS signal double 1` (NaN where masked) and a
+//! masked shape's `SCALARS mask double 1`. A planar shape gets
 //! z = 0 and the title `fshape planar`, which this reader honours.
 
 use std::io::{self, Write};
@@ -351,6 +353,9 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
     let mut raw = RawMesh { dim: 3, points, ..RawMesh::default() };
     fill_cells(&mut raw, blocks).map_err(|kind| r.cur.error(kind))?;
     raw.scalars = arrays.iter().map(|a| a.0.clone()).collect();
+    if signal_name != "mask" {
+        raw.mask = arrays.iter().find(|a| a.0 == "mask").map(|a| a.1.clone());
+    }
     raw.signal = arrays.into_iter().find(|a| a.0 == signal_name).map(|a| a.1);
     if title == PLANAR_TITLE && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
         raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
@@ -440,9 +445,13 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
     if !ascii {
         writeln!(w)?;
     }
-    if let Some(f) = shape.signal() {
-        writeln!(w, "POINT_DATA {}\nSCALARS signal double 1\nLOOKUP_TABLE default", shape.n_vertices())?;
-        for &x in f {
+    let fields = [("signal", shape.signal()), ("mask", shape.mask())];
+    for (k, (name, values)) in fields.iter().filter_map(|(n, v)| v.map(|v| (n, v))).enumerate() {
+        if k == 0 {
+            writeln!(w, "POINT_DATA {}", shape.n_vertices())?;
+        }
+        writeln!(w, "SCALARS {name} double 1\nLOOKUP_TABLE default")?;
+        for &x in values {
             put(w, &[x])?;
         }
         if !ascii {
