@@ -952,7 +952,7 @@ fn atlas_runs_its_first_stage_on_a_coarser_template() {
 #[test]
 fn atlas_refuses_a_bad_list_line_naming_the_file_and_line() {
     let (files, list, config) = atlas_inputs("atlas_bad");
-    std::fs::write(&list, "a.ply\nb.ply,b.csv,extra\n").unwrap();
+    std::fs::write(&list, "a.ply\nb.ply,b.csv,m.csv,extra\n").unwrap();
     let o = fshape(&[
         "atlas",
         &files[0],
