@@ -1029,6 +1029,16 @@ fn demo_atlas_spheres_reports_the_template_against_the_truth() {
 /// A batch table in a directory of its own: three sphere-to-ellipsoid
 /// pairs (one with a signal CSV), a pair whose target does not exist and a
 /// line with too few fields; and a fast configuration.
+/// The small registration the batch and masked-population tests run on
+/// spheres of radius 0.5: one deformation width, `iterations` at most.
+fn sphere_config(iterations: usize) -> String {
+    format!(
+        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.4]\n[integrator]\nsteps = 5\n\
+         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+         [optimizer]\nmax_iterations = {iterations}\n"
+    )
+}
+
 fn batch_inputs(tag: &str) -> (PathBuf, String) {
     use fshape_mesh::io::{Encoding, write_mesh};
     let dir = tmp(tag);
@@ -1058,13 +1068,7 @@ fn batch_inputs(tag: &str) -> (PathBuf, String) {
     )
     .unwrap();
     let config = dir.join("match.toml");
-    std::fs::write(
-        &config,
-        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.4]\n[integrator]\nsteps = 5\n\
-         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
-         [optimizer]\nmax_iterations = 6\n",
-    )
-    .unwrap();
+    std::fs::write(&config, sphere_config(6)).unwrap();
     (dir, config.display().to_string())
 }
 
@@ -1758,13 +1762,7 @@ fn a_masked_population_goes_through_atlas_stats_and_batch_with_its_wall_left_out
     }
     std::fs::write(dir.join("list.csv"), list).unwrap();
     let config = dir.join("atlas.toml");
-    std::fs::write(
-        &config,
-        "[model]\nnorm = \"h1\"\nlength = 0.2\n[deformation]\nwidths = [0.4]\n[integrator]\nsteps = 5\n\
-         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
-         [optimizer]\nmax_iterations = 4\n",
-    )
-    .unwrap();
+    std::fs::write(&config, sphere_config(4)).unwrap();
     let s = |p: PathBuf| p.display().to_string();
     let (list, config, atlas) = (s(dir.join("list.csv")), s(config), s(dir.join("atlas")));
     let template = s(dir.join("s0.ply"));
@@ -1831,14 +1829,12 @@ fn a_masked_population_goes_through_atlas_stats_and_batch_with_its_wall_left_out
          s0.ply,s3.ply,s0.csv,list.csv,short\n",
     )
     .unwrap();
-    let match_config = dir.join("match.toml");
-    std::fs::write(&match_config, std::fs::read_to_string(dir.join("atlas.toml")).unwrap()).unwrap();
     let batch = dir.join("batch");
     let o = fshape(&[
         "batch",
         &s(dir.join("pairs.csv")),
         "--config",
-        &s(match_config),
+        &config,
         "--allow-missing",
         "--out",
         &s(batch.clone()),

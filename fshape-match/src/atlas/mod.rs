@@ -90,12 +90,11 @@ pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape,
         return Ok(template);
     }
     let weight = |m: Option<&[f64]>, v: usize| m.map_or(1.0, |m| m[v]);
-    let (sum, total) = with.iter().fold((0.0, 0.0), |acc, (f, m)| {
-        f.iter().enumerate().fold(acc, |(s, t), (v, x)| {
-            let w = weight(*m, v);
-            if w > 0.0 { (s + w * x, t + w) } else { (s, t) }
-        })
-    });
+    // A weighted sum and its total weight, a masked value left out.
+    let add = |(s, t): (f64, f64), w: f64, x: f64| if w > 0.0 { (s + w * x, t + w) } else { (s, t) };
+    let (sum, total) = with
+        .iter()
+        .fold((0.0, 0.0), |acc, (f, m)| f.iter().enumerate().fold(acc, |acc, (v, &x)| add(acc, weight(*m, v), x)));
     let overall = if total > 0.0 { sum / total } else { 0.0 };
     if !with.iter().all(|(f, _)| f.len() == n) {
         let signal = vec![overall; n];
@@ -109,10 +108,7 @@ pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape,
     let mask = own.or(largest);
     let signal = (0..n)
         .map(|v| {
-            let (s, t) = with.iter().fold((0.0, 0.0), |(s, t), (f, m)| {
-                let w = weight(*m, v);
-                if w > 0.0 { (s + w * f[v], t + w) } else { (s, t) }
-            });
+            let (s, t) = with.iter().fold((0.0, 0.0), |acc, (f, m)| add(acc, weight(*m, v), f[v]));
             if t > 0.0 { s / t } else { overall }
         })
         .collect();
