@@ -104,6 +104,50 @@ nib.freesurfer.write_morph_data(os.path.join(out, "lh.thickness"), thickness, fn
 for ext in ("mgh", "mgz"):
     nib.save(nib.MGHImage(thickness.reshape(-1, 1, 1), np.eye(4)), os.path.join(out, f"thickness.{ext}"))
 
+# A parcellation: FreeSurfer's .annot (new layout) and a GIfTI label array
+# with its label table. Two vertices belong to no region (-1 in .annot; key
+# 0, "???", in the GIfTI as HCP writes its medial wall).
+parcel = np.array([0, 0, 1, 1, 2, -1, 0, 1, 2, 2, -1, 1], dtype=np.int32)
+names = ["precentral", "postcentral", "insula"]
+ctab = np.array([[220, 20, 10, 0], [20, 220, 60, 0], [255, 192, 32, 0]], dtype=np.int32)
+nib.freesurfer.write_annot(os.path.join(out, "lh.parcels.annot"), parcel, ctab, names)
+csv("expected_parcels.csv", "key", parcel)
+table = nib.gifti.GiftiLabelTable()
+for key, name, rgba in [(0, "???", (0, 0, 0, 0)), (4, "precentral", (0.8, 0.1, 0.05, 1)),
+                        (7, "postcentral", (0.1, 0.8, 0.25, 1)), (9, "insula", (1, 0.75, 0.125, 1))]:
+    label = nib.gifti.GiftiLabel(key, *rgba)
+    label.label = name
+    table.labels.append(label)
+gifti_keys = np.array([4, 7, 9, 0], dtype=np.int32)[np.where(parcel < 0, 3, parcel)]
+nib.save(nib.gifti.GiftiImage(labeltable=table, darrays=[nib.gifti.GiftiDataArray(
+    gifti_keys, intent="NIFTI_INTENT_LABEL", datatype="NIFTI_TYPE_INT32", encoding="B64GZ")]),
+    os.path.join(out, "parcels.label.gii"))
+csv("expected_label_gii_keys.csv", "key", gifti_keys)
+
+# CIFTI-2 dense scalars as HCP writes them: CORTEX_LEFT without a "medial
+# wall" (vertices 5 and 10), CORTEX_RIGHT on another 12-vertex surface
+# without vertex 0, and two thalamus voxels, in two named maps.
+ax = nib.cifti2.cifti2_axes
+left = np.flatnonzero(parcel >= 0)
+right = np.arange(1, 12)
+voxels = np.array([[1, 2, 3], [2, 2, 3]])
+brain = (ax.BrainModelAxis.from_surface(left, 12, "CortexLeft")
+         + ax.BrainModelAxis.from_surface(right, 12, "CortexRight")
+         + ax.BrainModelAxis("thalamus_left", voxel=voxels, affine=np.eye(4), volume_shape=(4, 4, 4)))
+myelin = (1.25 + np.cos(np.arange(12) * 0.7) / 4.0).astype(np.float32)
+right_thickness = (3.0 - np.sin(np.arange(12) * 0.9) / 5.0).astype(np.float32)
+maps = np.vstack([
+    np.concatenate([thickness[left], right_thickness[right], [7.5, 8.5]]),
+    np.concatenate([myelin[left], myelin[right] + 1, [9.5, 10.5]]),
+]).astype(np.float32)
+cifti = nib.Cifti2Image(maps, header=(ax.ScalarAxis(["thickness", "myelin"]), brain))
+cifti.nifti_header.set_intent("ConnDenseScalar")
+cifti.to_filename(os.path.join(out, "maps.dscalar.nii"))
+expand = lambda values, where: np.where(np.isin(np.arange(12), where), values, np.nan)  # noqa: E731
+csv("expected_cifti_left_thickness.csv", "thickness", expand(thickness, left))
+csv("expected_cifti_left_myelin.csv", "myelin", expand(myelin, left))
+csv("expected_cifti_right_myelin.csv", "myelin", expand(myelin + np.float32(1), right))
+
 # nibabel reads every file back to the same arrays (the big-endian ones
 # included), so the fixtures are what they claim to be. nibabel writes
 # ASCII floats with six decimals ('%10.6f'): those match to 5e-7.
@@ -119,6 +163,10 @@ for name in sorted(os.listdir(out)):
         f = g.agg_data("triangle")
         s = g.agg_data("shape")
         assert np_equal(p, points) and np_equal(f, faces) and np_equal(s, thickness), name
+    elif name == "parcels.label.gii":
+        g = nib.load(path)
+        assert np.array_equal(g.darrays[0].data, gifti_keys), name
+        assert g.labeltable.get_labels_as_dict()[7] == "postcentral", name
     elif name.endswith(".gii"):
         assert np_equal(nib.load(path).darrays[0].data, thickness), name
     elif name == "lh.icosahedron":
@@ -126,6 +174,12 @@ for name in sorted(os.listdir(out)):
         assert np_equal(p, points) and np_equal(f, faces), name
     elif name == "lh.thickness":
         assert np_equal(nib.freesurfer.read_morph_data(path), thickness), name
+    elif name == "lh.parcels.annot":
+        keys, table, read_names = nib.freesurfer.read_annot(path)
+        assert np.array_equal(keys, parcel) and [n.decode() for n in read_names] == names, name
+    elif name == "maps.dscalar.nii":
+        img = nib.load(path)
+        assert np.array_equal(img.get_fdata(dtype=np.float32), maps), name
     elif name.startswith("thickness.mg"):
         assert np_equal(np.asarray(nib.load(path).dataobj).ravel(), thickness), name
 print(f"wrote {len(os.listdir(out))} files to {out} with nibabel {nib.__version__}")

@@ -6,5 +6,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=$(bash scripts/python-venv.sh)
 out=fshape-mesh/tests/data/nibabel
-rm -f "$out"/*.gii "$out"/*.csv "$out"/lh.* "$out"/*.mgh "$out"/*.mgz
+rm -f "$out"/*.gii "$out"/*.csv "$out"/lh.* "$out"/*.mgh "$out"/*.mgz "$out"/*.nii
 "$venv/bin/python" scripts/make-nibabel-fixtures.py "$out"

@@ -1,6 +1,7 @@
 //! FreeSurfer's binary files: triangle surfaces (`lh.pial`, `lh.white`, …),
-//! per-vertex "curv" files (`lh.thickness`, `lh.curv`, `lh.sulc`, …) and
-//! MGH/MGZ volumes holding one value per vertex (`lh.thickness.mgh`).
+//! per-vertex "curv" files (`lh.thickness`, `lh.curv`, `lh.sulc`, …),
+//! MGH/MGZ volumes holding one value per vertex (`lh.thickness.mgh`) and
+//! annotations (`lh.aparc.annot`, a parcellation).
 //!
 //! FreeSurfer names carry no extension, so the surface and curv readers are
 //! chosen by their magic bytes (`FF FF FE` and `FF FF FF`); MGH has none
@@ -19,6 +20,7 @@
 use std::io::{self, Write};
 
 use super::cursor::Cursor;
+use super::parcellation::{Parcellation, Region};
 use super::{ParseError, ParseErrorKind, RawMesh};
 use crate::shape::{CellKind, FShape};
 
@@ -367,4 +369,118 @@ mod tests {
         let e = parse_surface(&bytes).unwrap_err();
         assert_eq!(e.kind, ParseErrorKind::NegativeIndex { cell: 3, value: -7 });
     }
+}
+
+/// A string of an annotation's colour table: its length (with the final
+/// NUL) then its bytes; the NUL and anything after it are dropped.
+fn annot_string(cur: &mut Cursor, what: &'static str) -> Result<String, ParseError> {
+    let n = count(cur, what, 1)?;
+    let b = cur.take(n, what)?;
+    let b = b.split(|&c| c == 0).next().unwrap_or(b);
+    Ok(super::cursor::lossy(b))
+}
+
+/// Parses an annotation (`lh.aparc.annot`), FreeSurfer's parcellation
+/// file, as FreeSurfer's `read_annotation.m` and nibabel's `read_annot`
+/// read it: the vertex count, a (vertex, value) pair per vertex, where the
+/// value packs the region's colour (r + 256 g + 65536 b), then a colour
+/// table in the old layout (a positive entry count) or the new one
+/// (version −2). Each vertex gets the table row of its colour as key, and
+/// −1 when its value is 0 or no row has its colour (nibabel's keys, with
+/// `orig_ids=False`). Alpha is 255 minus the table's transparency.
+pub fn parse_annot(data: &[u8]) -> Result<Parcellation, ParseError> {
+    let mut cur = Cursor::new(data);
+    cur.binary = true;
+    let n = count(&mut cur, "vertex and value pairs", 8)?;
+    let mut values = vec![0i32; n];
+    let mut seen = vec![false; n];
+    for _ in 0..n {
+        let at = cur.at();
+        let v = be_i32(&mut cur, "a vertex")?;
+        let value = be_i32(&mut cur, "a vertex's annotation value")?;
+        let k = usize::try_from(v).ok().filter(|&k| k < n).ok_or_else(|| ParseError {
+            at,
+            kind: ParseErrorKind::BadToken { expected: "a vertex index below the vertex count", found: v.to_string() },
+        })?;
+        if std::mem::replace(&mut seen[k], true) {
+            return Err(ParseError {
+                at,
+                kind: ParseErrorKind::BadToken { expected: "each vertex once", found: format!("vertex {k} again") },
+            });
+        }
+        values[k] = value;
+    }
+    let at = cur.at();
+    if be_i32(&mut cur, "the colour table flag")? == 0 {
+        return Err(ParseError { at, kind: ParseErrorKind::Missing { what: "the colour table (the flag is 0)" } });
+    }
+    let at = cur.at();
+    let first = be_i32(&mut cur, "the colour table's entry count or version")?;
+    // Each entry holds at least a name length and four colour numbers.
+    let mut regions = Vec::new();
+    // (packed colour, key) of every entry, to look the vertices' values up.
+    let mut by_value = Vec::new();
+    let mut entry = |cur: &mut Cursor, row: i32| -> Result<(), ParseError> {
+        let name = annot_string(cur, "a region name")?;
+        let mut c = [0i32; 4];
+        for x in &mut c {
+            *x = be_i32(cur, "a region colour")?;
+        }
+        let unit = |v: i32| f64::from(v) / 255.0;
+        by_value.push((c[0].wrapping_add(c[1].wrapping_shl(8)).wrapping_add(c[2].wrapping_shl(16)), row));
+        regions.push(Region { key: row, name, rgba: [unit(c[0]), unit(c[1]), unit(c[2]), unit(255 - c[3])] });
+        Ok(())
+    };
+    if first > 0 {
+        let m = usize::try_from(first).expect("positive");
+        if m.saturating_mul(20) > cur.remaining() {
+            return Err(ParseError {
+                at,
+                kind: ParseErrorKind::Truncated {
+                    what: "colour table entries",
+                    claimed: m as u64,
+                    available: cur.remaining(),
+                },
+            });
+        }
+        annot_string(&mut cur, "the colour table's file name")?;
+        for row in 0..first {
+            entry(&mut cur, row)?;
+        }
+    } else if first == -2 {
+        be_i32(&mut cur, "the colour table's largest index")?;
+        annot_string(&mut cur, "the colour table's file name")?;
+        let m = count(&mut cur, "colour table entries", 24)?;
+        for _ in 0..m {
+            let at = cur.at();
+            let row = be_i32(&mut cur, "a colour table index")?;
+            if row < 0 {
+                return Err(ParseError {
+                    at,
+                    kind: ParseErrorKind::BadToken {
+                        expected: "a non-negative colour table index",
+                        found: row.to_string(),
+                    },
+                });
+            }
+            entry(&mut cur, row)?;
+        }
+    } else {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::Unsupported {
+                what: "colour table version (fshape reads the old layout and version -2)",
+                found: first.to_string(),
+            },
+        });
+    }
+    by_value.sort_unstable();
+    let keys = values
+        .iter()
+        .map(|&v| match by_value.binary_search_by_key(&v, |&(p, _)| p) {
+            Ok(i) if v != 0 => by_value[i].1,
+            _ => -1,
+        })
+        .collect();
+    Ok(Parcellation { keys, regions })
 }

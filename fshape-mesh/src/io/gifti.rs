@@ -23,6 +23,7 @@ use std::path::Path;
 use base64::Engine;
 use quick_xml::events::Event;
 
+use super::parcellation::{Parcellation, Region};
 use super::{Location, ParseError, ParseErrorKind, RawMesh};
 use crate::shape::{CellKind, FShape};
 
@@ -182,11 +183,16 @@ impl DataType {
         x.fract() == 0.0 && (lo..=hi).contains(&x)
     }
 
-    fn is_integer(self) -> bool {
+    /// The type of a NIfTI `datatype` code (`16` is `FLOAT32`).
+    pub(crate) fn from_code(code: i32) -> Option<DataType> {
+        TYPES.iter().find(|t| t.2 == code).map(|t| t.0)
+    }
+
+    pub(crate) fn is_integer(self) -> bool {
         !matches!(self, DataType::F32 | DataType::F64)
     }
 
-    fn decode(self, b: &[u8], big: bool) -> f64 {
+    pub(crate) fn decode(self, b: &[u8], big: bool) -> f64 {
         macro_rules! num {
             ($t:ty) => {{
                 let a = b.try_into().expect("chunks have the type's size");
@@ -207,7 +213,7 @@ impl DataType {
         }
     }
 
-    fn encode(self, v: f64, big: bool, out: &mut Vec<u8>) {
+    pub(crate) fn encode(self, v: f64, big: bool, out: &mut Vec<u8>) {
         macro_rules! num {
             ($t:ty) => {{
                 let x = v as $t;
@@ -303,11 +309,78 @@ impl DataArray {
     }
 }
 
-/// A parsed GIfTI file: its data arrays in file order.
+/// A parsed GIfTI file: its data arrays in file order, and its label
+/// table (the names of a label array's keys).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Gifti {
     /// The data arrays.
     pub arrays: Vec<DataArray>,
+    /// The `LabelTable`'s labels, in file order.
+    pub labels: Vec<Region>,
+}
+
+/// A `Label` of the label table: its key and colour (its name is the
+/// element's text).
+fn label_attributes(e: &quick_xml::events::BytesStart) -> Result<Region, ParseErrorKind> {
+    let mut r = Region { key: 0, name: String::new(), rgba: [0.0; 4] };
+    let mut key = None;
+    for a in e.attributes() {
+        let a = a.map_err(|e| bad("a well-formed attribute", &e.to_string()))?;
+        let value = a
+            .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+            .map_err(|e| bad("a well-formed attribute value", &e.to_string()))?;
+        let v = value.trim();
+        let colour =
+            || v.parse::<f64>().ok().filter(|c| (0.0..=1.0).contains(c)).ok_or_else(|| bad("a colour in [0, 1]", v));
+        match a.key.as_ref() {
+            "Key" | "Index" => key = Some(v.parse::<i32>().map_err(|_| bad("a label key (a whole number)", v))?),
+            "Red" => r.rgba[0] = colour()?,
+            "Green" => r.rgba[1] = colour()?,
+            "Blue" => r.rgba[2] = colour()?,
+            "Alpha" => r.rgba[3] = colour()?,
+            _ => {}
+        }
+    }
+    r.key = key.ok_or(ParseErrorKind::Missing { what: "the Label's Key" })?;
+    Ok(r)
+}
+
+/// The parcellation of a label file (`.label.gii`): its one
+/// `NIFTI_INTENT_LABEL` array, whose values are keys of the label table.
+pub fn parcellation(g: &Gifti) -> Result<Parcellation, ParseError> {
+    let at = Location::Line(1);
+    let arrays: Vec<&DataArray> = g.arrays.iter().filter(|a| a.intent == intent::LABEL).collect();
+    let a = match arrays[..] {
+        [a] => a,
+        [] => return Err(ParseError { at, kind: ParseErrorKind::Missing { what: "a NIFTI_INTENT_LABEL array" } }),
+        _ => {
+            return Err(ParseError {
+                at,
+                kind: ParseErrorKind::Unsupported {
+                    what: "label file with several label arrays (fshape reads one)",
+                    found: arrays.len().to_string(),
+                },
+            });
+        }
+    };
+    if !a.per_vertex(None) || !a.data_type.is_integer() {
+        return Err(ParseError {
+            at,
+            kind: ParseErrorKind::BadToken {
+                expected: "a label array of one integer per vertex",
+                found: format!("{:?} of {}", a.dims, a.data_type.name()),
+            },
+        });
+    }
+    // Integer arrays hold whole numbers of their type; keys are 32-bit.
+    let keys = a
+        .values
+        .iter()
+        .map(|&v| {
+            i32::try_from(v as i64).map_err(|_| ParseError { at, kind: bad("a 32-bit label key", &v.to_string()) })
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(Parcellation { keys, regions: g.labels.clone() })
 }
 
 /// An error at byte `offset` of the XML, reported by its line.
@@ -592,6 +665,8 @@ pub fn parse_in(data: &[u8], folder: Option<&Path>) -> Result<Gifti, ParseError>
     let (mut md_name, mut md_value) = (None, None);
     let mut declared = None;
     let mut seen_root = false;
+    let mut labels = Vec::new();
+    let mut label: Option<Region> = None;
     loop {
         let at = reader.buffer_position() as usize;
         let event = reader
@@ -613,6 +688,14 @@ pub fn parse_in(data: &[u8], folder: Option<&Path>) -> Result<Gifti, ParseError>
                             let v = a.value.trim().to_string();
                             declared = Some(v.parse::<usize>().map_err(|_| at_err(bad("a count", &v)))?);
                         }
+                    }
+                }
+                if name == "Label" && stack.last().is_some_and(|p| p == "LabelTable") {
+                    let r = label_attributes(e).map_err(at_err)?;
+                    if empty {
+                        labels.push(r);
+                    } else {
+                        label = Some(r);
                     }
                 }
                 if name == "DataArray" {
@@ -657,6 +740,11 @@ pub fn parse_in(data: &[u8], folder: Option<&Path>) -> Result<Gifti, ParseError>
                         md_value = None;
                     }
                     "Data" if current.is_some() => data_text = Some(std::mem::take(&mut text)),
+                    "Label" if label.is_some() => {
+                        let mut r = label.take().expect("checked");
+                        r.name = std::mem::take(&mut text).trim().to_string();
+                        labels.push(r);
+                    }
                     "DataArray" => {
                         let h = current.take().expect("a DataArray end follows its start");
                         arrays.push(finish(data, h, data_text.take(), folder)?);
@@ -685,7 +773,7 @@ pub fn parse_in(data: &[u8], folder: Option<&Path>) -> Result<Gifti, ParseError>
             },
         ));
     }
-    Ok(Gifti { arrays })
+    Ok(Gifti { arrays, labels })
 }
 
 /// Parses a GIfTI file without external data files. Errors name the line.

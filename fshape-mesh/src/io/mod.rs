@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use crate::shape::{CellKind, FShape, ShapeError};
 
+pub mod cifti;
 pub mod csv;
 mod cursor;
 pub mod freesurfer;
@@ -22,6 +23,7 @@ pub mod image;
 pub mod label;
 pub mod mtx;
 pub mod obj;
+pub mod parcellation;
 pub mod ply;
 mod source;
 pub mod table;
@@ -134,6 +136,27 @@ pub enum ParseErrorKind {
     LongerThanMesh {
         /// The mesh's vertex count.
         vertices: u64,
+    },
+    /// A name asked for (a region, a structure, a map) is not in the file.
+    #[error("no {what} named `{name}` (the file has: {})", list(.available))]
+    UnknownName {
+        /// What kind of name.
+        what: &'static str,
+        /// The name asked for.
+        name: String,
+        /// The names the file has.
+        available: Vec<String>,
+    },
+    /// A file holding several things (structures, maps, regions) was
+    /// given without saying which.
+    #[error("name the {what} after the file, as {syntax} (the file has: {})", list(.available))]
+    NotChosen {
+        /// What must be chosen.
+        what: &'static str,
+        /// How to write the choice.
+        syntax: &'static str,
+        /// What the file has.
+        available: Vec<String>,
     },
     /// Two counts that must agree do not.
     #[error("{what}: expected {expected}, found {found}")]
@@ -532,16 +555,77 @@ pub fn read_signal(path: &Path) -> Result<csv::SignalColumn, ReadError> {
     read_signal_for(path, None, false)
 }
 
-/// A mask for a surface of `n_vertices` vertices: a FreeSurfer `.label`
-/// (its vertices 1, the rest 0; [`label::Label::mask`]) or a per-vertex
-/// column of weights in [0, 1] in any format [`read_signal`] reads (the
-/// weights' range is checked when the mask joins its shape).
-pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> {
+/// Splits `FILE:SELECTOR` (a CIFTI file's structure and map, a
+/// parcellation's regions) into the file and the selector. A path that
+/// names a file is all file; otherwise the file is the longest part
+/// before a `:` that names one.
+pub fn split_selector(path: &Path) -> (PathBuf, Option<String>) {
+    if path.exists() {
+        return (path.into(), None);
+    }
+    let s = path.to_string_lossy();
+    for (k, _) in s.match_indices(':').collect::<Vec<_>>().into_iter().rev() {
+        if Path::new(&s[..k]).is_file() {
+            return (PathBuf::from(&s[..k]), Some(s[k + 1..].to_string()));
+        }
+    }
+    (path.into(), None)
+}
+
+/// Whether a path names a parcellation: a FreeSurfer `.annot` or a GIfTI
+/// `.label.gii`.
+fn is_parcellation(path: &Path) -> bool {
     let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let name = name.strip_suffix(".gz").unwrap_or(&name);
+    name.ends_with(".annot") || name.ends_with(".label.gii")
+}
+
+/// Reads a parcellation: a FreeSurfer `.annot`
+/// ([`freesurfer::parse_annot`]) or a GIfTI label array with its label
+/// table ([`gifti::parcellation`]).
+pub fn read_parcellation(path: &Path) -> Result<parcellation::Parcellation, ReadError> {
+    let data = source::open(path, Expect::Any)?.read_all(path)?;
+    let parse = |source| ReadError::Parse { path: path.into(), source };
+    if Format::sniff(&data) == Some(Format::Gifti) {
+        gifti::parcellation(&gifti::parse_in(&data, path.parent()).map_err(parse)?).map_err(parse)
+    } else {
+        freesurfer::parse_annot(&data).map_err(parse)
+    }
+}
+
+/// A mask for a surface of `n_vertices` vertices: a FreeSurfer `.label`
+/// (its vertices 1, the rest 0; [`label::Label::mask`]), the regions of a
+/// parcellation named after the file (`lh.aparc.annot:precentral,postcentral`,
+/// also a `.label.gii`), or a per-vertex column of weights in [0, 1] in
+/// any format [`read_signal`] reads (the weights' range is checked when
+/// the mask joins its shape).
+pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> {
+    let (file, selector) = split_selector(path);
+    let name = file.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     if name.ends_with(".label") || name.ends_with(".label.gz") {
-        return label::read_label(path)?
+        return label::read_label(&file)?
             .mask(n_vertices)
-            .map_err(|source| ReadError::Parse { path: path.into(), source });
+            .map_err(|source| ReadError::Parse { path: file.clone(), source });
+    }
+    if is_parcellation(&file) {
+        let p = read_parcellation(&file)?;
+        if p.keys.len() != n_vertices {
+            return Err(ReadError::Count { path: file, found: p.keys.len(), expected: n_vertices });
+        }
+        let selector = selector.unwrap_or_default();
+        let names: Vec<&str> = selector.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
+        if names.is_empty() {
+            let source = ParseError {
+                at: Location::Byte(0),
+                kind: ParseErrorKind::NotChosen {
+                    what: "regions",
+                    syntax: "FILE:REGION,REGION",
+                    available: p.regions.iter().map(|r| r.name.clone()).collect(),
+                },
+            };
+            return Err(ReadError::Parse { path: file, source });
+        }
+        return p.mask(&names).map_err(|source| ReadError::Parse { path: file, source });
     }
     let column = read_signal_for(path, Some(n_vertices), false)?;
     if column.values.len() != n_vertices {
@@ -555,12 +639,27 @@ pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> 
 /// runaway file costs no more than the values expected. With
 /// `allow_missing`, NaN (a missing value, as HCP writes on the medial
 /// wall) is accepted; infinities never are.
+///
+/// A CIFTI-2 dense file (`.dscalar.nii`) is read for one surface structure,
+/// named after the file with, when the file has several maps, the map's
+/// name or number: `maps.dscalar.nii:CORTEX_LEFT:thickness`
+/// ([`cifti::Cifti::surface`]); the vertices the structure leaves out (the
+/// medial wall) are missing values.
 pub fn read_signal_for(
     path: &Path,
     n_vertices: Option<usize>,
     allow_missing: bool,
 ) -> Result<csv::SignalColumn, ReadError> {
+    let (file, selector) = split_selector(path);
+    let path = file.as_path();
     let input = source::open(path, Expect::Signal)?;
+    if cifti::is_nifti2(&input.prefix) {
+        let column = read_cifti(path, input, selector.as_deref(), n_vertices)?;
+        if let Some(k) = column.values.iter().position(|v| !(v.is_finite() || allow_missing && v.is_nan())) {
+            return Err(ReadError::NonFinite { path: path.into(), vertex: k, value: column.values[k] });
+        }
+        return Ok(column);
+    }
     let parse = |source| ReadError::Parse { path: path.into(), source };
     if let Some(f) = Format::sniff(&input.prefix).filter(|&f| f != Format::Gifti) {
         return Err(parse(ParseError {
@@ -601,6 +700,66 @@ pub fn read_signal_for(
         return Err(ReadError::NonFinite { path: path.into(), vertex: k, value: column.values[k] });
     }
     Ok(column)
+}
+
+/// One surface structure's map of a CIFTI-2 file, `selector` being
+/// `STRUCTURE[:MAP]`; without `n_vertices`, the structure's surface size
+/// (within what the file's size can stand for).
+fn read_cifti(
+    path: &Path,
+    input: source::Input,
+    selector: Option<&str>,
+    n_vertices: Option<usize>,
+) -> Result<csv::SignalColumn, ReadError> {
+    let parse = |source| ReadError::Parse { path: path.into(), source };
+    let c = cifti::Cifti::parse(input.read_all(path)?).map_err(parse)?;
+    let (structure, map) = match selector.map(|s| s.split_once(':').unwrap_or((s, ""))) {
+        Some((s, m)) if !s.is_empty() => (s, Some(m).filter(|m| !m.is_empty())),
+        _ => {
+            return Err(parse(ParseError {
+                at: Location::Byte(0),
+                kind: ParseErrorKind::NotChosen {
+                    what: "surface structure",
+                    syntax: "FILE:STRUCTURE or FILE:STRUCTURE:MAP",
+                    available: c
+                        .models
+                        .iter()
+                        .filter(|m| m.surface_vertices.is_some())
+                        .map(|m| m.structure.clone())
+                        .collect(),
+                },
+            }));
+        }
+    };
+    let n = match n_vertices {
+        Some(n) => n,
+        None => {
+            let n = c.model(structure).map_err(parse)?.surface_vertices.expect("a surface model");
+            let room = source::EXPANSION.saturating_mul(c.size() as u64).max(source::EXPANSION_FLOOR);
+            if n as u64 > room {
+                return Err(parse(ParseError {
+                    at: Location::Byte(0),
+                    kind: ParseErrorKind::TooMany {
+                        what: "surface vertices for a file this size (give the mesh)",
+                        claimed: n as u64,
+                        limit: room,
+                    },
+                }));
+            }
+            n
+        }
+    };
+    let values = c.surface(structure, map, n).map_err(parse)?;
+    let name = map.map_or_else(|| c.maps[0].clone(), str::to_string);
+    Ok(csv::SignalColumn { name, values })
+}
+
+/// Reads a CIFTI-2 file whole ([`cifti::Cifti::parse`]), to read its maps
+/// or write one back into a copy ([`cifti::Cifti::with_surface`], then
+/// [`write_atomic`]).
+pub fn read_cifti_file(path: &Path) -> Result<cifti::Cifti, ReadError> {
+    cifti::Cifti::parse(source::open(path, Expect::Any)?.read_all(path)?)
+        .map_err(|source| ReadError::Parse { path: path.into(), source })
 }
 
 /// Writes a per-vertex signal in the format the path names

@@ -298,9 +298,10 @@ fn check_start(prefix: &[u8], expect: Expect) -> Result<(), ParseError> {
         Expect::Signal => (
             prefix.starts_with(&super::freesurfer::CURV_MAGIC)
                 || prefix.starts_with(&[0, 0, 0, 1])
+                || super::cifti::is_nifti2(prefix)
                 || sniffed.is_some()
                 || is_text(prefix),
-            "a signal file (CSV text, GIfTI, FreeSurfer curv or MGH)",
+            "a signal file (CSV text, GIfTI, FreeSurfer curv, MGH or CIFTI-2)",
         ),
     };
     if ok || prefix.is_empty() || (expect != Expect::Text && looks_like_text(prefix)) {

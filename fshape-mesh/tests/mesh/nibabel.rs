@@ -244,3 +244,106 @@ fn bzip2_files_are_read_and_never_written() {
     assert!(!dir.join("u.ply.bz2").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn column(name: &str) -> Vec<f64> {
+    io::csv::read_signal(&fixture(name), true).unwrap().values
+}
+
+fn keys(name: &str) -> Vec<i32> {
+    column(name).iter().map(|&k| k as i32).collect()
+}
+
+#[test]
+fn parcellations_from_nibabel_read_to_its_keys_and_names() {
+    let annot = io::read_parcellation(&fixture("lh.parcels.annot")).unwrap();
+    assert_eq!(annot.keys, keys("expected_parcels.csv"));
+    let names: Vec<&str> = annot.regions.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["precentral", "postcentral", "insula"]);
+    assert_eq!(annot.regions[1].rgba, [20.0 / 255.0, 220.0 / 255.0, 60.0 / 255.0, 1.0]);
+    let gii = io::read_parcellation(&fixture("parcels.label.gii")).unwrap();
+    assert_eq!(gii.keys, keys("expected_label_gii_keys.csv"));
+    assert_eq!((gii.name(7), gii.name(0), gii.name(5)), (Some("postcentral"), Some("???"), None));
+    assert_eq!(gii.regions[1].rgba, [0.8, 0.1, 0.05, 1.0]);
+    // The same regions as masks, from either file.
+    let want: Vec<f64> = annot.keys.iter().map(|&k| f64::from(u8::from(k == 0 || k == 2))).collect();
+    assert_eq!(io::read_mask(&fixture("lh.parcels.annot:precentral,insula"), 12).unwrap(), want);
+    let path = format!("{}:precentral, insula", fixture("parcels.label.gii").display());
+    assert_eq!(io::read_mask(path.as_ref(), 12).unwrap(), want);
+    for (path, says) in [
+        (
+            format!("{}", fixture("lh.parcels.annot").display()),
+            "name the regions after the file, as FILE:REGION,REGION (the file has: precentral, postcentral, insula)",
+        ),
+        (
+            format!("{}:precentral,cuneus", fixture("lh.parcels.annot").display()),
+            "no region named `cuneus` (the file has: precentral, postcentral, insula)",
+        ),
+    ] {
+        let e = io::read_mask(path.as_ref(), 12).unwrap_err().to_string();
+        assert!(e.contains(says), "{e}");
+    }
+    let e = io::read_mask(&fixture("lh.parcels.annot:insula"), 13).unwrap_err().to_string();
+    assert!(e.contains("12 values for a surface of 13 vertices"), "{e}");
+}
+
+#[test]
+fn cifti_maps_from_nibabel_read_per_structure_with_nan_off_the_model() {
+    let same = |got: &[f64], want: &[f64]| {
+        assert_eq!(got.len(), want.len());
+        for (k, (g, w)) in got.iter().zip(want).enumerate() {
+            assert!(g == w || g.is_nan() && w.is_nan(), "vertex {k}: {g} against nibabel's {w}");
+        }
+    };
+    let maps = fixture("maps.dscalar.nii").display().to_string();
+    for (selector, expected) in [
+        ("CORTEX_LEFT:thickness", "expected_cifti_left_thickness.csv"),
+        ("CIFTI_STRUCTURE_CORTEX_LEFT:2", "expected_cifti_left_myelin.csv"),
+        ("CORTEX_RIGHT:myelin", "expected_cifti_right_myelin.csv"),
+    ] {
+        let path = format!("{maps}:{selector}");
+        let c = io::read_signal_for(path.as_ref(), Some(12), true).unwrap_or_else(|e| panic!("{selector}: {e}"));
+        same(&c.values, &column(expected));
+    }
+    // NaN off the model is a missing value, refused unless allowed.
+    let e = io::read_signal_for(format!("{maps}:CORTEX_LEFT:1").as_ref(), Some(12), false).unwrap_err();
+    assert!(e.to_string().contains("vertex 5 (counting from 0) is NaN"), "{e}");
+    for (selector, n, says) in [
+        (
+            "",
+            12,
+            "name the surface structure after the file, as FILE:STRUCTURE or FILE:STRUCTURE:MAP (the file has: CORTEX_LEFT, CORTEX_RIGHT)",
+        ),
+        (":CORTEX_LEFT", 12, "name the map (the file has several) after the file"),
+        (":THALAMUS_LEFT", 12, "no surface structure named `THALAMUS_LEFT` (the file has: CORTEX_LEFT, CORTEX_RIGHT)"),
+        (":CORTEX_LEFT:curvature", 12, "no map named `curvature` (the file has: thickness, myelin)"),
+        (":CORTEX_LEFT:3", 12, "no map named `3`"),
+        (":CORTEX_LEFT:myelin", 32492, "a map of another surface?): expected 32492, found 12"),
+    ] {
+        let e = io::read_signal_for(format!("{maps}{selector}").as_ref(), Some(n), true).unwrap_err().to_string();
+        assert!(e.contains(says), "{selector}: {e}");
+    }
+}
+
+#[test]
+fn a_cifti_map_written_back_changes_that_map_of_that_structure_only() {
+    let like = fixture("maps.dscalar.nii");
+    let original = std::fs::read(&like).unwrap();
+    let c = io::read_cifti_file(&like).unwrap();
+    let new: Vec<f64> = (0..12).map(|k| 0.5 + k as f64 / 8.0).collect();
+    let bytes = c.with_surface("CORTEX_RIGHT", Some("myelin"), &new).unwrap();
+    assert_eq!(bytes.len(), original.len());
+    let c2 = io::cifti::Cifti::parse(bytes.clone()).unwrap();
+    // The structure's vertices carry the new values, vertex 0 (off it) NaN.
+    let got = c2.surface("CORTEX_RIGHT", Some("myelin"), 12).unwrap();
+    assert!(got[0].is_nan() && got[1..] == new[1..], "{got:?}");
+    // Every other map and structure is the file's: the bytes differ only
+    // in the right cortex's myelin values (11 float32).
+    for (s, m) in [("CORTEX_LEFT", "thickness"), ("CORTEX_LEFT", "myelin"), ("CORTEX_RIGHT", "thickness")] {
+        let (a, b) = (c.surface(s, Some(m), 12).unwrap(), c2.surface(s, Some(m), 12).unwrap());
+        assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()), "{s} {m}");
+    }
+    let changed = original.iter().zip(&bytes).filter(|(a, b)| a != b).count();
+    assert!((1..=44).contains(&changed), "{changed} bytes changed");
+    let e = c.with_surface("CORTEX_RIGHT", Some("myelin"), &new[..11]).unwrap_err().to_string();
+    assert!(e.contains("expected 12, found 11"), "{e}");
+}
