@@ -90,6 +90,27 @@ fn gz(path: &Path, parts: &[(&[u8], usize)]) {
     enc.finish().unwrap().flush().unwrap();
 }
 
+/// A little-endian CIFTI-2 file: a NIfTI-2 header with matrix dimensions
+/// `lens` of float32, the XML extension, then `data`.
+fn cifti(xml: &str, lens: [i64; 2], data: &[u8]) -> Vec<u8> {
+    let mut h = vec![0u8; 540];
+    h[..4].copy_from_slice(&540i32.to_le_bytes());
+    h[4..12].copy_from_slice(b"n+2\0\r\n\x1a\n");
+    h[12..14].copy_from_slice(&16i16.to_le_bytes());
+    for (k, d) in [6, 1, 1, 1, 1, lens[0], lens[1], 1].into_iter().enumerate() {
+        h[16 + 8 * k..24 + 8 * k].copy_from_slice(&i64::to_le_bytes(d));
+    }
+    let esize = (8 + xml.len()).div_ceil(16) * 16;
+    h[168..176].copy_from_slice(&((544 + esize) as i64).to_le_bytes());
+    h.extend([1, 0, 0, 0]);
+    h.extend((esize as i32).to_le_bytes());
+    h.extend(32i32.to_le_bytes());
+    h.extend(xml.as_bytes());
+    h.resize(544 + esize, 0);
+    h.extend(data);
+    h
+}
+
 #[test]
 fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
     let dir = std::env::temp_dir().join(format!("fshape-hostile-{}", std::process::id()));
@@ -154,9 +175,31 @@ fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
     }
     big.into_inner().unwrap().sync_all().unwrap();
 
+    // A CIFTI-2 file whose structure claims 2·10⁹ surface vertices, one
+    // whose matrix claims 10⁹ × 10⁹ values, and an annotation claiming
+    // 2³¹ − 1 vertices.
+    let xml = |surface: u64| {
+        format!(
+            "<CIFTI Version=\"2\"><Matrix><MatrixIndicesMap AppliesToMatrixDimension=\"0\" \
+             IndicesMapToDataType=\"CIFTI_INDEX_TYPE_SCALARS\"><NamedMap><MapName>t</MapName></NamedMap>\
+             </MatrixIndicesMap><MatrixIndicesMap AppliesToMatrixDimension=\"1\" \
+             IndicesMapToDataType=\"CIFTI_INDEX_TYPE_BRAIN_MODELS\"><BrainModel IndexOffset=\"0\" \
+             IndexCount=\"2\" ModelType=\"CIFTI_MODEL_TYPE_SURFACE\" BrainStructure=\"CIFTI_STRUCTURE_CORTEX_LEFT\" \
+             SurfaceNumberOfVertices=\"{surface}\"><VertexIndices>0 1</VertexIndices></BrainModel>\
+             </MatrixIndicesMap></Matrix></CIFTI>"
+        )
+    };
+    std::fs::write(sub.join("huge_surface.dscalar.nii"), cifti(&xml(2_000_000_000), [1, 2], &[0u8; 8])).unwrap();
+    std::fs::write(sub.join("huge_matrix.dscalar.nii"), cifti(&xml(4), [1_000_000_000, 1_000_000_000], &[])).unwrap();
+    let mut annot = 0x7fff_ffffi32.to_be_bytes().to_vec();
+    annot.extend([0u8; 64]);
+    std::fs::write(sub.join("lh.huge.annot"), &annot).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", sub.join("lh.zero.annot")).unwrap();
+
     let small_s = small.to_str().unwrap();
     // `fshape info SMALL --signal FILE`: the hostile file as a signal.
     let signal = |file: &str| vec!["info".to_string(), small_s.into(), "--signal".into(), file.into()];
+    let mask = |file: &str| vec!["info".to_string(), small_s.into(), "--mask".into(), file.into()];
     let cases: Vec<(&str, Vec<String>, &str)> = vec![
         ("exec", vec!["info".into(), "/dev/zero".into()], "device"),
         ("exec", vec!["info".into(), p("zero.ply")], "device"),
@@ -181,6 +224,10 @@ fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
         ("cat /dev/urandom |", signal("/dev/stdin"), "expected a signal file"),
         ("(echo thickness; yes 1) |", signal("/dev/stdin"), "past the mesh's 4 vertices (value 5 is here)"),
         ("exec", vec!["checkpoint".into(), "/dev/zero".into()], "device"),
+        ("exec", signal(&format!("{}:CORTEX_LEFT", p("huge_surface.dscalar.nii"))), "expected 4, found 2000000000"),
+        ("exec", signal(&format!("{}:CORTEX_LEFT", p("huge_matrix.dscalar.nii"))), "expected 1000000000, found 1"),
+        ("exec", mask(&format!("{}:x", p("lh.huge.annot"))), "claims 2147483647"),
+        ("exec", mask(&format!("{}:x", p("lh.zero.annot"))), "device"),
     ];
     let mut failures = Vec::new();
     for (prefix, args, says) in &cases {

@@ -480,3 +480,67 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
     }
     Ok((maps, models, brain_dim))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// nibabel's file (tests/data/nibabel): two maps, CORTEX_LEFT (10 of
+    /// 12 vertices), CORTEX_RIGHT (11 of 12), two thalamus voxels.
+    const MAPS: &[u8] = include_bytes!("../../tests/data/nibabel/maps.dscalar.nii");
+
+    fn edited(from: &str, to: &str) -> Vec<u8> {
+        // Same length, so the extension's size and the data offset hold.
+        assert_eq!(from.len(), to.len());
+        let at = MAPS.windows(from.len()).position(|w| w == from.as_bytes()).expect("the fixture has it");
+        let mut b = MAPS.to_vec();
+        b[at..at + from.len()].copy_from_slice(to.as_bytes());
+        b
+    }
+
+    #[test]
+    fn damaged_files_are_refused_naming_what_is_wrong() {
+        let mut nifti1 = MAPS.to_vec();
+        nifti1[..4].copy_from_slice(&348i32.to_le_bytes());
+        let mut magic = MAPS.to_vec();
+        magic[4..8].copy_from_slice(b"ni2\0");
+        let mut no_ext = MAPS.to_vec();
+        no_ext[540] = 0;
+        for (bytes, says) in [
+            (MAPS[..500].to_vec(), "NIfTI-2 header"),
+            (nifti1, "NIfTI-1 file"),
+            (magic, "n+2"),
+            (no_ext, "the CIFTI extension"),
+            (MAPS[..MAPS.len() - 4].to_vec(), "claims 46 matrix values"),
+            (edited("0 1 2 3 4 6 7 8 9 11", "0 1 2 3 4 6 7 8 9 99"), "99 in CORTEX_LEFT"),
+            (edited("0 1 2 3 4 6 7 8 9 11", "0 1 2 3 4 6 7 8 9 9 "), "vertex 9 again in CORTEX_LEFT"),
+            (
+                edited("0 1 2 3 4 6 7 8 9 11", "0 1 2 3 4 6 7 8 9   "),
+                "VertexIndices against IndexCount: expected 10, found 9",
+            ),
+            (edited("IndexOffset=\"10\"", "IndexOffset=\"11\""), "each starting where the last ended"),
+            (edited("<MapName>myelin</MapName>", "<MapNime>myelin</MapNime>"), "maps in the XML"),
+        ] {
+            let e = Cifti::parse(bytes).unwrap_err().to_string();
+            assert!(e.contains(says), "{says}: {e}");
+        }
+    }
+
+    #[test]
+    fn values_are_read_from_their_place_in_the_matrix() {
+        let c = Cifti::parse(MAPS.to_vec()).unwrap();
+        assert_eq!(c.maps, ["thickness", "myelin"]);
+        let m: Vec<(&str, usize, usize, Option<usize>)> =
+            c.models.iter().map(|m| (m.structure.as_str(), m.offset, m.count, m.surface_vertices)).collect();
+        assert_eq!(
+            m,
+            [("CORTEX_LEFT", 0, 10, Some(12)), ("CORTEX_RIGHT", 10, 11, Some(12)), ("THALAMUS_LEFT", 21, 2, None)]
+        );
+        // The voxels' values (the last two rows) sit after every surface
+        // row, map fastest: 7.5, 9.5, 8.5, 10.5 at the end of the file.
+        let tail: Vec<f32> =
+            MAPS[MAPS.len() - 16..].chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+        assert_eq!(tail, [7.5, 9.5, 8.5, 10.5]);
+        assert!(c.model("THALAMUS_LEFT").is_err(), "a voxel model is no surface");
+    }
+}

@@ -303,74 +303,6 @@ pub fn mgh_bytes(values: &[f64]) -> io::Result<Vec<u8>> {
     Ok(out)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn tetra() -> FShape {
-        let p = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-        FShape::try_new(3, CellKind::Triangle, p, vec![0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], None).unwrap()
-    }
-
-    #[test]
-    fn surface_curv_and_mgh_round_trip() {
-        let mut bytes = Vec::new();
-        write_surface(&mut bytes, &tetra()).unwrap();
-        let raw = parse_surface(&bytes).unwrap();
-        assert_eq!(raw.points, tetra().points());
-        assert_eq!(raw.cells, tetra().cells());
-        let v = [0.5, -2.25, 3.0, 1e-3_f32 as f64];
-        assert_eq!(parse_curv(&curv_bytes(&v, 4).unwrap()).unwrap(), v);
-        assert_eq!(parse_mgh(&mgh_bytes(&v).unwrap()).unwrap(), v);
-    }
-
-    #[test]
-    fn counts_beyond_the_file_and_bad_magic_are_errors_with_offsets() {
-        let mut bytes = Vec::new();
-        write_surface(&mut bytes, &tetra()).unwrap();
-        let e = parse_surface(&bytes[..bytes.len() - 5]).unwrap_err();
-        assert!(
-            matches!(e.kind, ParseErrorKind::Truncated { what: "triangles after the vertices", claimed: 4, .. }),
-            "{e}"
-        );
-        let mut huge = bytes.clone();
-        huge[22..26].copy_from_slice(&i32::MAX.to_be_bytes()); // the vertex count
-        let e = parse_surface(&huge).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            format!("byte 22: the header claims 2147483647 vertices, but only {} bytes follow", bytes.len() - 30)
-        );
-        // A vertex count that fits the bytes after it but not after the
-        // triangle count: the 4 bytes of that count are not vertex data.
-        let mut tight = bytes[..30].to_vec();
-        tight[22..26].copy_from_slice(&1i32.to_be_bytes());
-        tight.extend_from_slice(&[0; 8]);
-        let e = parse_surface(&tight).unwrap_err();
-        assert!(matches!(e.kind, ParseErrorKind::Truncated { what: "vertices", claimed: 1, available: 8 }), "{e}");
-        let e = parse_curv(&bytes).unwrap_err();
-        assert_eq!(e.to_string(), "byte 0: expected the FreeSurfer curv magic ff ff ff, found `ff ff fe`");
-        let mut c = curv_bytes(&[1.0, 2.0], 0).unwrap();
-        c[11..15].copy_from_slice(&3i32.to_be_bytes());
-        assert!(parse_curv(&c).unwrap_err().to_string().starts_with("byte 11: unsupported values per vertex"));
-        let mut m = mgh_bytes(&[1.0, 2.0]).unwrap();
-        m[16..20].copy_from_slice(&2i32.to_be_bytes());
-        assert!(parse_mgh(&m).unwrap_err().to_string().contains("frame count"));
-        assert!(
-            parse_mgh(&mgh_bytes(&[1.0, 2.0]).unwrap()[..290]).unwrap_err().to_string().contains("claims 2 values")
-        );
-    }
-
-    #[test]
-    fn a_negative_face_index_names_its_triangle() {
-        let mut bytes = Vec::new();
-        write_surface(&mut bytes, &tetra()).unwrap();
-        let at = bytes.len() - 4;
-        bytes[at..].copy_from_slice(&(-7i32).to_be_bytes());
-        let e = parse_surface(&bytes).unwrap_err();
-        assert_eq!(e.kind, ParseErrorKind::NegativeIndex { cell: 3, value: -7 });
-    }
-}
-
 /// A string of an annotation's colour table: its length (with the final
 /// NUL) then its bytes; the NUL and anything after it are dropped.
 fn annot_string(cur: &mut Cursor, what: &'static str) -> Result<String, ParseError> {
@@ -483,4 +415,102 @@ pub fn parse_annot(data: &[u8]) -> Result<Parcellation, ParseError> {
         })
         .collect();
     Ok(Parcellation { keys, regions })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::Location;
+
+    fn tetra() -> FShape {
+        let p = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        FShape::try_new(3, CellKind::Triangle, p, vec![0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], None).unwrap()
+    }
+
+    #[test]
+    fn surface_curv_and_mgh_round_trip() {
+        let mut bytes = Vec::new();
+        write_surface(&mut bytes, &tetra()).unwrap();
+        let raw = parse_surface(&bytes).unwrap();
+        assert_eq!(raw.points, tetra().points());
+        assert_eq!(raw.cells, tetra().cells());
+        let v = [0.5, -2.25, 3.0, 1e-3_f32 as f64];
+        assert_eq!(parse_curv(&curv_bytes(&v, 4).unwrap()).unwrap(), v);
+        assert_eq!(parse_mgh(&mgh_bytes(&v).unwrap()).unwrap(), v);
+    }
+
+    #[test]
+    fn counts_beyond_the_file_and_bad_magic_are_errors_with_offsets() {
+        let mut bytes = Vec::new();
+        write_surface(&mut bytes, &tetra()).unwrap();
+        let e = parse_surface(&bytes[..bytes.len() - 5]).unwrap_err();
+        assert!(
+            matches!(e.kind, ParseErrorKind::Truncated { what: "triangles after the vertices", claimed: 4, .. }),
+            "{e}"
+        );
+        let mut huge = bytes.clone();
+        huge[22..26].copy_from_slice(&i32::MAX.to_be_bytes()); // the vertex count
+        let e = parse_surface(&huge).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("byte 22: the header claims 2147483647 vertices, but only {} bytes follow", bytes.len() - 30)
+        );
+        // A vertex count that fits the bytes after it but not after the
+        // triangle count: the 4 bytes of that count are not vertex data.
+        let mut tight = bytes[..30].to_vec();
+        tight[22..26].copy_from_slice(&1i32.to_be_bytes());
+        tight.extend_from_slice(&[0; 8]);
+        let e = parse_surface(&tight).unwrap_err();
+        assert!(matches!(e.kind, ParseErrorKind::Truncated { what: "vertices", claimed: 1, available: 8 }), "{e}");
+        let e = parse_curv(&bytes).unwrap_err();
+        assert_eq!(e.to_string(), "byte 0: expected the FreeSurfer curv magic ff ff ff, found `ff ff fe`");
+        let mut c = curv_bytes(&[1.0, 2.0], 0).unwrap();
+        c[11..15].copy_from_slice(&3i32.to_be_bytes());
+        assert!(parse_curv(&c).unwrap_err().to_string().starts_with("byte 11: unsupported values per vertex"));
+        let mut m = mgh_bytes(&[1.0, 2.0]).unwrap();
+        m[16..20].copy_from_slice(&2i32.to_be_bytes());
+        assert!(parse_mgh(&m).unwrap_err().to_string().contains("frame count"));
+        assert!(
+            parse_mgh(&mgh_bytes(&[1.0, 2.0]).unwrap()[..290]).unwrap_err().to_string().contains("claims 2 values")
+        );
+    }
+
+    #[test]
+    fn a_negative_face_index_names_its_triangle() {
+        let mut bytes = Vec::new();
+        write_surface(&mut bytes, &tetra()).unwrap();
+        let at = bytes.len() - 4;
+        bytes[at..].copy_from_slice(&(-7i32).to_be_bytes());
+        let e = parse_surface(&bytes).unwrap_err();
+        assert_eq!(e.kind, ParseErrorKind::NegativeIndex { cell: 3, value: -7 });
+    }
+    /// nibabel's annotation (tests/data/nibabel): 12 vertices, 3 regions.
+    const ANNOT: &[u8] = include_bytes!("../../tests/data/nibabel/lh.parcels.annot");
+
+    #[test]
+    fn damaged_annotations_are_refused_at_their_byte() {
+        let with = |at: usize, v: i32| {
+            let mut b = ANNOT.to_vec();
+            b[at..at + 4].copy_from_slice(&v.to_be_bytes());
+            b
+        };
+        // Byte 4 + 8k is vertex k's index, then its value; the flag follows the pairs.
+        let flag = 4 + 8 * 12;
+        for (bytes, at, says) in [
+            (ANNOT[..50].to_vec(), 0, "claims 12 vertex and value pairs"),
+            (with(4 + 8 * 3, 12), 28, "a vertex index below the vertex count"),
+            (with(4 + 8 * 3, 2), 28, "vertex 2 again"),
+            (with(flag, 0), flag, "the colour table (the flag is 0)"),
+            (with(flag + 4, -3), flag + 4, "colour table version"),
+            (with(flag + 4, 1_000_000), flag + 4, "claims 1000000 colour table entries"),
+            (ANNOT[..ANNOT.len() - 2].to_vec(), ANNOT.len() - 4, "a region colour"),
+        ] {
+            let e = parse_annot(&bytes).unwrap_err();
+            assert!(e.to_string().contains(says), "{says}: {e}");
+            assert_eq!(e.at, Location::Byte(at), "{says}: {e}");
+        }
+        // A value that is no region's colour is a vertex without a region.
+        let p = parse_annot(&with(4 + 8 * 3 + 4, 12345)).unwrap();
+        assert_eq!(p.keys[3], -1);
+    }
 }

@@ -565,7 +565,7 @@ pub fn split_selector(path: &Path) -> (PathBuf, Option<String>) {
     }
     let s = path.to_string_lossy();
     for (k, _) in s.match_indices(':').collect::<Vec<_>>().into_iter().rev() {
-        if Path::new(&s[..k]).is_file() {
+        if Path::new(&s[..k]).exists() {
             return (PathBuf::from(&s[..k]), Some(s[k + 1..].to_string()));
         }
     }
