@@ -8,7 +8,7 @@ the GIL while it computes.
 """
 
 from os import PathLike
-from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, TypedDict, Union
+from typing import Any, Callable, List, Literal, Mapping, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -238,12 +238,15 @@ def read_signal(
     path: Union[str, "PathLike[str]"], allow_missing: bool = False
 ) -> Tuple[str, npt.NDArray[np.float64]]:
     """Reads a per-vertex signal (CSV column, GIfTI .shape.gii/.func.gii,
-    FreeSurfer curv such as lh.thickness, .mgh/.mgz): (name, values). With
+    FreeSurfer curv such as lh.thickness, .mgh/.mgz, or a CIFTI-2 map named
+    as "maps.dscalar.nii:CORTEX_LEFT:thickness"): (name, values). With
     allow_missing, NaN (HCP's medial wall) is accepted as a missing value."""
 
 def read_mask(path: Union[str, "PathLike[str]"], n_vertices: int) -> npt.NDArray[np.float64]:
     """Reads a mask for a surface of n_vertices vertices: a FreeSurfer .label
-    (its vertices 1, the rest 0) or a per-vertex column of weights in [0, 1]."""
+    (its vertices 1, the rest 0), regions of a parcellation named after it
+    ("lh.aparc.annot:precentral,postcentral", also .label.gii) or a
+    per-vertex column of weights in [0, 1]."""
 
 def write_signal(
     path: Union[str, "PathLike[str]"], values: npt.ArrayLike, name: str = "signal", faces: int = 0
@@ -378,6 +381,31 @@ def read_label(
 ) -> Tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Reads a FreeSurfer label file: (vertices, points k x 3, values), as
     nibabel's read_label(path, read_scalars=True) reads the first and last."""
+
+def read_parcellation(
+    path: Union[str, "PathLike[str]"],
+) -> Tuple[npt.NDArray[np.int32], List[Tuple[int, str, Tuple[float, float, float, float]]]]:
+    """Reads a FreeSurfer .annot or a GIfTI label array (.label.gii):
+    (keys, regions). Keys per vertex (.annot: the colour table's row, -1
+    without a region, as nibabel's read_annot; GIfTI: the label key);
+    regions as (key, name, (red, green, blue, alpha)) in [0, 1]."""
+
+def read_cifti(
+    path: Union[str, "PathLike[str]"], structure: str, n_vertices: int, map: Optional[str] = None
+) -> Tuple[str, npt.NDArray[np.float64]]:
+    """Reads one map (name or number from 1; optional with one map) of a
+    surface structure (CORTEX_LEFT) of a CIFTI-2 dense file on a surface of
+    n_vertices vertices, NaN off the structure: (map name, values)."""
+
+def write_cifti(
+    path: Union[str, "PathLike[str]"],
+    like: Union[str, "PathLike[str]"],
+    structure: str,
+    values: npt.ArrayLike,
+    map: Optional[str] = None,
+) -> None:
+    """Writes values (one per surface vertex) as one map of a structure into
+    a copy of the CIFTI-2 file like, every other byte kept; atomic."""
 
 def write_label(
     path: Union[str, "PathLike[str]"],

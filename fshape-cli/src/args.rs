@@ -138,14 +138,16 @@ pub struct Signals {
     /// Vertex property of both meshes to read as the signal (default `signal`).
     #[arg(long)]
     pub signal_name: Option<String>,
-    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv or MGH).
+    /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv,
+    /// MGH, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT[:MAP]).
     #[arg(long, visible_alias = "signal")]
     pub source_signal: Option<PathBuf>,
-    /// Per-vertex signal file for the target (CSV, GIfTI, FreeSurfer curv or MGH).
+    /// Per-vertex signal file for the target (as --source-signal).
     #[arg(long)]
     pub target_signal: Option<PathBuf>,
     /// The source's mask: a FreeSurfer .label (its vertices count, the
-    /// rest is masked) or a per-vertex column of weights in [0, 1]. A
+    /// rest is masked), regions of a parcellation (lh.aparc.annot:insula,
+    /// also .label.gii) or a per-vertex column of weights in [0, 1]. A
     /// masked vertex's signal counts nowhere; its geometry still does.
     #[arg(long)]
     pub source_mask: Option<PathBuf>,

@@ -1848,3 +1848,24 @@ fn a_masked_population_goes_through_atlas_stats_and_batch_with_its_wall_left_out
     let error = std::fs::read_to_string(batch.join("short/error.txt")).unwrap();
     assert!(error.contains("list.csv"), "{error}");
 }
+
+#[test]
+fn info_takes_a_cifti_map_and_a_parcellation_s_regions_named_after_the_file() {
+    // nibabel's files (fshape-mesh/tests/data/nibabel): a 12-vertex
+    // surface, a dscalar whose CORTEX_LEFT leaves vertices 5 and 10 out,
+    // and an annotation of three regions.
+    let nib = |name: &str| repo(&format!("fshape-mesh/tests/data/nibabel/{name}"));
+    let surface = nib("surf_base64.surf.gii");
+    let signal = format!("{}:CORTEX_LEFT:myelin", nib("maps.dscalar.nii"));
+    let v = json(&fshape(&["info", &surface, "--signal", &signal, "--allow-missing", "--json"]));
+    assert_eq!(v["mask"]["masked"], 2, "{v}");
+    let o = fshape(&["info", &surface, "--signal", &signal]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.contains("is NaN") && err.contains("--allow-missing"), "{err}");
+    let o = fshape(&["info", &surface, "--signal", &nib("maps.dscalar.nii")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("name the surface structure after the file") && err.contains("CORTEX_RIGHT"), "{err}");
+    let mask = format!("{}:insula", nib("lh.parcels.annot"));
+    let v = json(&fshape(&["info", &surface, "--mask", &mask, "--json"]));
+    assert_eq!(v["mask"]["masked"], 9, "three of the twelve vertices are the insula: {v}");
+}

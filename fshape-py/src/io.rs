@@ -150,3 +150,71 @@ pub(crate) fn write_label(
     let label = io::label::Label { vertices: list, points, values };
     py.detach(|| io::label::write_label(&path, &label, subject)).map_err(err)
 }
+
+/// Reads a parcellation: a FreeSurfer .annot or a GIfTI label array
+/// (.label.gii). Returns (keys, regions): a key per vertex (for .annot the
+/// colour table's row, -1 without a region, as nibabel's `read_annot`
+/// gives them; for GIfTI the label key) and the table as a list of
+/// (key, name, (red, green, blue, alpha)) with colours in [0, 1].
+#[pyfunction]
+#[expect(clippy::type_complexity, reason = "a parcellation's keys and table, as Python returns them")]
+pub(crate) fn read_parcellation<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(Bound<'py, PyArray1<i32>>, Vec<(i32, String, (f64, f64, f64, f64))>)> {
+    let p = py.detach(|| io::read_parcellation(&path)).map_err(err)?;
+    let regions =
+        p.regions.into_iter().map(|r| (r.key, r.name, (r.rgba[0], r.rgba[1], r.rgba[2], r.rgba[3]))).collect();
+    Ok((p.keys.into_pyarray(py), regions))
+}
+
+/// Reads one map of a surface structure (`CORTEX_LEFT`) of a CIFTI-2
+/// dense file (.dscalar.nii, .dtseries.nii) on a surface of `n_vertices`
+/// vertices: the file's values at the structure's vertices, NaN at the
+/// others (the medial wall). `map` is the map's name or its number from 1;
+/// it may be left out when the file has one map. A structure of another
+/// vertex count is refused. Returns (map name, values).
+#[pyfunction]
+#[pyo3(signature = (path, structure, n_vertices, map = None))]
+pub(crate) fn read_cifti<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    structure: &str,
+    n_vertices: usize,
+    map: Option<&str>,
+) -> PyResult<(String, Bound<'py, PyArray1<f64>>)> {
+    let (name, values) = py
+        .detach(|| {
+            let c = io::read_cifti_file(&path)?;
+            let select = |source| io::ReadError::Select { path: path.clone(), source };
+            let k = c.map_index(map).map_err(select)?;
+            let values = c.surface(structure, map, n_vertices).map_err(select)?;
+            Ok::<_, io::ReadError>((c.maps[k].clone(), values))
+        })
+        .map_err(err)?;
+    Ok((name, values.into_pyarray(py)))
+}
+
+/// Writes `values` (one per vertex of the structure's surface) as one map
+/// of a surface structure into a copy of the CIFTI-2 file `like`, saved at
+/// `path`: the other structures, the other maps, the header and the XML
+/// are `like`'s, byte for byte; values off the structure (the medial wall)
+/// have no place in the file and are dropped. The write is atomic.
+#[pyfunction]
+#[pyo3(signature = (path, like, structure, values, map = None))]
+pub(crate) fn write_cifti(
+    py: Python<'_>,
+    path: PathBuf,
+    like: PathBuf,
+    structure: &str,
+    values: PyArrayLike1<'_, f64, AllowTypeChange>,
+    map: Option<&str>,
+) -> PyResult<()> {
+    let v: Vec<f64> = values.as_array().iter().copied().collect();
+    py.detach(|| {
+        let c = io::read_cifti_file(&like).map_err(|e| e.to_string())?;
+        let bytes = c.with_surface(structure, map, &v).map_err(|e| format!("{}: {e}", like.display()))?;
+        io::write_atomic(&path, &bytes, false).map_err(|e| e.to_string())
+    })
+    .map_err(err)
+}

@@ -547,3 +547,66 @@ def test_freesurfer_labels_read_and_write_as_nibabel_reads_them(tmp_path):
     fshape.write_label(tmp_path / "out.label", vertices, points, values, subject="bert")
     wv, ws = nib.freesurfer.read_label(tmp_path / "out.label", read_scalars=True)
     assert np.array_equal(wv, vertices) and np.array_equal(ws, values)
+
+
+def test_parcellations_nibabel_writes_read_to_its_keys_and_become_masks(tmp_path):
+    rng = np.random.default_rng(5)
+    n = 400
+    names = ["unknown", "precentral", "postcentral", "insula", "cuneus"]
+    ctab = np.column_stack([rng.integers(0, 256, size=(5, 3)), np.zeros(5, int)]).astype(np.int32)
+    keys = rng.integers(-1, 5, size=n).astype(np.int32)
+    nib.freesurfer.write_annot(tmp_path / "lh.aparc.annot", keys, ctab, names)
+    nk, nctab, nnames = nib.freesurfer.read_annot(tmp_path / "lh.aparc.annot")
+    fk, regions = fshape.read_parcellation(tmp_path / "lh.aparc.annot")
+    assert np.array_equal(fk, nk) and [r[1] for r in regions] == [x.decode() for x in nnames]
+    assert np.allclose([r[2][:3] for r in regions], nctab[:, :3] / 255.0)
+    mask = fshape.read_mask(f"{tmp_path / 'lh.aparc.annot'}:insula,cuneus", n)
+    assert np.array_equal(mask, np.isin(nk, [3, 4]).astype(float))
+    # A GIfTI label array with its table, as HCP writes its parcellations.
+    table = nib.gifti.GiftiLabelTable()
+    for key, name in [(0, "???"), (11, "V1"), (12, "V2")]:
+        label = nib.gifti.GiftiLabel(key, *rng.random(3), 1.0)
+        label.label = name
+        table.labels.append(label)
+    gkeys = rng.choice([0, 11, 12], size=n).astype(np.int32)
+    darray = nib.gifti.GiftiDataArray(gkeys, intent="NIFTI_INTENT_LABEL", datatype="NIFTI_TYPE_INT32")
+    nib.save(nib.gifti.GiftiImage(labeltable=table, darrays=[darray]), tmp_path / "lh.visual.label.gii")
+    fk, regions = fshape.read_parcellation(tmp_path / "lh.visual.label.gii")
+    assert np.array_equal(fk, nib.load(tmp_path / "lh.visual.label.gii").darrays[0].data)
+    assert {k: name for k, name, _ in regions} == nib.load(tmp_path / "lh.visual.label.gii").labeltable.get_labels_as_dict()
+    with pytest.raises(fshape.FShapeError, match="no region named `V3`"):
+        fshape.read_mask(f"{tmp_path / 'lh.visual.label.gii'}:V3", n)
+
+
+def test_cifti_maps_read_as_nibabel_reads_them_and_write_back_keeping_the_rest(tmp_path):
+    rng = np.random.default_rng(7)
+    ax = nib.cifti2.cifti2_axes
+    # fs_LR-like: each cortex without its "medial wall", plus voxels.
+    n = 300
+    left = np.sort(rng.choice(n, size=260, replace=False))
+    right = np.sort(rng.choice(n, size=250, replace=False))
+    voxels = rng.integers(0, 5, size=(7, 3))
+    brain = (ax.BrainModelAxis.from_surface(left, n, "CortexLeft")
+             + ax.BrainModelAxis.from_surface(right, n, "CortexRight")
+             + ax.BrainModelAxis("brain_stem", voxel=voxels, affine=np.eye(4), volume_shape=(5, 5, 5)))
+    data = rng.normal(size=(3, len(brain))).astype(np.float32)
+    img = nib.Cifti2Image(data, header=(ax.ScalarAxis(["thickness", "myelin", "curvature"]), brain))
+    img.nifti_header.set_intent("ConnDenseScalar")
+    img.to_filename(tmp_path / "maps.dscalar.nii")
+    expected = np.full(n, np.nan)
+    expected[right] = data[1, len(left):len(left) + len(right)]
+    name, got = fshape.read_cifti(tmp_path / "maps.dscalar.nii", "CORTEX_RIGHT", n, map="myelin")
+    assert name == "myelin" and np.array_equal(got, expected, equal_nan=True)
+    _, got = fshape.read_signal(f"{tmp_path / 'maps.dscalar.nii'}:CORTEX_RIGHT:2", allow_missing=True)
+    assert np.array_equal(got, expected, equal_nan=True)
+    with pytest.raises(fshape.FShapeError, match="expected 301, found 300"):
+        fshape.read_cifti(tmp_path / "maps.dscalar.nii", "CORTEX_LEFT", n + 1, map="myelin")
+    # Written back: nibabel reads the new left thickness, and everything
+    # else (the other maps, the right cortex, the voxels, the axes) as before.
+    new = rng.normal(size=n)
+    fshape.write_cifti(tmp_path / "out.dscalar.nii", tmp_path / "maps.dscalar.nii", "CORTEX_LEFT", new, map="thickness")
+    out = nib.load(tmp_path / "out.dscalar.nii")
+    want = data.copy()
+    want[0, :len(left)] = new[left].astype(np.float32)
+    assert np.array_equal(out.get_fdata(dtype=np.float32), want)
+    assert out.header.get_axis(0) == img.header.get_axis(0) and out.header.get_axis(1) == brain

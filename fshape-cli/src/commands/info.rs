@@ -17,10 +17,13 @@ pub struct Args {
     #[arg(long)]
     pub signal_name: Option<String>,
     /// Per-vertex signal file replacing the mesh's signal: a CSV column with a
-    /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness) or .mgh/.mgz.
+    /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness),
+    /// .mgh/.mgz, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT[:MAP].
     #[arg(long)]
     pub signal: Option<PathBuf>,
-    /// A mask: a FreeSurfer .label or a per-vertex column of weights in [0, 1].
+    /// A mask: a FreeSurfer .label, regions of a parcellation
+    /// (lh.aparc.annot:insula, also .label.gii) or a per-vertex column of
+    /// weights in [0, 1].
     #[arg(long)]
     pub mask: Option<PathBuf>,
     /// Accept NaN in the signal file as missing values (each masks its vertex).

@@ -182,41 +182,37 @@ impl Cifti {
 
     /// The surface structure named `structure` (`CORTEX_LEFT`, with or
     /// without the `CIFTI_STRUCTURE_` prefix).
-    pub fn model(&self, structure: &str) -> Result<&BrainModel, ParseError> {
+    pub fn model(&self, structure: &str) -> Result<&BrainModel, ParseErrorKind> {
         let name = structure.strip_prefix("CIFTI_STRUCTURE_").unwrap_or(structure);
         self.models.iter().find(|m| m.structure == name && m.surface_vertices.is_some()).ok_or_else(|| {
-            err(
-                0,
-                ParseErrorKind::UnknownName {
-                    what: "surface structure",
-                    name: name.to_string(),
-                    available: self
-                        .models
-                        .iter()
-                        .filter(|m| m.surface_vertices.is_some())
-                        .map(|m| m.structure.clone())
-                        .collect(),
-                },
-            )
+            ParseErrorKind::UnknownName {
+                what: "surface structure",
+                name: name.to_string(),
+                available: self
+                    .models
+                    .iter()
+                    .filter(|m| m.surface_vertices.is_some())
+                    .map(|m| m.structure.clone())
+                    .collect(),
+            }
         })
     }
 
     /// The map named `map` (a name, or its number counting from 1 as
     /// Workbench's `-column` does); `None` when the file has one map.
-    pub fn map_index(&self, map: Option<&str>) -> Result<usize, ParseError> {
-        let unknown = |name: &str| {
-            err(0, ParseErrorKind::UnknownName { what: "map", name: name.to_string(), available: self.maps.clone() })
+    pub fn map_index(&self, map: Option<&str>) -> Result<usize, ParseErrorKind> {
+        let unknown = |name: &str| ParseErrorKind::UnknownName {
+            what: "map",
+            name: name.to_string(),
+            available: self.maps.clone(),
         };
         match map {
             None if self.maps.len() == 1 => Ok(0),
-            None => Err(err(
-                0,
-                ParseErrorKind::NotChosen {
-                    what: "map (the file has several)",
-                    syntax: "FILE:STRUCTURE:MAP, MAP a name or a number from 1",
-                    available: self.maps.clone(),
-                },
-            )),
+            None => Err(ParseErrorKind::NotChosen {
+                what: "map (the file has several)",
+                syntax: "FILE:STRUCTURE:MAP, MAP a name or a number from 1",
+                available: self.maps.clone(),
+            }),
             Some(m) => self
                 .maps
                 .iter()
@@ -236,19 +232,16 @@ impl Cifti {
     /// vertices: the file's value at each vertex of the structure, NaN at
     /// the others. A structure of another vertex count is refused (the
     /// map of another surface).
-    pub fn surface(&self, structure: &str, map: Option<&str>, n_vertices: usize) -> Result<Vec<f64>, ParseError> {
+    pub fn surface(&self, structure: &str, map: Option<&str>, n_vertices: usize) -> Result<Vec<f64>, ParseErrorKind> {
         let model = self.model(structure)?;
         let map = self.map_index(map)?;
         let n = model.surface_vertices.expect("a surface model");
         if n != n_vertices {
-            return Err(err(
-                0,
-                ParseErrorKind::CountMismatch {
-                    what: "the structure's SurfaceNumberOfVertices against the surface's vertex count (a map of another surface?)",
-                    expected: n_vertices as u64,
-                    found: n as u64,
-                },
-            ));
+            return Err(ParseErrorKind::CountMismatch {
+                what: "the structure's SurfaceNumberOfVertices against the surface's vertex count (a map of another surface?)",
+                expected: n_vertices as u64,
+                found: n as u64,
+            });
         }
         let mut out = vec![f64::NAN; n];
         let size = self.data_type.size();
@@ -264,28 +257,22 @@ impl Cifti {
     /// `values` (one per surface vertex; those off the structure are not
     /// stored): every other byte is the file's. The file must store floats
     /// without scaling.
-    pub fn with_surface(&self, structure: &str, map: Option<&str>, values: &[f64]) -> Result<Vec<u8>, ParseError> {
+    pub fn with_surface(&self, structure: &str, map: Option<&str>, values: &[f64]) -> Result<Vec<u8>, ParseErrorKind> {
         let model = self.model(structure)?;
         let map = self.map_index(map)?;
         let n = model.surface_vertices.expect("a surface model");
         if values.len() != n {
-            return Err(err(
-                0,
-                ParseErrorKind::CountMismatch {
-                    what: "values against the structure's surface vertices",
-                    expected: n as u64,
-                    found: values.len() as u64,
-                },
-            ));
+            return Err(ParseErrorKind::CountMismatch {
+                what: "values against the structure's surface vertices",
+                expected: n as u64,
+                found: values.len() as u64,
+            });
         }
         if !matches!(self.data_type, DataType::F32 | DataType::F64) || self.scale != (1.0, 0.0) {
-            return Err(err(
-                12,
-                ParseErrorKind::Unsupported {
-                    what: "CIFTI file to write into (fshape writes into unscaled FLOAT32 or FLOAT64 files)",
-                    found: format!("{} scaled by {:?}", self.data_type.name(), self.scale),
-                },
-            ));
+            return Err(ParseErrorKind::Unsupported {
+                what: "CIFTI file to write into (fshape writes into unscaled FLOAT32 or FLOAT64 files)",
+                found: format!("{} scaled by {:?}", self.data_type.name(), self.scale),
+            });
         }
         let mut out = self.bytes.clone();
         let size = self.data_type.size();

@@ -227,7 +227,11 @@ pub enum ReadError {
         source: ShapeError,
     },
     /// A signal file holds a value that is not a finite number.
-    #[error("{path}: the value of vertex {vertex} (counting from 0) is {value}; signals must be finite", path = .path.display())]
+    #[error(
+        "{path}: the value of vertex {vertex} (counting from 0) is {value}; signals must be finite{hint}",
+        path = .path.display(),
+        hint = if .value.is_nan() { " (NaN is a missing value: allowing them, with --allow-missing or allow_missing=True, masks their vertices)" } else { "" }
+    )]
     NonFinite {
         /// The file.
         path: PathBuf,
@@ -246,6 +250,15 @@ pub enum ReadError {
         found: usize,
         /// The surface's vertices.
         expected: usize,
+    },
+    /// The file does not hold what was asked of it: a structure, map or
+    /// region it lacks, a surface of another vertex count.
+    #[error("{path}: {source}", path = .path.display())]
+    Select {
+        /// The file.
+        path: PathBuf,
+        /// What is missing or does not fit.
+        source: ParseErrorKind,
     },
     /// The signal property the caller named is not in the file.
     #[error("{path}: no per-vertex scalar named `{name}` (available: {avail})", path = .path.display(), avail = list(.available))]
@@ -615,17 +628,14 @@ pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> 
         let selector = selector.unwrap_or_default();
         let names: Vec<&str> = selector.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
         if names.is_empty() {
-            let source = ParseError {
-                at: Location::Byte(0),
-                kind: ParseErrorKind::NotChosen {
-                    what: "regions",
-                    syntax: "FILE:REGION,REGION",
-                    available: p.regions.iter().map(|r| r.name.clone()).collect(),
-                },
+            let source = ParseErrorKind::NotChosen {
+                what: "regions",
+                syntax: "FILE:REGION,REGION",
+                available: p.regions.iter().map(|r| r.name.clone()).collect(),
             };
-            return Err(ReadError::Parse { path: file, source });
+            return Err(ReadError::Select { path: file, source });
         }
-        return p.mask(&names).map_err(|source| ReadError::Parse { path: file, source });
+        return p.mask(&names).map_err(|source| ReadError::Select { path: file, source });
     }
     let column = read_signal_for(path, Some(n_vertices), false)?;
     if column.values.len() != n_vertices {
@@ -711,46 +721,40 @@ fn read_cifti(
     selector: Option<&str>,
     n_vertices: Option<usize>,
 ) -> Result<csv::SignalColumn, ReadError> {
-    let parse = |source| ReadError::Parse { path: path.into(), source };
-    let c = cifti::Cifti::parse(input.read_all(path)?).map_err(parse)?;
+    let c =
+        cifti::Cifti::parse(input.read_all(path)?).map_err(|source| ReadError::Parse { path: path.into(), source })?;
+    let select = |source| ReadError::Select { path: path.into(), source };
     let (structure, map) = match selector.map(|s| s.split_once(':').unwrap_or((s, ""))) {
         Some((s, m)) if !s.is_empty() => (s, Some(m).filter(|m| !m.is_empty())),
         _ => {
-            return Err(parse(ParseError {
-                at: Location::Byte(0),
-                kind: ParseErrorKind::NotChosen {
-                    what: "surface structure",
-                    syntax: "FILE:STRUCTURE or FILE:STRUCTURE:MAP",
-                    available: c
-                        .models
-                        .iter()
-                        .filter(|m| m.surface_vertices.is_some())
-                        .map(|m| m.structure.clone())
-                        .collect(),
-                },
+            return Err(select(ParseErrorKind::NotChosen {
+                what: "surface structure",
+                syntax: "FILE:STRUCTURE or FILE:STRUCTURE:MAP",
+                available: c
+                    .models
+                    .iter()
+                    .filter(|m| m.surface_vertices.is_some())
+                    .map(|m| m.structure.clone())
+                    .collect(),
             }));
         }
     };
     let n = match n_vertices {
         Some(n) => n,
         None => {
-            let n = c.model(structure).map_err(parse)?.surface_vertices.expect("a surface model");
+            let n = c.model(structure).map_err(select)?.surface_vertices.expect("a surface model");
             let room = source::EXPANSION.saturating_mul(c.size() as u64).max(source::EXPANSION_FLOOR);
             if n as u64 > room {
-                return Err(parse(ParseError {
-                    at: Location::Byte(0),
-                    kind: ParseErrorKind::TooMany {
-                        what: "surface vertices for a file this size (give the mesh)",
-                        claimed: n as u64,
-                        limit: room,
-                    },
+                return Err(select(ParseErrorKind::Unsupported {
+                    what: "surface size, without a mesh, for a file this small (read it with the mesh's vertex count)",
+                    found: n.to_string(),
                 }));
             }
             n
         }
     };
-    let values = c.surface(structure, map, n).map_err(parse)?;
-    let name = map.map_or_else(|| c.maps[0].clone(), str::to_string);
+    let values = c.surface(structure, map, n).map_err(select)?;
+    let name = c.maps[c.map_index(map).map_err(select)?].clone();
     Ok(csv::SignalColumn { name, values })
 }
 

@@ -4,7 +4,7 @@
 //! fshape takes a parcellation as a mask (the vertices of chosen regions)
 //! or carries it, key by key, from one surface to another.
 
-use super::{Location, ParseError, ParseErrorKind};
+use super::ParseErrorKind;
 
 /// One region of a parcellation's table.
 #[derive(Clone, Debug, PartialEq)]
@@ -34,17 +34,14 @@ impl Parcellation {
     /// The mask of the vertices in the named regions (1 there, 0
     /// elsewhere). A name that is not in the table is an error listing the
     /// names that are.
-    pub fn mask(&self, names: &[&str]) -> Result<Vec<f64>, ParseError> {
+    pub fn mask(&self, names: &[&str]) -> Result<Vec<f64>, ParseErrorKind> {
         let mut keys = Vec::with_capacity(names.len());
         for name in names {
             let Some(r) = self.regions.iter().find(|r| r.name == *name) else {
-                return Err(ParseError {
-                    at: Location::Byte(0),
-                    kind: ParseErrorKind::UnknownName {
-                        what: "region",
-                        name: name.to_string(),
-                        available: self.regions.iter().map(|r| r.name.clone()).collect(),
-                    },
+                return Err(ParseErrorKind::UnknownName {
+                    what: "region",
+                    name: name.to_string(),
+                    available: self.regions.iter().map(|r| r.name.clone()).collect(),
                 });
             };
             keys.push(r.key);
