@@ -91,6 +91,14 @@ enum Command {
     /// pictures, multivariate.csv and summary.json. The same seed gives
     /// the same bits.
     Stats(commands::stats::Args),
+    /// Carry a map, a parcellation or a label through a registration: from
+    /// the source's vertices onto the target's (or back, `--onto source`),
+    /// each receiving vertex reading the values at its closest point on the
+    /// other surface as matched (barycentric for maps, leaving out corners
+    /// without a value; the heaviest region for labels). Vertices farther
+    /// than `--max-distance` (2 % of the target's diagonal) get none. RUN
+    /// is an `fshape match` output or an atlas subject's folder.
+    Transfer(commands::transfer::Args),
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo(commands::demo::Args),
@@ -127,6 +135,7 @@ fn main() -> ExitCode {
         Command::Batch(a) => commands::batch::run(a),
         Command::Atlas(a) => commands::atlas::run(a),
         Command::Stats(a) => commands::stats::run(a),
+        Command::Transfer(a) => commands::transfer::run(a),
         Command::Demo(a) => commands::demo::run(a),
         Command::Render(a) => commands::render::run(a),
         Command::Convert(a) => commands::convert::run(a),

@@ -884,6 +884,17 @@ fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
     let pca = std::fs::read_to_string(whole.join("pca.csv")).unwrap();
     assert_eq!(pca.lines().next().unwrap(), "subject,mode_1,mode_2");
     assert_eq!(pca.lines().count(), 4);
+    // A map on the template carried onto a subject (its folder), and the
+    // atlas folder itself refused with the way to name a subject.
+    let template = fshape_mesh::io::read_mesh(&whole.join("template.ply"), &Default::default()).unwrap();
+    let heights: Vec<f64> = template.points().chunks_exact(3).map(|p| p[2]).collect();
+    fshape_mesh::io::csv::write_signal(&tmp("atlas_height.csv"), "height", &heights).unwrap();
+    let (height, onto) =
+        (tmp("atlas_height.csv").display().to_string(), tmp("atlas_height_1.csv").display().to_string());
+    let v = json(&fshape(&["transfer", &whole.join("subject_001").display().to_string(), &height, &onto, "--json"]));
+    assert_eq!((v["vertices"].as_u64(), v["missing"].as_u64()), (Some(162), Some(0)), "{v}");
+    let o = fshape(&["transfer", &whole.display().to_string(), &height, &onto]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("give one subject's folder"), "{o:?}");
     // Stopped after 2 iterations and resumed: the same template, bit for bit.
     run(&parts, &["--stop-after", "2"]);
     assert!(!parts.join("template.ply").exists());
@@ -1868,4 +1879,153 @@ fn info_takes_a_cifti_map_and_a_parcellation_s_regions_named_after_the_file() {
     let mask = format!("{}:insula", nib("lh.parcels.annot"));
     let v = json(&fshape(&["info", &surface, "--mask", &mask, "--json"]));
     assert_eq!(v["mask"]["masked"], 9, "three of the twelve vertices are the insula: {v}");
+}
+
+#[test]
+fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
+    use fshape_mesh::io::{self, ReadOptions, parcellation::Parcellation, parcellation::Region, read_mesh};
+    let (s, t, c) = match_inputs("transfer", 15);
+    let run = tmp("transfer_run");
+    let r = fshape(&["match", &s, &t, "--config", &c, "--out", &run.display().to_string(), "--times", "0,0.5"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // matched.ply is the end of the geodesic even when --times leaves t = 1 out.
+    let source = read_mesh(s.as_ref(), &ReadOptions::default()).unwrap();
+    let matched = read_mesh(&run.join("matched.ply"), &ReadOptions::default()).unwrap();
+    assert_eq!(matched.n_vertices(), source.n_vertices());
+    let n = source.n_vertices();
+    let file = |name: &str| tmp(name).display().to_string();
+    let run = run.display().to_string();
+
+    // A map with a cap of missing values (z > 0.3 on the radius-0.5 sphere),
+    // carried onto the target and back: the same values, up to twice the
+    // interpolation error of a smooth map on cells of about 0.15 (h² ≈ 0.02
+    // times its second derivatives, about 9), the cap still missing.
+    let f = |p: &[f64]| if p[2] > 0.3 { f64::NAN } else { (3.0 * p[0]).sin() + p[1] };
+    let values: Vec<f64> = (0..n).map(|v| f(source.point(v))).collect();
+    io::csv::write_signal(tmp("transfer_map.csv").as_ref(), "thickness", &values).unwrap();
+    let there = json(&fshape(&[
+        "transfer",
+        &run,
+        &file("transfer_map.csv"),
+        &file("transfer_on_target.gii"),
+        "--max-distance",
+        "1",
+        "--json",
+    ]));
+    assert_eq!((there["kind"].as_str(), there["beyond"].as_u64()), (Some("map"), Some(0)), "{there}");
+    assert!(there["missing"].as_u64().unwrap() > 0, "the cap is missing on the target: {there}");
+    let back = json(&fshape(&[
+        "transfer",
+        &run,
+        &file("transfer_on_target.gii"),
+        &file("transfer_back.csv"),
+        "--onto",
+        "source",
+        "--max-distance",
+        "1",
+        "--json",
+    ]));
+    assert_eq!(back["vertices"].as_u64(), Some(n as u64));
+    let got = io::read_signal_for(tmp("transfer_back.csv").as_ref(), Some(n), true).unwrap().values;
+    assert_eq!(got.len(), n);
+    let mut worst: f64 = 0.0;
+    for v in 0..n {
+        let z = source.point(v)[2];
+        if z < 0.2 {
+            assert!(got[v].is_finite(), "vertex {v} at z = {z} lost its value");
+            worst = worst.max((got[v] - values[v]).abs());
+        } else if z > 0.4 {
+            assert!(got[v].is_nan(), "vertex {v} at z = {z} in the missing cap got {}", got[v]);
+        }
+    }
+    assert!(worst < 0.1, "round trip error {worst}");
+
+    // A parcellation (.annot): two regions and vertices in none, there and
+    // back; most vertices come back to their region, all keys and names kept.
+    let region = |p: &[f64]| {
+        if p[0] > 0.05 {
+            0
+        } else if p[1] > 0.0 {
+            1
+        } else {
+            -1
+        }
+    };
+    let parcels = Parcellation {
+        keys: (0..n).map(|v| region(source.point(v))).collect(),
+        regions: vec![
+            Region { key: 0, name: "east".into(), rgba: [1.0, 0.0, 0.0, 1.0] },
+            Region { key: 1, name: "north".into(), rgba: [0.0, 0.0, 1.0, 1.0] },
+        ],
+    };
+    std::fs::write(tmp("lh.transfer.annot"), io::freesurfer::annot_bytes(&parcels).unwrap()).unwrap();
+    for (from, to, onto) in
+        [("lh.transfer.annot", "lh.on_target.annot", "target"), ("lh.on_target.annot", "lh.back.annot", "source")]
+    {
+        let o = fshape(&["transfer", &run, &file(from), &file(to), "--onto", onto, "--max-distance", "1"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stdout).contains("a parcellation onto the"), "{o:?}");
+    }
+    let back = io::read_parcellation(&tmp("lh.back.annot")).unwrap();
+    assert_eq!(back.regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(), ["east", "north"]);
+    let same = back.keys.iter().zip(&parcels.keys).filter(|(a, b)| a == b).count();
+    assert!(same * 10 >= n * 9, "{same} of {n} vertices back in their region");
+    assert!([-1, 0, 1].iter().all(|k| back.keys.contains(k)));
+
+    // A FreeSurfer label onto the target: a .label of the target's vertices.
+    let label = io::label::Label {
+        vertices: (0..n).filter(|&v| source.point(v)[2] < -0.2).collect(),
+        points: vec![],
+        values: vec![],
+    };
+    let label = io::label::Label {
+        points: vec![0.0; 3 * label.vertices.len()],
+        values: vec![0.0; label.vertices.len()],
+        ..label
+    };
+    io::label::write_label(&tmp("lh.bottom.label"), &label, "test").unwrap();
+    let v = json(&fshape(&["transfer", &run, &file("lh.bottom.label"), &file("lh.bottom_on_target.label"), "--json"]));
+    assert_eq!(v["kind"], "label");
+    let carried = io::label::read_label(&tmp("lh.bottom_on_target.label")).unwrap();
+    let target = read_mesh(t.as_ref(), &ReadOptions::default()).unwrap();
+    assert!(carried.vertices.iter().all(|&u| target.point(u)[2] < -0.05), "{:?}", carried.vertices);
+    assert!(
+        carried.vertices.len() * 2 > label.vertices.len(),
+        "{} of {}",
+        carried.vertices.len(),
+        label.vertices.len()
+    );
+
+    // A limit of 0: no vertex lies exactly on the other surface.
+    let v = json(&fshape(&[
+        "transfer",
+        &run,
+        &file("transfer_map.csv"),
+        &file("transfer_none.csv"),
+        "--max-distance",
+        "0%",
+        "--json",
+    ]));
+    assert_eq!(v["beyond"], v["vertices"], "{v}");
+
+    // Refusals, naming the problem, with nothing written.
+    io::csv::write_signal(tmp("transfer_short.csv").as_ref(), "thickness", &values[..5]).unwrap();
+    for (args, says) in [
+        (vec![run.clone(), file("transfer_map.csv"), file("transfer_x.annot")], "is a map; it is written as a signal"),
+        (vec![run.clone(), file("lh.transfer.annot"), file("transfer_x.gii")], "written as .annot or .csv"),
+        (vec![run.clone(), file("transfer_short.csv"), file("transfer_x.csv")], "values for a surface of"),
+        (
+            vec![run.clone(), file("transfer_map.csv"), file("transfer_x.csv"), "--max-distance=-1".into()],
+            "--max-distance",
+        ),
+        (vec![repo("data"), file("transfer_map.csv"), file("transfer_x.csv")], "no matched.ply here"),
+    ] {
+        let args: Vec<&str> = std::iter::once("transfer").chain(args.iter().map(String::as_str)).collect();
+        let o = fshape(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.code() == Some(1) && err.contains(says), "{args:?}: {err}");
+    }
+    for f in ["transfer_x.annot", "transfer_x.gii", "transfer_x.csv"] {
+        assert!(!tmp(f).exists(), "{f}");
+    }
 }

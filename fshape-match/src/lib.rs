@@ -43,6 +43,7 @@ pub mod quality;
 pub mod resolution;
 pub mod runner;
 pub mod session;
+pub mod transfer;
 pub mod unknowns;
 
 pub use atlas::{Atlas, AtlasResult, Cluster, Local, SubjectResult};

@@ -221,6 +221,18 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     }
     outputs.push((a.out.join("target.png"), crate::render::picture(&target, &view)?));
     files.push("target.png".into());
+    // The source at the end of the geodesic, whatever --times asked for:
+    // with target.ply, what `fshape transfer` carries values through.
+    let (x, f) = traj.at(1.0);
+    let mut matched_ply = Vec::new();
+    io::write_to(
+        &mut matched_ply,
+        &template.clone().with_points(x)?.with_signal(Some(f))?,
+        io::Format::Ply,
+        io::Encoding::Binary,
+    )?;
+    outputs.push((a.out.join("matched.ply"), matched_ply));
+    files.push("matched.ply".into());
     let mut target_ply = Vec::new();
     io::write_to(&mut target_ply, &target, io::Format::Ply, io::Encoding::Binary)?;
     outputs.push((a.out.join("target.ply"), target_ply));

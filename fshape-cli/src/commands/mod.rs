@@ -15,3 +15,4 @@ pub mod render;
 pub mod report;
 pub mod shoot;
 pub mod stats;
+pub mod transfer;

@@ -417,6 +417,57 @@ pub fn parse_annot(data: &[u8]) -> Result<Parcellation, ParseError> {
     Ok(Parcellation { keys, regions })
 }
 
+/// The bytes of an annotation as nibabel's `write_annot` writes it (the
+/// new colour table layout, version −2), which [`parse_annot`] reads back
+/// to the same keys: a region's key is its table index, its colour packs
+/// into each vertex's value, and a vertex whose key is not in the table
+/// (−1) gets 0. A black region's vertices also get 0 and read back as no
+/// region (−1), as FreeSurfer reads them (HCP's `???`). Refused: a
+/// negative key in the table and two regions of one colour (their
+/// vertices would read back as one region).
+pub fn annot_bytes(p: &Parcellation) -> io::Result<Vec<u8>> {
+    let invalid = |m: String| io::Error::new(io::ErrorKind::InvalidInput, m);
+    let byte = |x: f64| (x.clamp(0.0, 1.0) * 255.0).round() as i32;
+    let mut packed = Vec::with_capacity(p.regions.len());
+    for r in &p.regions {
+        if r.key < 0 {
+            return Err(invalid(format!("annotation: region {:?} has the negative key {}", r.name, r.key)));
+        }
+        let value = byte(r.rgba[0]) + (byte(r.rgba[1]) << 8) + (byte(r.rgba[2]) << 16);
+        if let Some((_, other)) = packed.iter().find(|(v, _)| *v == value && value != 0) {
+            return Err(invalid(format!("annotation: regions {other:?} and {:?} have one colour", r.name)));
+        }
+        packed.push((value, &r.name));
+    }
+    let n = i32::try_from(p.keys.len()).map_err(|_| invalid(format!("annotation: {} vertices", p.keys.len())))?;
+    let mut out = Vec::with_capacity(8 * p.keys.len() + 64 * p.regions.len() + 64);
+    let put = |v: i32, out: &mut Vec<u8>| out.extend_from_slice(&v.to_be_bytes());
+    put(n, &mut out);
+    for (v, &key) in p.keys.iter().enumerate() {
+        let value = p.regions.iter().position(|r| r.key == key).map_or(0, |i| packed[i].0);
+        put(v as i32, &mut out);
+        put(value, &mut out);
+    }
+    put(1, &mut out);
+    put(-2, &mut out);
+    put(p.regions.iter().map(|r| r.key + 1).max().unwrap_or(0), &mut out);
+    let string = |s: &str, out: &mut Vec<u8>| {
+        out.extend_from_slice(&(s.len() as i32 + 1).to_be_bytes());
+        out.extend_from_slice(s.as_bytes());
+        out.push(0);
+    };
+    string("NOFILE", &mut out);
+    put(p.regions.len() as i32, &mut out);
+    for r in &p.regions {
+        put(r.key, &mut out);
+        string(&r.name, &mut out);
+        for c in [byte(r.rgba[0]), byte(r.rgba[1]), byte(r.rgba[2]), 255 - byte(r.rgba[3])] {
+            put(c, &mut out);
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

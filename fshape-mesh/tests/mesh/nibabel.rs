@@ -287,6 +287,27 @@ fn parcellations_from_nibabel_read_to_its_keys_and_names() {
 }
 
 #[test]
+fn annotations_are_written_byte_for_byte_as_nibabel_writes_them() {
+    let annot = io::read_parcellation(&fixture("lh.parcels.annot")).unwrap();
+    assert!(io::freesurfer::annot_bytes(&annot).unwrap() == std::fs::read(fixture("lh.parcels.annot")).unwrap());
+    // A GIfTI label table (keys 0, 4, 7, 9; 0 is HCP's black `???`) as an
+    // annotation: the keys come back, the black region's vertices as none.
+    let gii = io::read_parcellation(&fixture("parcels.label.gii")).unwrap();
+    let back = io::freesurfer::parse_annot(&io::freesurfer::annot_bytes(&gii).unwrap()).unwrap();
+    let want: Vec<i32> = gii.keys.iter().map(|&k| if k == 0 { -1 } else { k }).collect();
+    assert_eq!(back.keys, want);
+    assert_eq!(
+        back.regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(),
+        ["???", "precentral", "postcentral", "insula"]
+    );
+    // Two regions of one colour would read back as one.
+    let mut same = annot.clone();
+    same.regions[1].rgba = same.regions[0].rgba;
+    let e = io::freesurfer::annot_bytes(&same).unwrap_err().to_string();
+    assert!(e.contains("regions \"precentral\" and \"postcentral\" have one colour"), "{e}");
+}
+
+#[test]
 fn cifti_maps_from_nibabel_read_per_structure_with_nan_off_the_model() {
     let same = |got: &[f64], want: &[f64]| {
         assert_eq!(got.len(), want.len());

@@ -1,0 +1,255 @@
+//! `fshape transfer`: a map, a parcellation or a label carried through a
+//! registration, from the source's vertices onto the target's or back
+//! ([`fshape_match::transfer`] holds the rules).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use fshape_match::transfer::{Carried, Correspondence};
+use fshape_mesh::FShape;
+use fshape_mesh::io::{self, ReadOptions, label::Label, parcellation::Parcellation};
+use serde::Serialize;
+
+/// `fshape transfer`'s arguments (its help is on the command).
+#[derive(clap::Args)]
+pub struct Args {
+    /// A registration's folder: `fshape match`'s output (matched.ply and
+    /// target.ply) or one subject's folder of an `fshape atlas`
+    /// (subject_NNN: matched.ply and subject.ply; its source is the
+    /// template).
+    pub run: PathBuf,
+    /// What to carry, on the vertices of the surface it comes from: a map
+    /// (CSV, GIfTI, curv, MGH, or CIFTI-2 as FILE:STRUCTURE[:MAP]; NaN
+    /// marks vertices without a value), a parcellation (.annot,
+    /// .label.gii) or a FreeSurfer .label.
+    pub input: PathBuf,
+    /// Where to write it, on the receiving surface's vertices, in the
+    /// format its name says: a map as a signal file (.csv, .gii, .mgh,
+    /// .mgz, or a FreeSurfer name such as lh.thickness), a parcellation
+    /// as .annot or .csv (a key per vertex, −1 for none), a label as
+    /// .label.
+    pub output: PathBuf,
+    /// The surface that receives the values: `target` (from the source's
+    /// vertices) or `source` (from the target's).
+    #[arg(long, value_enum, default_value_t = Onto::Target)]
+    pub onto: Onto,
+    /// Vertices farther than this from the surface the values come from
+    /// get none (NaN, or no region): a length in the meshes' units, or a
+    /// percentage of the target's bounding-box diagonal.
+    #[arg(long, default_value = "2%", value_name = "LENGTH|PERCENT%")]
+    pub max_distance: String,
+    /// Print JSON for scripts.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Which side of the registration receives the values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Onto {
+    /// The target's vertices, from the source's.
+    Target,
+    /// The source's vertices, from the target's.
+    Source,
+}
+
+/// What `transfer` did, printed for the user (and as JSON).
+#[derive(Serialize)]
+struct Summary {
+    run: String,
+    input: String,
+    output: String,
+    onto: Onto,
+    /// map, parcellation or label.
+    kind: &'static str,
+    /// The distance limit in the meshes' units.
+    max_distance: f64,
+    /// Vertices of the receiving surface, those beyond the limit and (a
+    /// map) those whose closest cell had too few corners with a value.
+    #[serde(flatten)]
+    carried: Carried,
+    /// Distances of the receiving vertices to the other surface, as
+    /// percentages of the target's bounding-box diagonal.
+    distance_median_percent: f64,
+    distance_p95_percent: f64,
+    distance_max_percent: f64,
+}
+
+/// The two meshes of a registration folder: the matched source (the
+/// source's vertices at the end of the geodesic) and the target as
+/// matched.
+fn registration(run: &Path) -> Result<(FShape, FShape)> {
+    let matched = run.join("matched.ply");
+    if !matched.is_file() {
+        if run.join("template.ply").is_file() {
+            bail!(
+                "{}: an atlas folder; give one subject's folder (e.g. {}) to carry between the template and that subject",
+                run.display(),
+                run.join("subject_000").display()
+            );
+        }
+        bail!(
+            "{}: no matched.ply here (an `fshape match` output folder, or an atlas subject's folder, holds it)",
+            run.display()
+        );
+    }
+    let target = ["target.ply", "subject.ply"].iter().map(|n| run.join(n)).find(|p| p.is_file());
+    let Some(target) = target else {
+        bail!("{}: matched.ply without target.ply (a match) or subject.ply (an atlas subject)", run.display());
+    };
+    let read = |p: &Path| io::read_mesh(p, &ReadOptions::default()).with_context(|| format!("reading {}", p.display()));
+    Ok((read(&matched)?, read(&target)?))
+}
+
+/// `--max-distance`: a length, or a percentage of `diagonal`.
+fn max_distance(text: &str, diagonal: f64) -> Result<f64> {
+    let t = text.trim();
+    let (number, percent) = match t.strip_suffix('%') {
+        Some(n) => (n.trim(), true),
+        None => (t, false),
+    };
+    let v: f64 = number.parse().ok().filter(|v: &f64| *v >= 0.0 && !v.is_nan()).with_context(|| {
+        format!("--max-distance {text:?}: expected a non-negative length or a percentage such as 2%")
+    })?;
+    Ok(if percent { v / 100.0 * diagonal } else { v })
+}
+
+fn is_label(path: &Path) -> bool {
+    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    name.ends_with(".label") || name.ends_with(".label.gz")
+}
+
+fn is_parcellation(path: &Path) -> bool {
+    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let name = name.strip_suffix(".gz").unwrap_or(&name);
+    name.ends_with(".annot") || name.ends_with(".label.gii")
+}
+
+/// The output's format must suit the input's kind (checked before any work).
+fn check_output(input: &Path, output: &Path) -> Result<()> {
+    let name = output.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if is_label(input) && !is_label(output) {
+        bail!("{}: a label is written as a FreeSurfer .label", output.display());
+    }
+    if is_parcellation(input) && !(name.ends_with(".annot") || name.ends_with(".csv")) {
+        bail!("{}: a parcellation is written as .annot or .csv (a key per vertex)", output.display());
+    }
+    if !is_label(input) && !is_parcellation(input) && (is_label(output) || is_parcellation(output)) {
+        bail!(
+            "{}: {} is a map; it is written as a signal file (.csv, .gii, .mgh, .mgz, a FreeSurfer name)",
+            output.display(),
+            input.display()
+        );
+    }
+    Ok(())
+}
+
+pub fn run(a: Args) -> Result<()> {
+    check_output(&a.input, &a.output)?;
+    let (matched, target) = registration(&a.run)?;
+    let (from, onto) = match a.onto {
+        Onto::Target => (&matched, &target),
+        Onto::Source => (&target, &matched),
+    };
+    let diagonal = target.bounding_box().diagonal();
+    let limit = max_distance(&a.max_distance, diagonal)?;
+    let n = from.n_vertices();
+    let correspondence = Correspondence::new(from, onto).context("the closest points between the two surfaces")?;
+    let what = |side: &str| format!("{} (on the {side}'s {n} vertices)", a.input.display());
+    let side = if a.onto == Onto::Target { "source" } else { "target" };
+    let (kind, carried) = if is_label(&a.input) {
+        let label = io::label::read_label(&a.input)?;
+        let keys: Vec<i32> = label
+            .mask(n)
+            .map_err(|source| io::ReadError::Parse { path: a.input.clone(), source })?
+            .iter()
+            .map(|&m| if m > 0.0 { 0 } else { -1 })
+            .collect();
+        let out = correspondence.labels(&keys, limit)?;
+        let vertices: Vec<usize> = (0..out.len()).filter(|&v| out[v] == 0).collect();
+        let points = vertices.iter().flat_map(|&v| point3(onto, v)).collect();
+        let values = vec![0.0; vertices.len()];
+        io::label::write_label(&a.output, &Label { vertices, points, values }, "fshape-transfer")?;
+        ("label", count_beyond(&correspondence, limit))
+    } else if is_parcellation(&a.input) {
+        let p = io::read_parcellation(&a.input)?;
+        if p.keys.len() != n {
+            return Err(io::ReadError::Count { path: a.input.clone(), found: p.keys.len(), expected: n })
+                .with_context(|| what(side));
+        }
+        let out = Parcellation { keys: correspondence.labels(&p.keys, limit)?, regions: p.regions };
+        write_parcellation(&a.output, &out)?;
+        ("parcellation", count_beyond(&correspondence, limit))
+    } else {
+        let column = io::read_signal_for(&a.input, Some(n), true).with_context(|| what(side))?;
+        if column.values.len() != n {
+            return Err(io::ReadError::Count { path: a.input.clone(), found: column.values.len(), expected: n })
+                .with_context(|| what(side));
+        }
+        let (out, carried) = correspondence.map(&column.values, limit)?;
+        let name = if column.name.is_empty() { "signal".to_string() } else { column.name.clone() };
+        io::write_signal(&a.output, &name, &out, onto.n_cells())?;
+        ("map", carried)
+    };
+    let mut d: Vec<f64> = correspondence.distances().iter().map(|d| 100.0 * d / diagonal).collect();
+    d.sort_by(f64::total_cmp);
+    let at = |q: f64| d.get(((d.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0.0);
+    let summary = Summary {
+        run: a.run.display().to_string(),
+        input: a.input.display().to_string(),
+        output: a.output.display().to_string(),
+        onto: a.onto,
+        kind,
+        max_distance: limit,
+        carried,
+        distance_median_percent: at(0.5),
+        distance_p95_percent: at(0.95),
+        distance_max_percent: at(1.0),
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!(
+            "{} -> {}: a {kind} onto the {}'s {} vertices; {} beyond {} ({}), {} without a value; distance to the other surface: median {:.3} %, 95th percentile {:.3} %, max {:.3} % of the target's diagonal",
+            summary.input,
+            summary.output,
+            if a.onto == Onto::Target { "target" } else { "source" },
+            carried.vertices,
+            carried.beyond,
+            a.max_distance,
+            format_length(limit),
+            carried.missing,
+            summary.distance_median_percent,
+            summary.distance_p95_percent,
+            summary.distance_max_percent,
+        );
+    }
+    Ok(())
+}
+
+fn format_length(v: f64) -> String {
+    format!("{v:.4}")
+}
+
+fn point3(shape: &FShape, v: usize) -> [f64; 3] {
+    let p = shape.point(v);
+    [p[0], p[1], if p.len() == 3 { p[2] } else { 0.0 }]
+}
+
+fn count_beyond(c: &Correspondence, limit: f64) -> Carried {
+    Carried { vertices: c.len(), beyond: c.distances().iter().filter(|d| !(**d <= limit)).count(), missing: 0 }
+}
+
+/// A parcellation as .annot, or as a CSV column of keys (`check_output`
+/// allowed only these).
+fn write_parcellation(path: &Path, p: &Parcellation) -> Result<()> {
+    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if name.ends_with(".annot") {
+        let bytes = io::freesurfer::annot_bytes(p).with_context(|| format!("writing {}", path.display()))?;
+        io::write_atomic(path, &bytes, false)?;
+    } else {
+        let values: Vec<f64> = p.keys.iter().map(|&k| f64::from(k)).collect();
+        io::csv::write_signal(path, "key", &values)?;
+    }
+    Ok(())
+}
