@@ -181,6 +181,9 @@ class MatchResult(TypedDict):
     seconds: float
     geodesic: Geodesic
     matched: FShape
+    target: FShape
+    """The target as matched (moved when [prealign] moves the target): with
+    `matched`, what a `Correspondence` carries values between."""
     config: dict[str, Any]
 
 class SubjectResult(TypedDict):
@@ -381,6 +384,38 @@ def read_label(
 ) -> Tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Reads a FreeSurfer label file: (vertices, points k x 3, values), as
     nibabel's read_label(path, read_scalars=True) reads the first and last."""
+
+class Carried(TypedDict):
+    vertices: int
+    beyond: int
+    """Vertices farther than max_distance from the source."""
+    missing: int
+    """Vertices within it whose closest cell carries under half its weight
+    on corners with a value."""
+
+class Correspondence:
+    """Every vertex of `onto` at its closest point on `source` (the surface
+    the values come from), computed once, as `fshape transfer` does. For a
+    match result r, Correspondence(r["matched"], r["target"]) carries the
+    source's maps onto the target; Correspondence(r["target"], r["matched"])
+    the target's back onto the source's vertices."""
+
+    def __init__(self, source: FShape, onto: FShape) -> None: ...
+    def map(
+        self, values: npt.ArrayLike, max_distance: float = ...
+    ) -> Tuple[npt.NDArray[np.float64], Carried]:
+        """A map on source's vertices (NaN: no value) on onto's vertices:
+        the barycentric mean at the closest point, corners without a value
+        left out while the others carry at least half the weight, else NaN;
+        NaN farther than max_distance (default: no limit)."""
+    def labels(self, keys: npt.ArrayLike, max_distance: float = ...) -> npt.NDArray[np.int32]:
+        """Integer keys on source's vertices (-1: no region) on onto's
+        vertices: the key with the largest barycentric weight at the closest
+        point (ties to the smaller key); -1 farther than max_distance."""
+    @property
+    def distances(self) -> npt.NDArray[np.float64]:
+        """Each vertex of onto's distance to source."""
+    def __len__(self) -> int: ...
 
 def read_parcellation(
     path: Union[str, "PathLike[str]"],

@@ -1996,6 +1996,31 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
         label.vertices.len()
     );
 
+    // A mask on the source: only the label's vertices carry their values.
+    let o = fshape(&[
+        "transfer",
+        &run,
+        &file("transfer_map.csv"),
+        &file("transfer_masked.csv"),
+        "--mask",
+        &file("lh.bottom.label"),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got = io::read_signal_for(tmp("transfer_masked.csv").as_ref(), Some(target.n_vertices()), true).unwrap().values;
+    for (u, g) in got.iter().enumerate() {
+        let z = target.point(u)[2];
+        assert!(
+            if z > -0.1 {
+                g.is_nan()
+            } else if z < -0.35 {
+                g.is_finite()
+            } else {
+                true
+            },
+            "vertex {u} at z = {z}: {g}"
+        );
+    }
+
     // A limit of 0: no vertex lies exactly on the other surface.
     let v = json(&fshape(&[
         "transfer",

@@ -16,6 +16,7 @@ mod report;
 mod shape;
 mod shoot;
 mod stats;
+mod transfer;
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -38,6 +39,7 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<shape::PyFShape>()?;
     m.add_class::<config::PyConfig>()?;
+    m.add_class::<transfer::PyCorrespondence>()?;
     m.add_function(wrap_pyfunction!(io::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(io::write_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(io::read_signal, m)?)?;

@@ -59,7 +59,9 @@ fn prepared<S: Staged>(
 /// `matrix`, its `scale`, `rotation_degrees`, `translation`, the
 /// attachment before and after; else None), `stages` (every iteration's J), `iterations`,
 /// `evaluations`, `seconds`, `geodesic` (`times`, `points` T × n × d,
-/// `signals` T × n, `hamiltonian`), `matched` (the FShape at t = 1), and
+/// `signals` T × n, `hamiltonian`), `matched` (the FShape at t = 1),
+/// `target` (the target as matched: moved when `[prealign]` moves the
+/// target; `Correspondence` carries values between it and `matched`), and
 /// `config` (the configuration with the weights used, for `shoot`).
 #[pyfunction(name = "match")]
 #[pyo3(signature = (source, target, config, progress = None, stage_templates = None, times = None, checkpoint = None))]
@@ -94,9 +96,9 @@ pub(crate) fn match_shapes<'py>(
         };
         let used = config.resolved(session.plan().scales);
         let template = session.problem().template().clone();
-        Ok((result, used, template))
+        Ok((result, used, template, session.target().clone()))
     });
-    let (result, used, template) = run.map_err(err)?;
+    let (result, used, template, matched_target) = run.map_err(err)?;
     observer.raised()?;
     let Some(r) = result else {
         return Err(err("stopped by the progress callback before the first iteration: there is no result yet"));
@@ -118,6 +120,7 @@ pub(crate) fn match_shapes<'py>(
     let (x1, f1) = r.trajectory.at(1.0);
     let matched = template.with_points(x1).and_then(|s| s.with_signal(Some(f1))).map_err(err)?;
     d.set_item("matched", PyFShape { inner: matched })?;
+    d.set_item("target", PyFShape { inner: matched_target })?;
     d.set_item("config", to_py(py, &used)?)?;
     Ok(d)
 }

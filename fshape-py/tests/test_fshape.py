@@ -201,6 +201,49 @@ def test_a_small_match_equals_the_cli_on_the_same_inputs_and_config(tmp_path):
     assert np.array_equal(shot["points"][-1], end.points)
 
 
+def test_a_correspondence_follows_the_stated_rules_and_carries_as_the_cli_transfers(tmp_path):
+    # One triangle; onto points at barycentric (0.6, 0.3, 0.1), (0.2, 0.4, 0.4)
+    # and one 2 above (0.2, 0.2, 0.6).
+    tri = fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    onto = fshape.FShape([[0.3, 0.1, 0], [0.4, 0.4, 0], [0.2, 0.6, 2]], [[0, 1, 2]])
+    c = fshape.Correspondence(tri, onto)
+    assert len(c) == 3 and np.allclose(c.distances, [0, 0, 2])
+    values, counts = c.map([np.nan, 10.0, 20.0], max_distance=1.0)
+    # Corner 0 has no value: 0.4 of the weight is left at the first point
+    # (NaN), 0.8 at the second: (0.4 * 10 + 0.4 * 20) / 0.8.
+    assert np.isnan(values[0]) and values[1] == pytest.approx(15.0) and np.isnan(values[2])
+    assert counts == {"vertices": 3, "beyond": 1, "missing": 1}
+    assert c.map([1.0, 10.0, 20.0])[0][2] == pytest.approx(0.2 + 2.0 + 12.0)
+    labels = c.labels(np.array([7, 3, 4]), max_distance=1.0)
+    assert labels.dtype == np.int32 and labels.tolist() == [7, 3, -1]
+    with pytest.raises(fshape.FShapeError, match="3 vertices"):
+        c.map([1.0, 2.0])
+    with pytest.raises(fshape.FShapeError, match="outside int32"):
+        c.labels([1, 2, 2**40])
+
+    # Through a registration: the result's matched and target shapes carry
+    # a map as `fshape transfer` carries it from the run's folder.
+    src, tgt = sphere_pair()
+    fshape.write_mesh(tmp_path / "src.ply", src)
+    fshape.write_mesh(tmp_path / "tgt.ply", tgt)
+    (tmp_path / "match.toml").write_text(
+        '[model]\nnorm = "h1"\nlength = 0.2\ngamma_w = 400.0\n[deformation]\nwidths = [0.4, 0.2]\n'
+        '[integrator]\nsteps = 5\n[attachment]\nkernel_geom = "gaussian:0.1"\nkernel_signal = "gaussian:0.5"\n'
+        '[optimizer]\nmax_iterations = 10\n[schedule]\nkernel_geom = ["gaussian:0.3", "gaussian:0.1"]\n'
+    )
+    cli("match", tmp_path / "src.ply", tmp_path / "tgt.ply", "--config", tmp_path / "match.toml",
+        "--out", tmp_path / "run")
+    result = fshape.match(src, tgt, CONFIG)
+    thickness = np.sin(3 * src.points[:, 0]) + src.points[:, 1]
+    thickness[src.points[:, 2] > 0.4] = np.nan
+    fshape.write_signal(tmp_path / "thickness.csv", thickness, name="thickness")
+    cli("transfer", tmp_path / "run", tmp_path / "thickness.csv", tmp_path / "on_target.csv", "--max-distance", "1")
+    on_target, _ = fshape.Correspondence(result["matched"], result["target"]).map(thickness, max_distance=1.0)
+    cli_values = np.genfromtxt(tmp_path / "on_target.csv", delimiter=",", skip_header=1)
+    assert np.allclose(on_target, cli_values, rtol=0, atol=1e-12, equal_nan=True)
+    assert np.isnan(on_target).any() and np.isfinite(on_target).sum() > 6
+
+
 def test_prealignment_brings_a_turned_shifted_copy_back_and_agrees_with_the_cli(tmp_path):
     # The bunny (geometry only) turned by 120 degrees about a tilted axis and shifted:
     # a rigid [prealign] undoes it before a short registration.

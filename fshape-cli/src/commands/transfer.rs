@@ -38,6 +38,12 @@ pub struct Args {
     /// percentage of the target's bounding-box diagonal.
     #[arg(long, default_value = "2%", value_name = "LENGTH|PERCENT%")]
     pub max_distance: String,
+    /// A mask on the surface the values come from (as `match` takes it: a
+    /// .label, FILE:REGION,REGION of a parcellation, or weights in
+    /// [0, 1]): its vertices under 0.5 carry no value, as if NaN (a map)
+    /// or in no region (a parcellation or a label).
+    #[arg(long, value_name = "MASK")]
+    pub mask: Option<PathBuf>,
     /// Print JSON for scripts.
     #[arg(long)]
     pub json: bool,
@@ -157,6 +163,16 @@ pub fn run(a: Args) -> Result<()> {
     let correspondence = Correspondence::new(from, onto).context("the closest points between the two surfaces")?;
     let what = |side: &str| format!("{} (on the {side}'s {n} vertices)", a.input.display());
     let side = if a.onto == Onto::Target { "source" } else { "target" };
+    let masked: Vec<bool> = match &a.mask {
+        Some(m) => io::read_mask(m, n)
+            .with_context(|| format!("--mask {} (on the {side}'s {n} vertices)", m.display()))?
+            .iter()
+            .map(|&w| w < 0.5)
+            .collect(),
+        None => vec![false; n],
+    };
+    let unmask_keys =
+        |keys: Vec<i32>| -> Vec<i32> { keys.iter().zip(&masked).map(|(&k, &m)| if m { -1 } else { k }).collect() };
     let (kind, carried) = if is_label(&a.input) {
         let label = io::label::read_label(&a.input)?;
         let keys: Vec<i32> = label
@@ -165,7 +181,7 @@ pub fn run(a: Args) -> Result<()> {
             .iter()
             .map(|&m| if m > 0.0 { 0 } else { -1 })
             .collect();
-        let out = correspondence.labels(&keys, limit)?;
+        let out = correspondence.labels(&unmask_keys(keys), limit)?;
         let vertices: Vec<usize> = (0..out.len()).filter(|&v| out[v] == 0).collect();
         let points = vertices.iter().flat_map(|&v| point3(onto, v)).collect();
         let values = vec![0.0; vertices.len()];
@@ -177,7 +193,7 @@ pub fn run(a: Args) -> Result<()> {
             return Err(io::ReadError::Count { path: a.input.clone(), found: p.keys.len(), expected: n })
                 .with_context(|| what(side));
         }
-        let out = Parcellation { keys: correspondence.labels(&p.keys, limit)?, regions: p.regions };
+        let out = Parcellation { keys: correspondence.labels(&unmask_keys(p.keys), limit)?, regions: p.regions };
         write_parcellation(&a.output, &out)?;
         ("parcellation", count_beyond(&correspondence, limit))
     } else {
@@ -186,7 +202,8 @@ pub fn run(a: Args) -> Result<()> {
             return Err(io::ReadError::Count { path: a.input.clone(), found: column.values.len(), expected: n })
                 .with_context(|| what(side));
         }
-        let (out, carried) = correspondence.map(&column.values, limit)?;
+        let values: Vec<f64> = column.values.iter().zip(&masked).map(|(&v, &m)| if m { f64::NAN } else { v }).collect();
+        let (out, carried) = correspondence.map(&values, limit)?;
         let name = if column.name.is_empty() { "signal".to_string() } else { column.name.clone() };
         io::write_signal(&a.output, &name, &out, onto.n_cells())?;
         ("map", carried)
@@ -237,7 +254,7 @@ fn point3(shape: &FShape, v: usize) -> [f64; 3] {
 }
 
 fn count_beyond(c: &Correspondence, limit: f64) -> Carried {
-    Carried { vertices: c.len(), beyond: c.distances().iter().filter(|d| !(**d <= limit)).count(), missing: 0 }
+    Carried { vertices: c.len(), beyond: c.distances().iter().filter(|&&d| d > limit).count(), missing: 0 }
 }
 
 /// A parcellation as .annot, or as a CSV column of keys (`check_output`
