@@ -76,7 +76,9 @@ pub struct DisplacedPair {
 /// vertices and in directions drawn from `seed`, scaled so that the
 /// largest displacement of a vertex is `amplitude`, and its signal changed
 /// by four Gaussian bumps of the same width and of heights ±½ the signal's
-/// standard deviation. Deterministic: the same inputs give the same bits.
+/// standard deviation (over the vertices with a value: a masked source's
+/// mask is kept and its masked vertices stay NaN). Deterministic: the same
+/// inputs give the same bits.
 pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Result<DisplacedPair, MatchError> {
     use fshape_mesh::generate::SplitMix64;
     let (n, dim) = (source.n_vertices(), source.dim());
@@ -111,8 +113,11 @@ pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Resu
         displacement.chunks_exact(dim).map(|d| d.iter().map(|v| v * v).sum::<f64>().sqrt()).fold(0.0, f64::max);
     let scale = if largest > 0.0 { amplitude / largest } else { 0.0 };
     displacement.iter_mut().for_each(|v| *v *= scale);
-    let mean = signal.iter().sum::<f64>() / n as f64;
-    let sd = (signal.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64).sqrt();
+    // The signal's spread over the vertices with a value (a masked vertex's
+    // is NaN and stays so on the target).
+    let valued = signal.iter().filter(|v| !v.is_nan()).count().max(1) as f64;
+    let mean = signal.iter().filter(|v| !v.is_nan()).sum::<f64>() / valued;
+    let sd = (signal.iter().filter(|v| !v.is_nan()).map(|v| (v - mean) * (v - mean)).sum::<f64>() / valued).sqrt();
     let mut signal_change = vec![0.0; n];
     for k in 0..4 {
         let c = (rng.next_u64() % n as u64) as usize;
@@ -125,4 +130,37 @@ pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Resu
     let target_signal: Vec<f64> = signal.iter().zip(&signal_change).map(|(a, b)| a + b).collect();
     let target = source.clone().with_points(points)?.with_signal(Some(target_signal))?;
     Ok(DisplacedPair { target, displacement, signal_change })
+}
+
+#[cfg(test)]
+mod tests {
+    use fshape_mesh::test_support::perturbed_icosphere;
+
+    use super::*;
+
+    /// A masked source moves as the unmasked one; its target keeps the mask
+    /// (NaN there) and the signal bumps scale with the spread of the
+    /// values that exist.
+    #[test]
+    fn a_masked_source_gives_the_same_displacement_and_keeps_its_mask() {
+        let whole = perturbed_icosphere(2, 0.05, 3);
+        let n = whole.n_vertices();
+        let mask: Vec<f64> = (0..n).map(|v| if whole.point(v)[2] > 0.5 { 0.0 } else { 1.0 }).collect();
+        let values: Vec<f64> = whole.signal().unwrap().to_vec();
+        let masked = whole.clone().with_signal_and_mask(Some(values.clone()), Some(mask.clone())).unwrap();
+        let (a, b) = (displaced(&whole, 0.2, 0.5, 7).unwrap(), displaced(&masked, 0.2, 0.5, 7).unwrap());
+        assert_eq!(a.displacement, b.displacement);
+        assert_eq!(b.target.mask(), Some(&mask[..]));
+        let sd = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        let kept: Vec<f64> = (0..n).filter(|&v| mask[v] > 0.0).map(|v| values[v]).collect();
+        let ratio = sd(&kept) / sd(&values);
+        for v in 0..n {
+            assert!((b.signal_change[v] - ratio * a.signal_change[v]).abs() < 1e-12, "vertex {v}");
+            let t = b.target.signal().unwrap()[v];
+            assert!(if mask[v] == 0.0 { t.is_nan() } else { (t - values[v] - b.signal_change[v]).abs() < 1e-12 });
+        }
+    }
 }
