@@ -125,7 +125,14 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let cli = Cli::parse();
+    // FSHAPE_SIMD caps the kernel sums' instruction set (fshape_kernels::simd);
+    // a value the library would ignore is refused here, before any work.
+    if let Err(e) = fshape_kernels::simd::Cap::from_env() {
+        eprintln!("error: {e}");
+        return ExitCode::from(1);
+    }
+    let result = match cli.command {
         Command::Info(a) => commands::info::run(a),
         Command::Fem(a) => commands::fem::run(a),
         Command::Quality(a) => commands::quality::run(a),

@@ -11,7 +11,8 @@
 //! inside its inner radius). Each target's sum runs over the sources in the
 //! order BlockPairs fixes, so results do not depend on the number of
 //! threads. The block kernel is plain lane-wise arithmetic, compiled through
-//! pulp's runtime dispatch (AVX-512, AVX2 or scalar, whichever the CPU has)
+//! pulp's runtime dispatch (AVX-512, AVX2 or scalar, whichever the CPU has
+//! and [`crate::simd`]'s cap allows)
 //! so that LLVM vectorises it without special build flags and without
 //! unsafe code here. Its fused multiply-adds are `f64::mul_add`, one
 //! rounding each whatever the instruction set: vfmadd under AVX2 and
@@ -30,7 +31,7 @@
 // turns into SIMD; iterator chains over several arrays are not.
 #![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
 
-use pulp::{Arch, Simd, WithSimd};
+use pulp::{Simd, WithSimd};
 
 use crate::profile::{GaussTerms, quintic_taper, quintic_taper_derivatives};
 use crate::{BlockPairs, Taper};
@@ -500,7 +501,7 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
     let n = inp.x.len() / D;
     rows.clear();
     rows.resize(n * w_out, 0.0);
-    let arch = Arch::new();
+    let arch = crate::simd::arch();
     pairs.for_each_block(parallel, rows, w_out, |targets, runs, out| {
         let lanes = targets.len();
         // Unused lanes repeat the last target.

@@ -648,7 +648,7 @@ impl Job<'_> {
         let rows = crate::fast::rows(MODE, D, c);
         let (split, w2) = (self.split, rows - self.split);
         // Chunks of targets, each compiled for the CPU's vector width.
-        let arch = pulp::Arch::new();
+        let arch = crate::simd::arch();
         let chunk = |(k, (o1, o2)): (usize, (&mut [f64], &mut [f64]))| {
             let first = k * GATHER_CHUNK;
             dispatch(arch, scalar, Gather::<D, P, MODE> { fields: &fields, inp, h, basis, first, rows, split, o1, o2 })
@@ -772,7 +772,7 @@ fn spread_c<const D: usize, const P: usize, const C: usize, const JVP: bool>(
     let slabs = if parallel { (2 * rayon::current_num_threads()).min(win.n[slow]).max(1) } else { 1 };
     let per = win.n[slow].div_ceil(slabs);
     let (dy, db) = d.unwrap_or((&[], &[]));
-    let arch = pulp::Arch::new();
+    let arch = crate::simd::arch();
     let slab = |(k, chunk): (usize, &mut [f64])| {
         let z0 = (k * per) as i64 + win.lo[slow];
         let z1 = z0 + (chunk.len() / plane) as i64;
@@ -902,7 +902,7 @@ fn first_pass(
     // its contributions to consecutive outputs are consecutive taps.
     let reach = taps.len() - 1;
     let full: Vec<f64> = (0..2 * reach + 1).map(|k| taps[k.abs_diff(reach)]).collect();
-    let arch = pulp::Arch::new();
+    let arch = crate::simd::arch();
     let line = |(r, o): (usize, &mut [f64])| {
         let (ch, start) = (r / (nodes / nx), (r % (nodes / nx)) * nx);
         let input = &input[start * c..(start + nx) * c];
@@ -964,7 +964,7 @@ fn axis_pass(
     debug_assert_eq!(input.len(), win.nodes() * c);
     out.clear();
     out.resize(input.len(), 0.0);
-    let arch = pulp::Arch::new();
+    let arch = crate::simd::arch();
     let row = |(r, o): (usize, &mut [f64])| {
         // The channel and the slower axes are the row's "outer" index.
         let (outer, i) = (r / len, r % len);

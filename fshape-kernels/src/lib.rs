@@ -42,6 +42,7 @@ mod fast;
 pub mod grid;
 mod mixed;
 mod profile;
+pub mod simd;
 mod sums;
 mod symmetric;
 

@@ -34,7 +34,7 @@
 
 #![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
 
-use pulp::{Arch, Simd, WithSimd};
+use pulp::{Simd, WithSimd};
 
 use crate::profile::{GaussTerms, quintic_taper};
 use crate::{BlockPairs, SourceRun, Taper};
@@ -266,7 +266,7 @@ fn run<const D: usize, const BD: usize>(
     let bs: Vec<[f32; BD]> = order.iter().map(|&j| std::array::from_fn(|c| b[j * BD + c] as f32)).collect();
     let n = x.len() / D;
     let mut rows = vec![0.0; n * BD];
-    let arch = Arch::new();
+    let arch = crate::simd::arch();
     let tm = Terms32::new(terms, taper);
     pairs.for_each_block(parallel, &mut rows, BD, |targets, runs, out| {
         let centre = block_centre::<D>(x, targets);

@@ -29,7 +29,7 @@
 // turns into SIMD (as in `fast.rs`).
 #![expect(clippy::needless_range_loop, reason = "explicit lane loops are the vectorisation idiom")]
 
-use pulp::{Arch, Simd, WithSimd};
+use pulp::{Simd, WithSimd};
 use rayon::prelude::*;
 
 use crate::fast::{FastWorkspace, L, gauss_lanes, sq_dist_lanes};
@@ -312,7 +312,7 @@ fn run<const D: usize, const BD: usize, const JVP: bool>(
     let acc = &mut ws.chunks;
     acc.clear();
     acc.resize(chunks * n * w, 0.0);
-    let arch = Arch::new();
+    let arch = crate::simd::arch();
     let chunk = |(c, acc): (usize, &mut [f64])| {
         let blocks = bounds[c]..bounds[c + 1];
         let task = Chunk::<D, BD, JVP> { terms, inp, n, blocks, acc };

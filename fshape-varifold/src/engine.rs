@@ -20,7 +20,7 @@
 
 use fshape_kernels::BlockPairs;
 use fshape_kernels::lanes::{L, exp_lanes, sq_dist_lanes};
-use pulp::{Arch, Simd, WithSimd};
+use pulp::{Simd, WithSimd};
 
 use crate::{CellFeatures, GrassKernel, SignalKernel, VarifoldError, VarifoldKernel};
 
@@ -290,7 +290,7 @@ fn run<const D: usize, const DU: usize, const GRAD: bool>(
     let sf: Vec<f64> = order.iter().map(|&j| yf[j]).collect();
     let sr: Vec<f64> = order.iter().map(|&j| y.weights()[j]).collect();
     let w = row_len(D, DU, GRAD);
-    let arch = Arch::new();
+    let arch = fshape_kernels::simd::arch();
     let blocks = pairs.map_blocks(parallel, |targets, runs| {
         let n = targets.len();
         // Unused lanes repeat the last target; their sums are discarded.
