@@ -2035,8 +2035,28 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
 
     // Refusals, naming the problem, with nothing written.
     io::csv::write_signal(tmp("transfer_short.csv").as_ref(), "thickness", &values[..5]).unwrap();
+    let wide: Vec<f64> = (0..n).map(|v| if v == 7 { 5.0 } else { 1.0 }).collect();
+    io::csv::write_signal(tmp("transfer_wide.csv").as_ref(), "mask", &wide).unwrap();
     for (args, says) in [
-        (vec![run.clone(), file("transfer_map.csv"), file("transfer_x.annot")], "is a map; it is written as a signal"),
+        (vec![run.clone(), file("transfer_map.csv"), file("transfer_x.annot")], "a map is written as a signal file"),
+        (
+            vec![run.clone(), file("transfer_map.csv"), file("transfer_x.dscalar.nii")],
+            "a map is written as a signal file",
+        ),
+        (
+            vec![run.clone(), "thick.dlabel.nii:CORTEX_LEFT".into(), file("transfer_x.csv")],
+            "CIFTI-2 label file is not read",
+        ),
+        (
+            vec![
+                run.clone(),
+                file("transfer_map.csv"),
+                file("transfer_x.csv"),
+                "--mask".into(),
+                file("transfer_wide.csv"),
+            ],
+            "a mask's weights are in [0, 1]",
+        ),
         (vec![run.clone(), file("lh.transfer.annot"), file("transfer_x.gii")], "written as .annot or .csv"),
         (vec![run.clone(), file("transfer_short.csv"), file("transfer_x.csv")], "values for a surface of"),
         (
@@ -2050,7 +2070,44 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(o.status.code() == Some(1) && err.contains(says), "{args:?}: {err}");
     }
-    for f in ["transfer_x.annot", "transfer_x.gii", "transfer_x.csv"] {
+    for f in ["transfer_x.annot", "transfer_x.gii", "transfer_x.csv", "transfer_x.dscalar.nii"] {
         assert!(!tmp(f).exists(), "{f}");
     }
+}
+
+/// FSHAPE_SIMD caps the kernel sums' instruction set: a registration gives
+/// the same bits on every instruction set this machine has (the sums hold
+/// their lanes in fixed blocks and round each fused multiply-add once), and
+/// a value that is not understood is refused before any work.
+#[test]
+fn every_instruction_set_gives_the_same_registration_bits() {
+    let (s, t, c) = match_inputs("simd", 8);
+    let mut runs = Vec::new();
+    for cap in ["auto", "avx2", "scalar"] {
+        let out = tmp(&format!("simd_{cap}"));
+        let o = Command::new(env!("CARGO_BIN_EXE_fshape"))
+            .args(["match", &s, &t, "--config", &c, "--out", &out.display().to_string()])
+            .env("FSHAPE_SIMD", cap)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{cap}: {}", String::from_utf8_lossy(&o.stderr));
+        let read = |name: &str| std::fs::read(out.join(name)).unwrap();
+        let summary: serde_json::Value = serde_json::from_slice(&read("summary.json")).unwrap();
+        runs.push((cap, read("p0.csv"), read("pf.csv"), summary["final_value"].as_f64().unwrap()));
+    }
+    for r in &runs[1..] {
+        assert!(
+            r.1 == runs[0].1 && r.2 == runs[0].2 && r.3.to_bits() == runs[0].3.to_bits(),
+            "{} differs from auto",
+            r.0
+        );
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_fshape"))
+        .args(["match", &s, &t, "--config", &c, "--out", &tmp("simd_bad").display().to_string()])
+        .env("FSHAPE_SIMD", "avx-512")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.contains("FSHAPE_SIMD") && err.contains("auto, avx2 or scalar"), "{err}");
+    assert!(!tmp("simd_bad").exists());
 }

@@ -114,6 +114,14 @@ impl Correspondence {
         self.distance.is_empty()
     }
 
+    /// Whether vertex `i` of `onto` gets no value: farther than the limit,
+    /// or its closest point not a number (coordinates so large that the
+    /// distance overflowed).
+    fn beyond(&self, i: usize, max_distance: f64) -> bool {
+        let d = self.distance[i];
+        d.is_nan() || d > max_distance || self.bary[i].iter().any(|w| w.is_nan())
+    }
+
     fn check(&self, what: &str, n: usize, max_distance: f64) -> Result<(), MatchError> {
         if max_distance.is_nan() || max_distance < 0.0 {
             return Err(MatchError::InvalidInput(format!(
@@ -140,7 +148,7 @@ impl Correspondence {
         let mut carried = Carried { vertices: self.len(), ..Carried::default() };
         let out = (0..self.len())
             .map(|i| {
-                if self.distance[i] > max_distance {
+                if self.beyond(i, max_distance) {
                     carried.beyond += 1;
                     return f64::NAN;
                 }
@@ -168,24 +176,23 @@ impl Correspondence {
         self.check("labels", keys.len(), max_distance)?;
         Ok((0..self.len())
             .map(|i| {
-                if self.distance[i] > max_distance {
+                if self.beyond(i, max_distance) {
                     return -1;
                 }
                 // At most three candidate keys: sum each one's weight.
-                let mut tally: [(i32, f64); 3] = [(0, -1.0); 3];
+                let mut tally: [Option<(i32, f64)>; 3] = [None; 3];
                 for (&c, &w) in self.corners[i].iter().zip(&self.bary[i]) {
                     let key = keys[c];
-                    match tally.iter_mut().find(|(k, t)| *t >= 0.0 && *k == key) {
-                        Some(slot) => slot.1 += w,
-                        None => *tally.iter_mut().find(|(_, t)| *t < 0.0).expect("three corners") = (key, w),
+                    for slot in tally.iter_mut() {
+                        match slot {
+                            Some((k, t)) if *k == key => *t += w,
+                            Some(_) => continue,
+                            None => *slot = Some((key, w)),
+                        }
+                        break;
                     }
                 }
-                tally
-                    .iter()
-                    .filter(|(_, t)| *t >= 0.0)
-                    .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
-                    .expect("one corner")
-                    .0
+                tally.iter().flatten().max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0))).map_or(-1, |&(k, _)| k)
             })
             .collect())
     }

@@ -131,27 +131,118 @@ fn is_parcellation(path: &Path) -> bool {
     name.ends_with(".annot") || name.ends_with(".label.gii")
 }
 
-/// The output's format must suit the input's kind (checked before any work).
-fn check_output(input: &Path, output: &Path) -> Result<()> {
-    let name = output.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    if is_label(input) && !is_label(output) {
-        bail!("{}: a label is written as a FreeSurfer .label", output.display());
+/// What is carried: a map (a number per vertex, interpolated), a
+/// parcellation or a label (regions, never averaged).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Map,
+    Parcellation,
+    Label,
+}
+
+/// The input's kind, by its name and, for a GIfTI file, by its contents (a
+/// NIFTI_INTENT_LABEL array is a parcellation whatever its name).
+fn kind_of(input: &Path) -> Result<Kind> {
+    if is_label(input) {
+        return Ok(Kind::Label);
     }
-    if is_parcellation(input) && !(name.ends_with(".annot") || name.ends_with(".csv")) {
-        bail!("{}: a parcellation is written as .annot or .csv (a key per vertex)", output.display());
+    if is_parcellation(input) {
+        return Ok(Kind::Parcellation);
     }
-    if !is_label(input) && !is_parcellation(input) && (is_label(output) || is_parcellation(output)) {
+    let name = input.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if name.contains(".dlabel.nii") {
         bail!(
-            "{}: {} is a map; it is written as a signal file (.csv, .gii, .mgh, .mgz, a FreeSurfer name)",
-            output.display(),
+            "{}: a CIFTI-2 label file is not read yet (its keys must not be averaged as a map); \
+             export the structure as a GIfTI label file (wb_command -cifti-separate … -label) and carry that",
             input.display()
         );
     }
-    Ok(())
+    let stem = name.strip_suffix(".gz").unwrap_or(&name);
+    if stem.ends_with(".gii") && io::read_parcellation(input).is_ok() {
+        return Ok(Kind::Parcellation);
+    }
+    Ok(Kind::Map)
+}
+
+/// The output's format must suit the input's kind (checked before any work).
+fn check_output(kind: Kind, output: &Path) -> Result<()> {
+    let name = output.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    match kind {
+        Kind::Label if !is_label(output) => {
+            bail!("{}: a label is written as a FreeSurfer .label", output.display())
+        }
+        Kind::Parcellation if !(name.ends_with(".annot") || name.ends_with(".csv")) => {
+            bail!("{}: a parcellation is written as .annot or .csv (a key per vertex)", output.display())
+        }
+        Kind::Map
+            if is_label(output)
+                || is_parcellation(output)
+                || (io::SignalFormat::from_path(output) == io::SignalFormat::Csv
+                    && !(name.ends_with(".csv") || name.ends_with(".csv.gz"))) =>
+        {
+            bail!(
+                "{}: a map is written as a signal file: .csv, .gii, .mgh, .mgz or a FreeSurfer name such as lh.thickness",
+                output.display()
+            )
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The values to carry, read and checked against the giving surface
+/// before any closest point is computed.
+enum Input {
+    Map { name: String, values: Vec<f64> },
+    Parcellation(Parcellation),
+    Label(Vec<i32>),
+}
+
+fn read_input(kind: Kind, path: &Path, n: usize, side: &str) -> Result<Input> {
+    let what = || format!("{} (on the {side}'s {n} vertices)", path.display());
+    let count = |found: usize| -> Result<()> {
+        if found != n {
+            return Err(io::ReadError::Count { path: path.to_path_buf(), found, expected: n }).with_context(what);
+        }
+        Ok(())
+    };
+    Ok(match kind {
+        Kind::Label => {
+            let label = io::label::read_label(path)?;
+            let mask = label
+                .mask(n)
+                .map_err(|source| io::ReadError::Parse { path: path.to_path_buf(), source })
+                .with_context(what)?;
+            Input::Label(mask.iter().map(|&m| if m > 0.0 { 0 } else { -1 }).collect())
+        }
+        Kind::Parcellation => {
+            let p = io::read_parcellation(path)?;
+            count(p.keys.len())?;
+            Input::Parcellation(p)
+        }
+        Kind::Map => {
+            let column = io::read_signal_for(path, Some(n), true).with_context(what)?;
+            count(column.values.len())?;
+            let name = if column.name.is_empty() { "signal".to_string() } else { column.name };
+            Input::Map { name, values: column.values }
+        }
+    })
+}
+
+/// `--mask`: which of the giving surface's vertices carry nothing (weight
+/// under 0.5); weights outside [0, 1] are refused, naming the vertex.
+fn read_masked(mask: Option<&Path>, n: usize, side: &str) -> Result<Vec<bool>> {
+    let Some(m) = mask else { return Ok(vec![false; n]) };
+    let context = || format!("--mask {} (on the {side}'s {n} vertices)", m.display());
+    let w = io::read_mask(m, n).with_context(context)?;
+    if let Some(v) = w.iter().position(|w| !(0.0..=1.0).contains(w)) {
+        bail!("{}: vertex {v} has the weight {}; a mask's weights are in [0, 1]", context(), w[v]);
+    }
+    Ok(w.iter().map(|&w| w < 0.5).collect())
 }
 
 pub fn run(a: Args) -> Result<()> {
-    check_output(&a.input, &a.output)?;
+    let kind = kind_of(&a.input)?;
+    check_output(kind, &a.output)?;
     let (matched, target) = registration(&a.run)?;
     let (from, onto) = match a.onto {
         Onto::Target => (&matched, &target),
@@ -160,53 +251,32 @@ pub fn run(a: Args) -> Result<()> {
     let diagonal = target.bounding_box().diagonal();
     let limit = max_distance(&a.max_distance, diagonal)?;
     let n = from.n_vertices();
-    let correspondence = Correspondence::new(from, onto).context("the closest points between the two surfaces")?;
-    let what = |side: &str| format!("{} (on the {side}'s {n} vertices)", a.input.display());
     let side = if a.onto == Onto::Target { "source" } else { "target" };
-    let masked: Vec<bool> = match &a.mask {
-        Some(m) => io::read_mask(m, n)
-            .with_context(|| format!("--mask {} (on the {side}'s {n} vertices)", m.display()))?
-            .iter()
-            .map(|&w| w < 0.5)
-            .collect(),
-        None => vec![false; n],
-    };
+    let masked = read_masked(a.mask.as_deref(), n, side)?;
+    let input = read_input(kind, &a.input, n, side)?;
+    let correspondence = Correspondence::new(from, onto).context("the closest points between the two surfaces")?;
     let unmask_keys =
         |keys: Vec<i32>| -> Vec<i32> { keys.iter().zip(&masked).map(|(&k, &m)| if m { -1 } else { k }).collect() };
-    let (kind, carried) = if is_label(&a.input) {
-        let label = io::label::read_label(&a.input)?;
-        let keys: Vec<i32> = label
-            .mask(n)
-            .map_err(|source| io::ReadError::Parse { path: a.input.clone(), source })?
-            .iter()
-            .map(|&m| if m > 0.0 { 0 } else { -1 })
-            .collect();
-        let out = correspondence.labels(&unmask_keys(keys), limit)?;
-        let vertices: Vec<usize> = (0..out.len()).filter(|&v| out[v] == 0).collect();
-        let points = vertices.iter().flat_map(|&v| point3(onto, v)).collect();
-        let values = vec![0.0; vertices.len()];
-        io::label::write_label(&a.output, &Label { vertices, points, values }, "fshape-transfer")?;
-        ("label", count_beyond(&correspondence, limit))
-    } else if is_parcellation(&a.input) {
-        let p = io::read_parcellation(&a.input)?;
-        if p.keys.len() != n {
-            return Err(io::ReadError::Count { path: a.input.clone(), found: p.keys.len(), expected: n })
-                .with_context(|| what(side));
+    let (kind, carried) = match input {
+        Input::Label(keys) => {
+            let out = correspondence.labels(&unmask_keys(keys), limit)?;
+            let vertices: Vec<usize> = (0..out.len()).filter(|&v| out[v] == 0).collect();
+            let points = vertices.iter().flat_map(|&v| point3(onto, v)).collect();
+            let values = vec![0.0; vertices.len()];
+            io::label::write_label(&a.output, &Label { vertices, points, values }, "fshape-transfer")?;
+            ("label", count_beyond(&correspondence, limit))
         }
-        let out = Parcellation { keys: correspondence.labels(&unmask_keys(p.keys), limit)?, regions: p.regions };
-        write_parcellation(&a.output, &out)?;
-        ("parcellation", count_beyond(&correspondence, limit))
-    } else {
-        let column = io::read_signal_for(&a.input, Some(n), true).with_context(|| what(side))?;
-        if column.values.len() != n {
-            return Err(io::ReadError::Count { path: a.input.clone(), found: column.values.len(), expected: n })
-                .with_context(|| what(side));
+        Input::Parcellation(p) => {
+            let out = Parcellation { keys: correspondence.labels(&unmask_keys(p.keys), limit)?, regions: p.regions };
+            write_parcellation(&a.output, &out)?;
+            ("parcellation", count_beyond(&correspondence, limit))
         }
-        let values: Vec<f64> = column.values.iter().zip(&masked).map(|(&v, &m)| if m { f64::NAN } else { v }).collect();
-        let (out, carried) = correspondence.map(&values, limit)?;
-        let name = if column.name.is_empty() { "signal".to_string() } else { column.name.clone() };
-        io::write_signal(&a.output, &name, &out, onto.n_cells())?;
-        ("map", carried)
+        Input::Map { name, values } => {
+            let values: Vec<f64> = values.iter().zip(&masked).map(|(&v, &m)| if m { f64::NAN } else { v }).collect();
+            let (out, carried) = correspondence.map(&values, limit)?;
+            io::write_signal(&a.output, &name, &out, onto.n_cells())?;
+            ("map", carried)
+        }
     };
     let mut d: Vec<f64> = correspondence.distances().iter().map(|d| 100.0 * d / diagonal).collect();
     d.sort_by(f64::total_cmp);
@@ -254,7 +324,11 @@ fn point3(shape: &FShape, v: usize) -> [f64; 3] {
 }
 
 fn count_beyond(c: &Correspondence, limit: f64) -> Carried {
-    Carried { vertices: c.len(), beyond: c.distances().iter().filter(|&&d| d > limit).count(), missing: 0 }
+    Carried {
+        vertices: c.len(),
+        beyond: c.distances().iter().filter(|&&d| d.is_nan() || d > limit).count(),
+        missing: 0,
+    }
 }
 
 /// A parcellation as .annot, or as a CSV column of keys (`check_output`

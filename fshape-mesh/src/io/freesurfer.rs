@@ -418,21 +418,20 @@ pub fn parse_annot(data: &[u8]) -> Result<Parcellation, ParseError> {
 }
 
 /// The bytes of an annotation as nibabel's `write_annot` writes it (the
-/// new colour table layout, version −2), which [`parse_annot`] reads back
-/// to the same keys: a region's key is its table index, its colour packs
-/// into each vertex's value, and a vertex whose key is not in the table
-/// (−1) gets 0. A black region's vertices also get 0 and read back as no
-/// region (−1), as FreeSurfer reads them (HCP's `???`). Refused: a
-/// negative key in the table and two regions of one colour (their
-/// vertices would read back as one region).
+/// new colour table layout, version −2): the regions in table order,
+/// numbered by their row (0, 1, …, as nibabel numbers them), each one's
+/// colour packed into its vertices' values; a vertex whose key is not in
+/// the table (−1) gets 0. [`parse_annot`] reads back each vertex's row, so
+/// keys 0..n−1 in table order (any annotation read) come back as they
+/// were, and other keys (a GIfTI label table's, e.g. 1001…) come back as
+/// their rows. A black region's vertices also get 0 and read back as no
+/// region (−1), as FreeSurfer reads them (HCP's `???`). Refused: two
+/// regions of one colour (their vertices would read back as one region).
 pub fn annot_bytes(p: &Parcellation) -> io::Result<Vec<u8>> {
     let invalid = |m: String| io::Error::new(io::ErrorKind::InvalidInput, m);
     let byte = |x: f64| (x.clamp(0.0, 1.0) * 255.0).round() as i32;
     let mut packed = Vec::with_capacity(p.regions.len());
     for r in &p.regions {
-        if r.key < 0 {
-            return Err(invalid(format!("annotation: region {:?} has the negative key {}", r.name, r.key)));
-        }
         let value = byte(r.rgba[0]) + (byte(r.rgba[1]) << 8) + (byte(r.rgba[2]) << 16);
         if let Some((_, other)) = packed.iter().find(|(v, _)| *v == value && value != 0) {
             return Err(invalid(format!("annotation: regions {other:?} and {:?} have one colour", r.name)));
@@ -450,16 +449,18 @@ pub fn annot_bytes(p: &Parcellation) -> io::Result<Vec<u8>> {
     }
     put(1, &mut out);
     put(-2, &mut out);
-    put(p.regions.iter().map(|r| r.key + 1).max().unwrap_or(0), &mut out);
+    let rows =
+        i32::try_from(p.regions.len()).map_err(|_| invalid(format!("annotation: {} regions", p.regions.len())))?;
+    put(rows, &mut out);
     let string = |s: &str, out: &mut Vec<u8>| {
         out.extend_from_slice(&(s.len() as i32 + 1).to_be_bytes());
         out.extend_from_slice(s.as_bytes());
         out.push(0);
     };
     string("NOFILE", &mut out);
-    put(p.regions.len() as i32, &mut out);
-    for r in &p.regions {
-        put(r.key, &mut out);
+    put(rows, &mut out);
+    for (row, r) in (0..).zip(&p.regions) {
+        put(row, &mut out);
         string(&r.name, &mut out);
         for c in [byte(r.rgba[0]), byte(r.rgba[1]), byte(r.rgba[2]), 255 - byte(r.rgba[3])] {
             put(c, &mut out);

@@ -121,9 +121,10 @@ pub fn label_text(label: &Label, subject: &str) -> String {
     s
 }
 
-/// Writes a label file atomically.
+/// Writes a label file atomically (gzipped when the name ends in `.gz`).
 pub fn write_label(path: &Path, label: &Label, subject: &str) -> Result<(), WriteError> {
-    super::write_atomic(path, label_text(label, subject).as_bytes(), false)
+    let gz = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    super::write_atomic(path, label_text(label, subject).as_bytes(), gz)
 }
 
 #[cfg(test)]

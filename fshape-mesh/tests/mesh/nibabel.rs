@@ -291,11 +291,16 @@ fn annotations_are_written_byte_for_byte_as_nibabel_writes_them() {
     let annot = io::read_parcellation(&fixture("lh.parcels.annot")).unwrap();
     assert!(io::freesurfer::annot_bytes(&annot).unwrap() == std::fs::read(fixture("lh.parcels.annot")).unwrap());
     // A GIfTI label table (keys 0, 4, 7, 9; 0 is HCP's black `???`) as an
-    // annotation: the keys come back, the black region's vertices as none.
+    // annotation: numbered by their rows as nibabel numbers a table (so
+    // that its read_annot indexes the names), the black region's vertices
+    // as none.
     let gii = io::read_parcellation(&fixture("parcels.label.gii")).unwrap();
+    assert_eq!(gii.regions.iter().map(|r| r.key).collect::<Vec<_>>(), [0, 4, 7, 9]);
     let back = io::freesurfer::parse_annot(&io::freesurfer::annot_bytes(&gii).unwrap()).unwrap();
-    let want: Vec<i32> = gii.keys.iter().map(|&k| if k == 0 { -1 } else { k }).collect();
+    let row = |k: i32| [0, 4, 7, 9].iter().position(|&r| r == k).map_or(-1, |i| i as i32);
+    let want: Vec<i32> = gii.keys.iter().map(|&k| if k == 0 { -1 } else { row(k) }).collect();
     assert_eq!(back.keys, want);
+    assert_eq!(back.regions.iter().map(|r| r.key).collect::<Vec<_>>(), [0, 1, 2, 3]);
     assert_eq!(
         back.regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(),
         ["???", "precentral", "postcentral", "insula"]
