@@ -139,7 +139,8 @@ pub struct Signals {
     #[arg(long)]
     pub signal_name: Option<String>,
     /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv,
-    /// MGH, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT[:MAP]).
+    /// MGH, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT, with :MAP after
+    /// it to pick a map).
     #[arg(long, visible_alias = "signal")]
     pub source_signal: Option<PathBuf>,
     /// Per-vertex signal file for the target (as --source-signal).

@@ -18,7 +18,8 @@ pub struct Args {
     pub signal_name: Option<String>,
     /// Per-vertex signal file replacing the mesh's signal: a CSV column with a
     /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness),
-    /// .mgh/.mgz, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT[:MAP].
+    /// .mgh/.mgz, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT, with :MAP
+    /// after it to pick a map.
     #[arg(long)]
     pub signal: Option<PathBuf>,
     /// A mask: a FreeSurfer .label, regions of a parcellation

@@ -19,9 +19,9 @@ pub struct Args {
     /// template).
     pub run: PathBuf,
     /// What to carry, on the vertices of the surface it comes from: a map
-    /// (CSV, GIfTI, curv, MGH, or CIFTI-2 as FILE:STRUCTURE[:MAP]; NaN
-    /// marks vertices without a value), a parcellation (.annot,
-    /// .label.gii) or a FreeSurfer .label.
+    /// (CSV, GIfTI, curv, MGH, or CIFTI-2 as FILE:STRUCTURE or
+    /// FILE:STRUCTURE:MAP; NaN marks vertices without a value), a
+    /// parcellation (.annot, .label.gii) or a FreeSurfer .label.
     pub input: PathBuf,
     /// Where to write it, on the receiving surface's vertices, in the
     /// format its name says: a map as a signal file (.csv, .gii, .mgh,
