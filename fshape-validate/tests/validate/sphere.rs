@@ -65,10 +65,18 @@ fn discrete_sphere_geodesics_converge_to_the_ode_at_second_order() {
     // The icosphere's flat triangles approximate the sphere's areas and the
     // kernel integral to O(h²), h the edge length: r_t and f_t follow.
     // Halving h per level, the error must fall by about 4 per level.
+    //
+    // Level 5 (10 242 vertices) is nine tenths of the cost, and with p^f a
+    // constant times the areas every norm solves to the same constant
+    // signal velocity, so the norms differ only in their solver: each
+    // setting runs to level 5 under one norm (each norm once), and every
+    // norm and setting shows its order on levels 2 to 4.
+    let finest = [(0, "l2-lumped"), (1, "l2"), (2, "h1")];
     for norm in ["l2-lumped", "l2", "h1"] {
         for setting in 0..3 {
-            let errs: Vec<f64> = (2..=5).map(|level| sphere_error(level, norm, setting, 1.0)).collect();
-            let h: Vec<f64> = (2..=5).map(|level| 0.5f64.powi(level)).collect();
+            let top = if finest.contains(&(setting, norm)) { 5 } else { 4 };
+            let errs: Vec<f64> = (2..=top).map(|level| sphere_error(level, norm, setting, 1.0)).collect();
+            let h: Vec<f64> = (2..=top).map(|level| 0.5f64.powf(f64::from(level))).collect();
             let order = observed_order(&h, &errs);
             eprintln!("{norm}, setting {setting}: errors {errs:?}, order {order:.2}");
             assert!((1.6..2.4).contains(&order), "{norm}, setting {setting}: errors {errs:?}, order {order}");
@@ -76,7 +84,9 @@ fn discrete_sphere_geodesics_converge_to_the_ode_at_second_order() {
             let paper = sphere_error(4, norm, setting, 2.0);
             assert!(paper > 20.0 * errs[2], "{norm}, setting {setting}: paper's χ error {paper} vs {}", errs[2]);
             // And the finest mesh agrees with the ODE closely.
-            assert!(errs[3] < 1e-4, "{norm}, setting {setting}: error {} at level 5", errs[3]);
+            if top == 5 {
+                assert!(errs[3] < 1e-4, "{norm}, setting {setting}: error {} at level 5", errs[3]);
+            }
         }
     }
 }
