@@ -27,14 +27,20 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Counts, bounding box, signal range and validation of a mesh file.
+    ///
     /// Print counts, dimension, bounding box, total volume, signal range and
     /// the validation report of a mesh file (.ply, .obj, .vtk, .gii, optionally
     /// .gz, or a FreeSurfer surface such as lh.pial).
     Info(commands::info::Args),
+    /// Assemble a mesh's signal norm matrix and summarise or export it.
+    ///
     /// Assemble the signal norm matrix D_s of a mesh (lumped or P1 mass, or
     /// H1 = mass + length² × stiffness) and print a summary; optionally
     /// export it in MatrixMarket format (symmetric, lower triangle).
     Fem(commands::fem::Args),
+    /// How close a shape is to a target, as `fshape match` reports it.
+    ///
     /// How close a shape X is to a target Y, as `fshape match` reports a
     /// registration: the mean symmetric closest-point distance, its 95th
     /// percentile and maximum, and the share of Y within 1 % of X, as
@@ -47,15 +53,21 @@ enum Command {
     /// 1 % of Y and over its part past Y's boundary (e.g. over Y's holes),
     /// which Y's samples cannot see.
     Quality(commands::quality::Args),
+    /// The data attachment between two fshapes, a squared distance.
+    ///
     /// The data attachment A(X, Y) = ⟨X,X⟩ − 2⟨X,Y⟩ + ⟨Y,Y⟩ between two
     /// fshapes (functional varifold; varifold or current without a signal
     /// kernel). Prints A itself, a squared distance, then the three inner
     /// products. Widths use exp(−u/(2σ²)); fshapesTk's σ is ours × √2.
     Distance(commands::distance::Args),
+    /// Shoot a metamorphosis geodesic from initial momenta.
+    ///
     /// Shoot a metamorphosis geodesic from SOURCE with initial momenta and
     /// write the states at the chosen times (VTK + ParaView .pvd, PLY with
     /// the signal as vertex property `signal`) and summary.json.
     Shoot(commands::shoot::Args),
+    /// Register a source onto a target (coarse to fine, resumable).
+    ///
     /// Register SOURCE onto TARGET: minimise J = H + γ_W·A over the initial
     /// momenta (L-BFGS by default), stage by stage of the configuration's
     /// coarse-to-fine schedule. Writes the geodesic (VTK + .pvd, PLY), the
@@ -66,6 +78,8 @@ enum Command {
     /// source is first aligned to the target on the data attachment, from
     /// 24 starts; summary.json's `prealign` holds the 4 × 4 matrix.
     Match(commands::matching::Args),
+    /// Register every pair of a table, each in its own folder.
+    ///
     /// Register every pair of a table: one `fshape match` per row, each in
     /// OUT/NAME (its own checkpoint and outputs), then OUT/index.csv and
     /// index.json (every row's status, J, match quality, time and error).
@@ -73,6 +87,8 @@ enum Command {
     /// stopped rows resume, failed ones are tried again. A failed row does
     /// not stop the others (the exit status is 1 if any failed).
     Batch(commands::batch::Args),
+    /// Estimate a template and each subject's momenta from a population.
+    ///
     /// Estimate a template from a population (metamorphosis atlas, free
     /// template): the template's positions and signal and every subject's
     /// momenta minimise the mean of the subjects' matching objectives
@@ -80,6 +96,8 @@ enum Command {
     /// subject's momenta and matched template, momenta.csv (one row per
     /// subject), pictures and summary.json; checkpoints every iteration.
     Atlas(commands::atlas::Args),
+    /// Group statistics on an atlas: GLM maps and permutation tests.
+    ///
     /// Group statistics on an atlas: where do the subjects' shapes and
     /// signals differ with a covariate (a group, an age)? From an `fshape
     /// atlas` folder and a covariates table, per-vertex maps on the
@@ -91,6 +109,8 @@ enum Command {
     /// pictures, multivariate.csv and summary.json. The same seed gives
     /// the same bits.
     Stats(commands::stats::Args),
+    /// Carry a map, parcellation or label through a registration.
+    ///
     /// Carry a map, a parcellation or a label through a registration: from
     /// the source's vertices onto the target's (or back, `--onto source`),
     /// each receiving vertex reading the values at its closest point on the
@@ -99,18 +119,26 @@ enum Command {
     /// than `--max-distance` (2 % of the target's diagonal) get none. RUN
     /// is an `fshape match` output or an atlas subject's folder.
     Transfer(commands::transfer::Args),
+    /// Run one of the paper's experiments on data shipped here.
+    ///
     /// Run one of the paper's experiments on data shipped in the repository
     /// (inputs, one config per run and `fshape match` outputs under OUT).
     Demo(commands::demo::Args),
+    /// PNG pictures of meshes from one camera in one colour range.
+    ///
     /// PNG pictures of meshes coloured by their signal, all from one
     /// camera, framed together and with one colour range, so that they
     /// compare: e.g. two registrations' end states and their target seen
     /// from below.
     Render(commands::render::Args),
+    /// Convert between mesh formats, optionally attaching a signal.
+    ///
     /// Convert between mesh formats (by extension: .ply, .obj, .vtk, .gii,
     /// each optionally .gz, or a FreeSurfer surface name such as lh.pial),
     /// optionally attaching a signal from a signal file.
     Convert(commands::convert::Args),
+    /// Write a match, atlas or batch folder's report.html again.
+    ///
     /// Write DIR/report.html again for an `fshape match`, `atlas` or
     /// `batch` output folder (they write it themselves): one page, viewable
     /// offline, with the geodesic as a 3-D view (rotate, zoom, a time
@@ -118,6 +146,8 @@ enum Command {
     /// configuration; for an atlas the template, each subject and the
     /// modes; for a batch the index with thumbnails.
     Report(commands::report::Args),
+    /// Where a run's checkpoint stands, as one line of JSON.
+    ///
     /// Where a run's checkpoint (OUT/checkpoint.bin, binary) stands, as one
     /// line of JSON: finished stages, the stage under way with its
     /// iterations and evaluations, wall seconds so far.

@@ -66,6 +66,23 @@ fn usage_errors_exit_2() {
 }
 
 #[test]
+fn the_command_list_is_one_short_line_per_command_and_each_command_explains_itself() {
+    // `fshape --help` lists the commands one line each, as cargo's does;
+    // the paragraph is `fshape COMMAND --help`'s.
+    let o = fshape(&["--help"]);
+    assert!(o.status.success());
+    let help = String::from_utf8(o.stdout).unwrap();
+    let list: Vec<&str> =
+        help.lines().skip_while(|l| *l != "Commands:").skip(1).take_while(|l| !l.trim().is_empty()).collect();
+    assert!(list.len() >= 15, "{help}");
+    for line in &list {
+        assert!(line.chars().count() <= 80, "a long line in the command list: {line}");
+    }
+    let long = String::from_utf8(fshape(&["match", "--help"]).stdout).unwrap();
+    assert!(long.contains("--resume") && long.contains("bit for bit"), "{long}");
+}
+
+#[test]
 fn convert_attaches_a_csv_signal_and_round_trips() {
     let out = tmp("rh.vtk");
     let r = fshape(&[
