@@ -62,9 +62,9 @@ enum Command {
     Distance(commands::distance::Args),
     /// Shoot a metamorphosis geodesic from initial momenta.
     ///
-    /// Shoot a metamorphosis geodesic from SOURCE with initial momenta and
-    /// write the states at the chosen times (VTK + ParaView .pvd, PLY with
-    /// the signal as vertex property `signal`) and summary.json.
+    /// Writes the states from SOURCE at the chosen times (VTK + ParaView
+    /// .pvd, PLY with the signal as vertex property `signal`) and
+    /// summary.json.
     Shoot(commands::shoot::Args),
     /// Register a source onto a target (coarse to fine, resumable).
     ///
@@ -121,8 +121,8 @@ enum Command {
     Transfer(commands::transfer::Args),
     /// Run one of the paper's experiments on data shipped here.
     ///
-    /// Run one of the paper's experiments on data shipped in the repository
-    /// (inputs, one config per run and `fshape match` outputs under OUT).
+    /// Writes the inputs, one config per run and the `fshape match`
+    /// outputs under OUT.
     Demo(commands::demo::Args),
     /// PNG pictures of meshes from one camera in one colour range.
     ///
