@@ -136,8 +136,10 @@ impl FShape {
         }
         let dim = self.dim();
         let points = self.points()[..nc * dim].to_vec();
-        let signal = self.signal().map(|s| s[..nc].to_vec());
-        Ok(FShape::try_new(dim, CellKind::Triangle, points, coarse, signal)?)
+        let k = self.n_channels().max(1);
+        let signal = self.signal().map(|s| s[..nc * k].to_vec());
+        let mask = self.mask().map(|m| m[..nc].to_vec());
+        Ok(FShape::try_new(dim, CellKind::Triangle, points, coarse, None)?.with_signals_and_mask(signal, k, mask)?)
     }
 }
 

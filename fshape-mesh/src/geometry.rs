@@ -103,12 +103,18 @@ impl FShape {
         out
     }
 
-    /// The mean signal of every cell's vertices (the paper's f_τ), or `None`
-    /// for a shape without signal.
+    /// The mean signal of every cell's vertices (the paper's f_τ), one
+    /// value per cell and channel (flat row-major, as the vertex signal), or
+    /// `None` for a shape without signal.
     pub fn cell_signal(&self) -> Option<Vec<f64>> {
         let f = self.signal()?;
+        let k = self.n_channels();
         let w = 1.0 / self.kind().n_corners() as f64;
-        Some(self.cell_iter().map(|c| w * c.iter().map(|&v| f[v]).sum::<f64>()).collect())
+        Some(
+            self.cell_iter()
+                .flat_map(|c| (0..k).map(move |ch| w * c.iter().map(|&v| f[v * k + ch]).sum::<f64>()))
+                .collect(),
+        )
     }
 
     /// Lumped vertex volumes (DESIGN.md, D_0 lumped): vertex k gets

@@ -63,6 +63,9 @@ pub enum ShapeError {
         /// Vertices per cell.
         corners: usize,
     },
+    /// A signal was given with zero channels per vertex.
+    #[error("a signal has at least one channel per vertex")]
+    Channels,
     /// The data is well formed but some values make the shape unusable
     /// (NaN coordinates, an index out of range, ...). Every such problem is
     /// listed with its index; fix the input or use the repairs of
@@ -76,7 +79,9 @@ pub enum ShapeError {
 
 /// A discrete functional shape (paper section 4): vertices `x` (P × n, flat
 /// row-major), cells `C` (T × (d+1), flat) and an optional per-vertex signal
-/// `f` (P values). Absent signal means a purely geometric shape.
+/// `f` (P × k values, flat row-major: the k channels of vertex 0, then of
+/// vertex 1, ...; k = 1 unless built with [`FShape::with_signals`]).
+/// Absent signal means a purely geometric shape.
 ///
 /// The type guarantees what every computation needs: finite coordinates and
 /// signal, cell indices in range, no repeated index inside a cell, a signal
@@ -98,7 +103,8 @@ pub enum ShapeError {
 /// medial wall; 1: a full value; between: a soft edge). The geometry is
 /// all real; only the signal is masked. At a vertex of mask 0 the signal
 /// is stored as NaN whatever was given (nothing may read it), so that two
-/// shapes differing only there are the same shape.
+/// shapes differing only there are the same shape. A mask masks every
+/// channel of a vertex.
 #[derive(Clone, Debug)]
 pub struct FShape {
     dim: usize,
@@ -106,6 +112,9 @@ pub struct FShape {
     points: Vec<f64>,
     cells: Vec<usize>,
     signal: Option<Vec<f64>>,
+    /// Signal values per vertex (1 without a signal, so that the flat
+    /// layout's arithmetic needs no special case).
+    channels: usize,
     mask: Option<Vec<f64>>,
 }
 
@@ -121,6 +130,7 @@ impl PartialEq for FShape {
             && self.points == other.points
             && self.cells == other.cells
             && self.mask == other.mask
+            && self.channels == other.channels
             && match (&self.signal, &other.signal) {
                 (Some(a), Some(b)) => same(a, b),
                 (None, None) => true,
@@ -151,7 +161,7 @@ impl FShape {
         if !cells.len().is_multiple_of(kind.n_corners()) {
             return Err(ShapeError::CellsLength { len: cells.len(), kind: kind.name(), corners: kind.n_corners() });
         }
-        FShape::checked(dim, kind, points, cells, signal, None)
+        FShape::checked(dim, kind, points, cells, signal, 1, None)
     }
 
     fn checked(
@@ -160,26 +170,60 @@ impl FShape {
         points: Vec<f64>,
         cells: Vec<usize>,
         mut signal: Option<Vec<f64>>,
+        channels: usize,
         mask: Option<Vec<f64>>,
     ) -> Result<Self, ShapeError> {
-        let problems = validate::blocking_problems(dim, kind, &points, &cells, signal.as_deref(), mask.as_deref());
+        if channels == 0 && signal.is_some() {
+            return Err(ShapeError::Channels);
+        }
+        let channels = channels.max(1);
+        let problems =
+            validate::blocking_problems(dim, kind, &points, &cells, signal.as_deref(), channels, mask.as_deref());
         if !problems.is_empty() {
             return Err(ShapeError::Invalid { problems });
         }
         if let (Some(f), Some(m)) = (&mut signal, &mask) {
-            for (v, w) in f.iter_mut().zip(m) {
+            for (v, w) in f.chunks_exact_mut(channels).zip(m) {
                 if *w == 0.0 {
-                    *v = f64::NAN;
+                    v.fill(f64::NAN);
                 }
             }
         }
-        Ok(FShape { dim, kind, points, cells, signal, mask })
+        let channels = if signal.is_some() { channels } else { 1 };
+        Ok(FShape { dim, kind, points, cells, signal, channels, mask })
     }
 
-    /// Replaces (or removes) the signal, checking its length and values
-    /// (NaN is accepted at masked vertices only); the mask is kept.
+    /// Replaces (or removes) the signal by one value per vertex, checking
+    /// its length and values (NaN is accepted at masked vertices only); the
+    /// mask is kept.
     pub fn with_signal(self, signal: Option<Vec<f64>>) -> Result<Self, ShapeError> {
-        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, self.mask)
+        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, 1, self.mask)
+    }
+
+    /// Replaces (or removes) the signal by `channels` values per vertex
+    /// (several maps on one surface: thickness, myelin, curvature), flat
+    /// row-major: vertex v's channel c is `signal[v * channels + c]`. The
+    /// mask is kept and masks every channel.
+    ///
+    /// ```
+    /// use fshape_mesh::{CellKind, FShape};
+    /// let s = FShape::try_new(2, CellKind::Triangle, vec![0., 0., 1., 0., 0., 1.], vec![0, 1, 2], None)?;
+    /// let s = s.with_signals(Some(vec![1.0, 10.0, 2.0, 20.0, 3.0, 30.0]), 2)?;
+    /// assert_eq!((s.n_channels(), s.channel(1).unwrap()), (2, vec![10.0, 20.0, 30.0]));
+    /// # Ok::<(), fshape_mesh::ShapeError>(())
+    /// ```
+    pub fn with_signals(self, signal: Option<Vec<f64>>, channels: usize) -> Result<Self, ShapeError> {
+        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, channels, self.mask)
+    }
+
+    /// [`FShape::with_signals`] and [`FShape::with_mask`] together.
+    pub fn with_signals_and_mask(
+        self,
+        signal: Option<Vec<f64>>,
+        channels: usize,
+        mask: Option<Vec<f64>>,
+    ) -> Result<Self, ShapeError> {
+        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, channels, mask)
     }
 
     /// Replaces (or removes) the mask (see [`FShape`]): one weight in
@@ -194,19 +238,19 @@ impl FShape {
     /// # Ok::<(), fshape_mesh::ShapeError>(())
     /// ```
     pub fn with_mask(self, mask: Option<Vec<f64>>) -> Result<Self, ShapeError> {
-        FShape::checked(self.dim, self.kind, self.points, self.cells, self.signal, mask)
+        FShape::checked(self.dim, self.kind, self.points, self.cells, self.signal, self.channels, mask)
     }
 
-    /// Replaces the signal and the mask together (a signal with missing
-    /// values and the mask that says where they are).
+    /// Replaces the signal (one value per vertex) and the mask together (a
+    /// signal with missing values and the mask that says where they are).
     pub fn with_signal_and_mask(self, signal: Option<Vec<f64>>, mask: Option<Vec<f64>>) -> Result<Self, ShapeError> {
-        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, mask)
+        FShape::checked(self.dim, self.kind, self.points, self.cells, signal, 1, mask)
     }
 
     /// Replaces the vertex positions (same count, same dimension), as when a
     /// shape moves along a deformation; signal and mask are kept.
     pub fn with_points(self, points: Vec<f64>) -> Result<Self, ShapeError> {
-        FShape::checked(self.dim, self.kind, points, self.cells, self.signal, self.mask)
+        FShape::checked(self.dim, self.kind, points, self.cells, self.signal, self.channels, self.mask)
     }
 
     /// The mask, one weight in [0, 1] per vertex, if any (see [`FShape`]).
@@ -268,13 +312,27 @@ impl FShape {
         self.cells.chunks_exact(self.kind.n_corners())
     }
 
-    /// The signal, one value per vertex, if any.
+    /// The signal, [`FShape::n_channels`] values per vertex (flat
+    /// row-major), if any.
     pub fn signal(&self) -> Option<&[f64]> {
         self.signal.as_deref()
     }
 
+    /// Signal values per vertex: 0 without a signal, else k ≥ 1.
+    pub fn n_channels(&self) -> usize {
+        if self.signal.is_some() { self.channels } else { 0 }
+    }
+
+    /// Channel `c` of the signal, one value per vertex, if the shape has a
+    /// signal with that channel.
+    pub fn channel(&self, c: usize) -> Option<Vec<f64>> {
+        let k = self.channels;
+        self.signal.as_ref().filter(|_| c < k).map(|f| f.iter().skip(c).step_by(k).copied().collect())
+    }
+
     /// Takes the parts apart: `(dim, kind, points, cells, signal)` (the
-    /// mask, if any, is dropped: read it with [`FShape::mask`] first).
+    /// mask, if any, is dropped: read it with [`FShape::mask`] first, and
+    /// the signal is flat: read [`FShape::n_channels`] first).
     pub fn into_parts(self) -> (usize, CellKind, Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
         (self.dim, self.kind, self.points, self.cells, self.signal)
     }

@@ -380,7 +380,10 @@ impl FShape {
             .collect();
         // The signal in units where one standard deviation is signal_weight
         // × 1 % of the diagonal, so that its quadric adds to the plane's.
-        let s: Vec<f64> = match self.signal() {
+        // With several channels the quadric weighs the first one (every
+        // channel is carried: the kept vertices keep all their values).
+        let first = self.channel(0);
+        let s: Vec<f64> = match first.as_deref() {
             Some(f) if signal_weight > 0.0 => {
                 // Over the values there are: a masked vertex's (NaN) counts
                 // as the mean, no signal feature to keep.
@@ -484,11 +487,15 @@ impl FShape {
             .filter(|(_, alive)| **alive)
             .flat_map(|(t, _)| t.map(|w| index[w as usize]))
             .collect();
-        let signal = self.signal().map(|f| kept.iter().map(|&i| f[i]).collect());
+        let k = self.n_channels();
+        let signal = self.signal().map(|f| kept.iter().flat_map(|&i| f[i * k..(i + 1) * k].to_vec()).collect());
         let mask = self.mask().map(|m| kept.iter().map(|&i| m[i]).collect());
         // The kept vertices keep their values and their mask weights.
-        let shape =
-            FShape::try_new(self.dim(), CellKind::Triangle, points, cells, None)?.with_signal_and_mask(signal, mask)?;
+        let shape = FShape::try_new(self.dim(), CellKind::Triangle, points, cells, None)?.with_signals_and_mask(
+            signal,
+            k.max(1),
+            mask,
+        )?;
         Ok(Simplified { shape, kept })
     }
 }

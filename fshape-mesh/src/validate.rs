@@ -49,9 +49,9 @@ pub enum Finding {
         /// Number of mask values.
         found: usize,
     },
-    /// The signal does not have one value per vertex. Error.
+    /// The signal does not have one value per vertex and channel. Error.
     SignalLength {
-        /// Number of vertices.
+        /// Number of vertices times the number of channels.
         expected: usize,
         /// Number of signal values.
         found: usize,
@@ -169,7 +169,7 @@ impl fmt::Display for Finding {
                 write!(f, "vertex {vertex} has a NaN or infinite (missing) signal value")
             }
             Finding::SignalLength { expected, found } => {
-                write!(f, "the signal has {found} values for {expected} vertices")
+                write!(f, "the signal has {found} values where {expected} were expected (one per vertex and channel)")
             }
             Finding::MaskValue { vertex, value } => {
                 write!(f, "vertex {vertex} has the mask value {value}; a mask holds weights in [0, 1]")
@@ -284,6 +284,7 @@ pub(crate) fn blocking_problems(
     points: &[f64],
     cells: &[usize],
     signal: Option<&[f64]>,
+    channels: usize,
     mask: Option<&[f64]>,
 ) -> Vec<Finding> {
     let n_vertices = points.len() / dim;
@@ -305,17 +306,21 @@ pub(crate) fn blocking_problems(
         );
     }
     if let Some(f) = signal {
-        if f.len() != n_vertices {
-            out.push(Finding::SignalLength { expected: n_vertices, found: f.len() });
+        // `channels` values per vertex, vertex by vertex.
+        let k = channels.max(1);
+        if f.len() != n_vertices * k {
+            out.push(Finding::SignalLength { expected: n_vertices * k, found: f.len() });
         }
         // A masked vertex (weight 0) has no value: anything is accepted there.
         let masked = |v: usize| mask.is_some_and(|m| m.get(v) == Some(&0.0));
-        out.extend(
-            f.iter()
-                .enumerate()
-                .filter(|&(v, x)| !x.is_finite() && !masked(v))
-                .map(|(vertex, _)| Finding::NonFiniteSignal { vertex }),
-        );
+        let mut last = None;
+        for (i, x) in f.iter().enumerate() {
+            let vertex = i / k;
+            if !x.is_finite() && !masked(vertex) && last != Some(vertex) {
+                out.push(Finding::NonFiniteSignal { vertex });
+                last = Some(vertex);
+            }
+        }
     }
     for (cell, c) in cells.chunks_exact(kind.n_corners()).enumerate() {
         for (i, &index) in c.iter().enumerate() {
@@ -347,8 +352,15 @@ fn cell_key(c: &[usize]) -> ([usize; 3], bool) {
 }
 
 pub(crate) fn validate(shape: &FShape) -> Validation {
-    let mut problems =
-        blocking_problems(shape.dim(), shape.kind(), shape.points(), shape.cells(), shape.signal(), shape.mask());
+    let mut problems = blocking_problems(
+        shape.dim(),
+        shape.kind(),
+        shape.points(),
+        shape.cells(),
+        shape.signal(),
+        shape.n_channels(),
+        shape.mask(),
+    );
     let d = shape.kind().dim() as i32;
     let tol = ZERO_VOLUME_REL * shape.bounding_box().diagonal().powi(d);
     for t in 0..shape.n_cells() {
@@ -474,10 +486,15 @@ impl FShape {
         let points: Vec<f64> =
             (0..self.n_vertices()).filter(|&v| used[v]).flat_map(|v| self.point(v).to_vec()).collect();
         let cells = kept_cells.iter().map(|&v| log.vertex_map[v].unwrap_or(usize::MAX)).collect();
-        let signal = self.signal().map(|f| (0..f.len()).filter(|&v| used[v]).map(|v| f[v]).collect());
+        let k = self.n_channels();
+        let signal = self.signal().map(|f| {
+            (0..self.n_vertices()).filter(|&v| used[v]).flat_map(|v| f[v * k..(v + 1) * k].to_vec()).collect()
+        });
+        let mask = self.mask().map(|m| (0..m.len()).filter(|&v| used[v]).map(|v| m[v]).collect());
         debug_assert_eq!(points.len() % n, 0);
-        let shape =
-            FShape::try_new(n, self.kind(), points, cells, signal).expect("repairs of a valid shape keep it valid");
+        let shape = FShape::try_new(n, self.kind(), points, cells, None)
+            .and_then(|s| s.with_signals_and_mask(signal, k, mask))
+            .expect("repairs of a valid shape keep it valid");
         (shape, log)
     }
 }

@@ -504,6 +504,12 @@ pub fn write_mesh(path: &Path, shape: &FShape, encoding: Encoding) -> Result<(),
 /// Writes a mesh in the given format to any writer (uncompressed). OBJ
 /// ignores `encoding` and carries no signal.
 pub fn write_to(w: &mut impl Write, shape: &FShape, format: Format, encoding: Encoding) -> std::io::Result<()> {
+    if shape.n_channels() > 1 && !matches!(format, Format::Obj | Format::FreeSurfer) {
+        return Err(std::io::Error::other(format!(
+            "the shape carries {} signal channels; mesh files carry one (write each channel as a signal file)",
+            shape.n_channels()
+        )));
+    }
     match format {
         Format::Ply => ply::write(w, shape, encoding),
         Format::Vtk => vtk::write(w, shape, encoding),

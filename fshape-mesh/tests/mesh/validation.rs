@@ -122,3 +122,57 @@ fn a_mask_allows_missing_values_where_it_is_zero_and_nowhere_else() {
     assert_eq!(moved.mask(), a.mask());
     assert_eq!(moved.with_signal(Some(vec![0.0; n])).unwrap().mask(), Some(&m[..]));
 }
+
+#[test]
+fn several_channels_are_checked_masked_and_carried_vertex_by_vertex() {
+    let s = fshape_mesh::generate::icosphere(2, 1.0);
+    let n = s.n_vertices();
+    // Channel c of vertex v is 10 v + c.
+    let f: Vec<f64> = (0..n).flat_map(|v| (0..3).map(move |c| (10 * v + c) as f64)).collect();
+    let a = s.clone().with_signals(Some(f.clone()), 3).unwrap();
+    assert_eq!((a.n_channels(), a.channel(2).unwrap()[5], a.channel(3)), (3, 52.0, None));
+    assert_eq!(s.n_channels(), 0);
+    // The length is checked against vertices × channels; a missing value
+    // is named by its vertex.
+    let e = s.clone().with_signals(Some(f[..3 * n - 1].to_vec()), 3).unwrap_err();
+    let ShapeError::Invalid { problems } = &e else { panic!("{e}") };
+    assert_eq!(problems, &vec![Finding::SignalLength { expected: 3 * n, found: 3 * n - 1 }]);
+    let mut g = f.clone();
+    g[3 * 7 + 1] = f64::NAN;
+    let e = s.clone().with_signals(Some(g.clone()), 3).unwrap_err();
+    assert!(e.to_string().contains("vertex 7"), "{e}");
+    assert!(matches!(s.clone().with_signals(Some(vec![]), 0), Err(ShapeError::Channels)));
+    // A mask masks every channel of a vertex, and only there.
+    let mut m = vec![1.0; n];
+    m[7] = 0.0;
+    let b = s.clone().with_signals_and_mask(Some(g), 3, Some(m.clone())).unwrap();
+    assert!(b.signal().unwrap()[21..24].iter().all(|v| v.is_nan()));
+    assert_eq!(b.signal().unwrap()[24..27], [80.0, 81.0, 82.0]);
+    // Simplification keeps whole rows; a one-channel shape is not a
+    // three-channel one.
+    let c = b.simplified(n / 3).unwrap();
+    for (i, &v) in c.kept.iter().enumerate() {
+        let row = &c.shape.signal().unwrap()[3 * i..3 * i + 3];
+        if v == 7 {
+            assert!(row.iter().all(|x| x.is_nan()));
+        } else {
+            assert_eq!(row, &f[3 * v..3 * v + 3]);
+        }
+    }
+    assert_eq!((c.shape.n_channels(), c.shape.mask().map(<[f64]>::len)), (3, Some(c.kept.len())));
+    // Dropping an unused vertex keeps the others' rows and mask weights.
+    let mut pts = square_pts();
+    pts.extend([5.0, 5.0]);
+    let sq = FShape::try_new(2, CellKind::Triangle, pts, vec![0, 1, 2, 0, 2, 3], None).unwrap();
+    let rows: Vec<f64> = (0..5).flat_map(|v| [v as f64, -(v as f64)]).collect();
+    let sq = sq.with_signals_and_mask(Some(rows.clone()), 2, Some(vec![1.0, 0.0, 1.0, 0.5, 1.0])).unwrap();
+    let repairs = Repairs { drop_unused_vertices: true, drop_zero_volume_cells: false, drop_duplicate_cells: false };
+    let (r, _) = sq.repaired(repairs);
+    assert_eq!((r.n_vertices(), r.n_channels(), r.mask()), (4, 2, Some(&[1.0, 0.0, 1.0, 0.5][..])));
+    assert_eq!(r.channel(1).unwrap()[3], -3.0);
+    // Mesh files carry one map: several are refused, not cut.
+    let path = std::env::temp_dir().join(format!("fshape-channels-{}.ply", std::process::id()));
+    let e = fshape_mesh::io::write_mesh(&path, &a, fshape_mesh::io::Encoding::Binary).unwrap_err();
+    assert!(e.to_string().contains("3 signal channels"), "{e}");
+    assert!(!path.exists());
+}
