@@ -360,7 +360,8 @@ kernel_spec!(
     fshape_varifold::parse_position
 );
 kernel_spec!(
-    /// A signal kernel k_f: `gaussian:σ_f`.
+    /// A signal kernel k_f: `gaussian:σ_f`, or `gaussian:σ_1,σ_2,…` for a
+    /// width per signal channel.
     SignalKernelSpec,
     SignalKernel,
     SignalKernel::parse
@@ -691,7 +692,7 @@ impl Config {
 
     fn attachment_with(&self, geom: &PositionKernel, key: &str) -> Result<VarifoldKernel, MatchError> {
         let a = self.attachment_section()?;
-        let signal = a.kernel_signal.as_ref().map_or(SignalKernel::Constant, |s| *s.kernel());
+        let signal = a.kernel_signal.as_ref().map_or(SignalKernel::Constant, |s| s.kernel().clone());
         let mut k = VarifoldKernel::try_new(geom.kernel().clone(), signal, *a.kernel_grass.kernel())
             .map_err(|e| bad(key, e.to_string()))?;
         if let Some(tol) = a.tolerance {

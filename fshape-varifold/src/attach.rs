@@ -3,9 +3,9 @@
 
 use fshape_mesh::FShape;
 
-use crate::engine::{pair_sums, row_len};
+use crate::engine::{channels, pair_sums, row_len};
 use crate::features::pull_back;
-use crate::{CellFeatures, FeatureGrad, SignalKernel, VarifoldError, VarifoldKernel};
+use crate::{CellFeatures, FeatureGrad, VarifoldError, VarifoldKernel};
 
 /// A(X, Y) = ⟨X,X⟩ − 2⟨X,Y⟩ + ⟨Y,Y⟩ with its three inner products.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,12 +38,20 @@ fn compatible(x: &CellFeatures, y: &CellFeatures, k: &VarifoldKernel) -> Result<
             target_dir: y.dir_len(),
         });
     }
-    if k.signal() != SignalKernel::Constant {
+    if !k.signal().is_constant() {
         for (which, f) in [("source", x), ("target", y)] {
             if f.signal().is_none() {
                 return Err(VarifoldError::MissingSignal { which });
             }
         }
+        if x.n_channels() != y.n_channels() {
+            return Err(VarifoldError::Channels {
+                what: "the target's signal against the source's",
+                expected: x.n_channels(),
+                found: y.n_channels(),
+            });
+        }
+        k.signal().width(0, x.n_channels())?;
     }
     Ok(())
 }
@@ -101,8 +109,13 @@ fn inner(
     let mut value = 0.0;
     let n = x.len();
     let (d, du) = (x.dim(), x.dir_len());
-    let mut g =
-        FeatureGrad { centre: vec![0.0; n * d], dir: vec![0.0; n * du], weight: vec![0.0; n], signal: vec![0.0; n] };
+    let nf = x.n_channels().max(1);
+    let mut g = FeatureGrad {
+        centre: vec![0.0; n * d],
+        dir: vec![0.0; n * du],
+        weight: vec![0.0; n],
+        signal: vec![0.0; n * nf],
+    };
     let share = x.mask();
     for (xp, idx, yp, kp, functional) in [(&xf, &xfi, &yf, k, true), (&xg, &xgi, &yg, &geometric, false)] {
         if xp.is_empty() || yp.is_empty() || (!functional && !k.masked_geometry()) {
@@ -121,7 +134,13 @@ fn inner(
             for c in 0..du {
                 g.dir[t * du + c] += gp.dir[i * du + c];
             }
-            g.signal[t] += gp.signal[i];
+            // The geometric part's gradient in the signal is zero (one
+            // channel of it, added as before for k = 1).
+            if functional || nf == 1 {
+                for c in 0..nf {
+                    g.signal[t * nf + c] += gp.signal[i * nf + c];
+                }
+            }
         }
     }
     Ok((value, grad.then_some(g)))
@@ -136,7 +155,8 @@ fn inner_plain(
 ) -> Result<(f64, Option<FeatureGrad>), VarifoldError> {
     compatible(x, y, k)?;
     let (d, du) = (x.dim(), x.dir_len());
-    let w = row_len(d, du, grad);
+    let (nf, _) = channels(x, k)?;
+    let w = row_len(d, du, nf, grad);
     let rows = pair_sums(x, y, k, grad, parallel)?;
     let r = x.weights();
     // Summed in cell order: deterministic.
@@ -145,8 +165,15 @@ fn inner_plain(
         return Ok((value, None));
     }
     let n = x.len();
-    let mut g =
-        FeatureGrad { centre: vec![0.0; n * d], dir: vec![0.0; n * du], weight: vec![0.0; n], signal: vec![0.0; n] };
+    // The gradient in the signal has the signal's shape (one channel of
+    // zeros for a geometric kernel).
+    let xf = x.n_channels().max(1);
+    let mut g = FeatureGrad {
+        centre: vec![0.0; n * d],
+        dir: vec![0.0; n * du],
+        weight: vec![0.0; n],
+        signal: vec![0.0; n * xf],
+    };
     for (i, row) in rows.chunks_exact(w).enumerate() {
         g.weight[i] = row[0];
         for c in 0..d {
@@ -155,7 +182,11 @@ fn inner_plain(
         for c in 0..du {
             g.dir[i * du + c] = r[i] * row[1 + d + c];
         }
-        g.signal[i] = r[i] * row[1 + d + du];
+        if nf == xf {
+            for c in 0..nf {
+                g.signal[i * nf + c] = r[i] * row[1 + d + du + c];
+            }
+        }
     }
     Ok((value, Some(g)))
 }
@@ -193,7 +224,7 @@ impl Attachment {
     pub fn from_features(target: CellFeatures, kernel: VarifoldKernel) -> Result<Self, VarifoldError> {
         // ⟨Y,Y⟩ below pairs the target with itself: say it is the target
         // that lacks a signal, not the "source" of that pairing.
-        if kernel.signal() != SignalKernel::Constant && target.signal().is_none() {
+        if !kernel.signal().is_constant() && target.signal().is_none() {
             return Err(VarifoldError::MissingSignal { which: "target" });
         }
         let (yy, _) = inner(&target, &target, &kernel, false, true)?;

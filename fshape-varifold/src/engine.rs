@@ -5,9 +5,12 @@
 //! - s0_i = Σ_j r_j k_p k_f k_t,
 //! - gc_i = Σ_j r_j 2k_p' (c_i − c_j) k_f k_t,
 //! - gu_i = Σ_j r_j k_p k_f k_t'(s) u_j,
-//! - gf_i = Σ_j r_j k_p k_f'(v) 2(f_i − f_j) k_t,
+//! - gf_i = Σ_j r_j k_p ∂_f k_f k_t (one sum per signal channel),
 //!
-//! with k_p, k_f, k_t at u = |c_i − c_j|², v = (f_i − f_j)², s = u_i·u_j.
+//! with k_p, k_f, k_t at u = |c_i − c_j|², f_i − f_j, s = u_i·u_j; for the
+//! Gaussian k_f = exp(−Σ_c b_c (f_ic − f_jc)²), ∂_{f_ic} k_f =
+//! −2 b_c (f_ic − f_jc) k_f. Without a signal kernel, one channel of zeros
+//! stands in for the signal.
 //! Then ⟨μ_X, μ_Y⟩ = Σ_i r_i s0_i, and r_i times the other sums are its
 //! derivatives in c_i, u_i and f_i (s0_i is the one in r_i).
 //!
@@ -22,33 +25,50 @@ use fshape_kernels::BlockPairs;
 use fshape_kernels::lanes::{L, exp_lanes, sq_dist_lanes};
 use pulp::{Simd, WithSimd};
 
-use crate::{CellFeatures, GrassKernel, SignalKernel, VarifoldError, VarifoldKernel};
+use crate::{CellFeatures, GrassKernel, VarifoldError, VarifoldKernel};
+
+/// The most signal channels a varifold compares (a run-time count up to
+/// this bound, so that one compiled kernel serves every k).
+pub const MAX_CHANNELS: usize = 8;
 
 /// Per-lane sums of one target block.
 #[derive(Clone, Copy)]
-struct Acc<const D: usize, const DU: usize> {
+struct Acc<const D: usize, const DU: usize, const NF: usize> {
     s0: [f64; L],
     gc: [[f64; L]; D],
     gu: [[f64; L]; DU],
-    gf: [f64; L],
+    gf: [[f64; L]; NF],
 }
 
 /// One target block against one run of sorted sources.
-struct Tile<'a, const D: usize, const DU: usize, const GRAD: bool> {
+///
+/// `NF` bounds the signal channels `nf`: 1, the common case compiled with
+/// one channel's arrays (MAX_CHANNELS' arrays there cost a third of the
+/// time), or [`MAX_CHANNELS`].
+struct Tile<'a, const D: usize, const DU: usize, const GRAD: bool, const NF: usize> {
     k: &'a VarifoldKernel,
+    /// k's direction kernel and whether its signal kernel is constant,
+    /// read once (the loops do not go back to `k` for them).
+    grass: GrassKernel,
+    functional: bool,
+    /// Signal channels (1, of zeros, without a signal kernel), and each
+    /// channel's b_c = 1/(2σ_c²) (0 without a signal kernel).
+    nf: usize,
+    b: &'a [f64; MAX_CHANNELS],
     tc: &'a [[f64; L]; D],
     tu: &'a [[f64; L]; DU],
-    tf: &'a [f64; L],
+    tf: &'a [[f64; L]; NF],
     sc: &'a [[f64; D]],
     su: &'a [[f64; DU]],
+    /// `nf` values per source cell.
     sf: &'a [f64],
     sr: &'a [f64],
     tapered: bool,
-    acc: Acc<D, DU>,
+    acc: Acc<D, DU, NF>,
 }
 
-impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D, DU, GRAD> {
-    type Output = Acc<D, DU>;
+impl<const D: usize, const DU: usize, const GRAD: bool, const NF: usize> WithSimd for Tile<'_, D, DU, GRAD, NF> {
+    type Output = Acc<D, DU, NF>;
 
     #[inline(always)]
     fn with_simd<S: Simd>(mut self, _simd: S) -> Self::Output {
@@ -61,24 +81,23 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
             let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
             let u2 = sq_dist_lanes(self.tc, cj);
             let (kp, kp1) = self.k.position().lanes(&u2, self.tapered);
-            // k_f and its derivative, and f_i − f_j.
-            let mut df = [0.0; L];
-            let (kf, kf1) = match self.k.signal() {
-                SignalKernel::Constant => ([1.0; L], [0.0; L]),
-                SignalKernel::Gaussian { sigma } => {
-                    let b = 0.5 / (sigma * sigma);
-                    let mut arg = [0.0; L];
+            // k_f and f_i − f_j per channel (k_f's derivative in
+            // v_c = (f_ic − f_jc)² is −b_c k_f).
+            let nf = if NF == 1 { 1 } else { self.nf };
+            let mut df = [[0.0; L]; NF];
+            let kf = if !self.functional {
+                [1.0; L]
+            } else {
+                let mut arg = [0.0; L];
+                for c in 0..nf {
+                    let (b, fj) = (self.b[c], self.sf[j * nf + c]);
                     for l in 0..L {
-                        df[l] = self.tf[l] - self.sf[j];
-                        arg[l] = -b * df[l] * df[l];
+                        df[c][l] = self.tf[c][l] - fj;
+                        let a = -b * df[c][l] * df[c][l];
+                        arg[l] = if c == 0 { a } else { arg[l] + a };
                     }
-                    let e = exp_lanes(arg);
-                    let mut e1 = [0.0; L];
-                    for l in 0..L {
-                        e1[l] = -b * e[l];
-                    }
-                    (e, e1)
                 }
+                exp_lanes(arg)
             };
             let mut s = [0.0; L];
             for k in 0..DU {
@@ -87,7 +106,7 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
                 }
             }
             // k_t = p·e^{arg_t}, k_t' = (p·q + p')·e^{arg_t} (grass_lanes).
-            let (p, p1, q, arg_t) = grass_lanes(self.k.grass(), &s);
+            let (p, p1, q, arg_t) = grass_lanes(self.grass, &s);
             let et = match arg_t {
                 Some(at) => exp_lanes(at),
                 None => [1.0; L],
@@ -111,7 +130,14 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
                 let mut w = [0.0; L];
                 for l in 0..L {
                     w[l] = rj * kp[l] * kf[l] * kt1[l];
-                    acc.gf[l] += 2.0 * rj * kp[l] * kf1[l] * df[l] * kt[l];
+                }
+                if self.functional {
+                    for c in 0..nf {
+                        let b = self.b[c];
+                        for l in 0..L {
+                            acc.gf[c][l] += 2.0 * rj * kp[l] * (-b * kf[l]) * df[c][l] * kt[l];
+                        }
+                    }
                 }
                 for k in 0..DU {
                     for l in 0..L {
@@ -124,7 +150,7 @@ impl<const D: usize, const DU: usize, const GRAD: bool> WithSimd for Tile<'_, D,
     }
 }
 
-impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
+impl<const D: usize, const DU: usize, const GRAD: bool, const NF: usize> Tile<'_, D, DU, GRAD, NF> {
     /// The common case, k_p a single Gaussian w·exp(−a u): the exponential
     /// factors k_p, k_f and (for the Gaussian direction kernels) k_t are
     /// computed as one exponential of the sum of their arguments, three
@@ -133,17 +159,18 @@ impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
     #[inline(always)]
     fn fused(&mut self, a: f64, w: f64, taper: Option<fshape_kernels::Taper>) {
         let acc = &mut self.acc;
-        let b = match self.k.signal() {
-            SignalKernel::Constant => 0.0,
-            SignalKernel::Gaussian { sigma } => 0.5 / (sigma * sigma),
-        };
+        let nf = if NF == 1 { 1 } else { self.nf };
+        let bs: [f64; NF] = std::array::from_fn(|c| self.b[c]);
+        let sf = self.sf;
         for j in 0..self.sr.len() {
             let (cj, uj, rj) = (&self.sc[j], &self.su[j], self.sr[j]);
             let u2 = sq_dist_lanes(self.tc, cj);
-            let mut df = [0.0; L];
-            let fj = self.sf.get(j).copied().unwrap_or(0.0);
-            for l in 0..L {
-                df[l] = self.tf[l] - fj;
+            let mut df = [[0.0; L]; NF];
+            for c in 0..nf {
+                let fj = sf.get(j * nf + c).copied().unwrap_or(0.0);
+                for l in 0..L {
+                    df[c][l] = self.tf[c][l] - fj;
+                }
             }
             let mut s = [0.0; L];
             for k in 0..DU {
@@ -155,9 +182,14 @@ impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
             // polynomial k_t (p, p') and the k_t'/k_t of the exponential one.
             let mut arg = [0.0; L];
             for l in 0..L {
-                arg[l] = -a * u2[l] - b * df[l] * df[l];
+                arg[l] = -a * u2[l] - bs[0] * df[0][l] * df[0][l];
             }
-            let (p, p1, q, arg_t) = grass_lanes(self.k.grass(), &s);
+            for c in 1..nf {
+                for l in 0..L {
+                    arg[l] = arg[l] - bs[c] * df[c][l] * df[c][l];
+                }
+            }
+            let (p, p1, q, arg_t) = grass_lanes(self.grass, &s);
             if let Some(at) = arg_t {
                 for l in 0..L {
                     arg[l] += at[l];
@@ -196,8 +228,13 @@ impl<const D: usize, const DU: usize, const GRAD: bool> Tile<'_, D, DU, GRAD> {
                 }
                 let mut g = [0.0; L];
                 for l in 0..L {
-                    acc.gf[l] += -2.0 * b * mt[l] * p[l] * df[l];
+                    acc.gf[0][l] += -2.0 * bs[0] * mt[l] * p[l] * df[0][l];
                     g[l] = mt[l] * (p[l] * q[l] + p1[l]);
+                }
+                for c in 1..nf {
+                    for l in 0..L {
+                        acc.gf[c][l] += -2.0 * bs[c] * mt[l] * p[l] * df[c][l];
+                    }
                 }
                 for k in 0..DU {
                     for l in 0..L {
@@ -248,7 +285,7 @@ fn grass_lanes(grass: GrassKernel, s: &[f64; L]) -> ([f64; L], [f64; L], [f64; L
 }
 
 /// The per-target sums (module doc) of every cell of `x` against `y`: rows
-/// [s0] or, with `grad`, [s0, gc (dim), gu (du), gf].
+/// [s0] or, with `grad`, [s0, gc (dim), gu (du), gf (one per channel)].
 pub(crate) fn pair_sums(
     x: &CellFeatures,
     y: &CellFeatures,
@@ -267,12 +304,31 @@ pub(crate) fn pair_sums(
     }
 }
 
-/// The widest row: s0, 3 centre and 3 direction components, the signal.
-const MAX_ROW: usize = 8;
+/// The widest row: s0, 3 centre and 3 direction components, the signal
+/// channels.
+const MAX_ROW: usize = 7 + MAX_CHANNELS;
 
-/// Row width of [`pair_sums`]' output.
-pub(crate) fn row_len(dim: usize, du: usize, grad: bool) -> usize {
-    if grad { 2 + dim + du } else { 1 }
+/// Row width of [`pair_sums`]' output, with `nf` signal channels.
+pub(crate) fn row_len(dim: usize, du: usize, nf: usize, grad: bool) -> usize {
+    if grad { 1 + dim + du + nf } else { 1 }
+}
+
+/// The channel count the sums run over and each channel's b_c = 1/(2σ_c²):
+/// the signal kernel's, or one channel of zeros without a signal kernel.
+pub(crate) fn channels(x: &CellFeatures, k: &VarifoldKernel) -> Result<(usize, [f64; MAX_CHANNELS]), VarifoldError> {
+    let mut b = [0.0; MAX_CHANNELS];
+    if k.signal().is_constant() {
+        return Ok((1, b));
+    }
+    let nf = x.n_channels();
+    if nf > MAX_CHANNELS {
+        return Err(VarifoldError::Channels { what: "signal channels (at most 8)", expected: MAX_CHANNELS, found: nf });
+    }
+    for (c, bc) in b.iter_mut().enumerate().take(nf) {
+        let sigma = k.signal().width(c, nf)?;
+        *bc = 0.5 / (sigma * sigma);
+    }
+    Ok((nf, b))
 }
 
 fn run<const D: usize, const DU: usize, const GRAD: bool>(
@@ -281,15 +337,33 @@ fn run<const D: usize, const DU: usize, const GRAD: bool>(
     k: &VarifoldKernel,
     parallel: bool,
 ) -> Result<Vec<f64>, VarifoldError> {
+    if channels(x, k)?.0 == 1 {
+        run_channels::<D, DU, GRAD, 1>(x, y, k, parallel)
+    } else {
+        run_channels::<D, DU, GRAD, MAX_CHANNELS>(x, y, k, parallel)
+    }
+}
+
+fn run_channels<const D: usize, const DU: usize, const GRAD: bool, const NF: usize>(
+    x: &CellFeatures,
+    y: &CellFeatures,
+    k: &VarifoldKernel,
+    parallel: bool,
+) -> Result<Vec<f64>, VarifoldError> {
+    let (nf, b) = channels(x, k)?;
     let pairs = BlockPairs::try_new(x.centres(), y.centres(), D, k.position())?;
     let order = pairs.source_order();
-    let zeros = vec![0.0; y.len()];
-    let (yf, xf) = (y.signal().unwrap_or(&zeros), x.signal());
+    // Without a signal kernel the signals are not read (one channel of 0).
+    let functional = !k.signal().is_constant();
+    let (yf, xf) = if functional { (y.signal(), x.signal()) } else { (None, None) };
     let sc: Vec<[f64; D]> = order.iter().map(|&j| std::array::from_fn(|c| y.centres()[j * D + c])).collect();
     let su: Vec<[f64; DU]> = order.iter().map(|&j| std::array::from_fn(|c| y.dirs()[j * DU + c])).collect();
-    let sf: Vec<f64> = order.iter().map(|&j| yf[j]).collect();
+    let sf: Vec<f64> = match yf {
+        Some(f) => order.iter().flat_map(|&j| f[j * nf..(j + 1) * nf].iter().copied()).collect(),
+        None => vec![0.0; order.len()],
+    };
     let sr: Vec<f64> = order.iter().map(|&j| y.weights()[j]).collect();
-    let w = row_len(D, DU, GRAD);
+    let w = row_len(D, DU, nf, GRAD);
     let arch = fshape_kernels::simd::arch();
     let blocks = pairs.map_blocks(parallel, |targets, runs| {
         let n = targets.len();
@@ -297,18 +371,24 @@ fn run<const D: usize, const DU: usize, const GRAD: bool>(
         let lane = |l: usize| targets[l.min(n - 1)];
         let tc: [[f64; L]; D] = std::array::from_fn(|c| std::array::from_fn(|l| x.centres()[lane(l) * D + c]));
         let tu: [[f64; L]; DU] = std::array::from_fn(|c| std::array::from_fn(|l| x.dirs()[lane(l) * DU + c]));
-        let tf: [f64; L] = std::array::from_fn(|l| xf.map_or(0.0, |f| f[lane(l)]));
-        let mut acc = Acc::<D, DU> { s0: [0.0; L], gc: [[0.0; L]; D], gu: [[0.0; L]; DU], gf: [0.0; L] };
+        let tf: [[f64; L]; NF] = std::array::from_fn(|c| {
+            std::array::from_fn(|l| xf.filter(|_| c < nf).map_or(0.0, |f| f[lane(l) * nf + c]))
+        });
+        let mut acc = Acc::<D, DU, NF> { s0: [0.0; L], gc: [[0.0; L]; D], gu: [[0.0; L]; DU], gf: [[0.0; L]; NF] };
         for run in runs {
             let r = run.range.clone();
-            let tile = Tile::<D, DU, GRAD> {
+            let tile = Tile::<D, DU, GRAD, NF> {
                 k,
+                grass: k.grass(),
+                functional,
+                nf,
+                b: &b,
                 tc: &tc,
                 tu: &tu,
                 tf: &tf,
                 sc: &sc[r.clone()],
                 su: &su[r.clone()],
-                sf: &sf[r.clone()],
+                sf: &sf[r.start * nf..r.end * nf],
                 sr: &sr[r],
                 tapered: run.tapered,
                 acc,
@@ -326,7 +406,9 @@ fn run<const D: usize, const DU: usize, const GRAD: bool>(
                 for c in 0..DU {
                     row[1 + D + c] = acc.gu[c][l];
                 }
-                row[1 + D + DU] = acc.gf[l];
+                for c in 0..nf {
+                    row[1 + D + DU + c] = acc.gf[c][l];
+                }
             }
             rows.push((i, row));
         }

@@ -14,7 +14,7 @@ use crate::VarifoldError;
 ///   `du` = 3, 2 or 1). Zero for a cell of zero volume.
 /// - `weight`: the cell's d-volume r_τ (length or area).
 /// - `signal`: the mean of the corners' signal values, if the shape has a
-///   signal.
+///   signal: k channels per cell (n × k, flat row-major), as the vertices.
 /// - `mask`: with a masked shape, each cell's functional share m_τ ∈ [0, 1],
 ///   the smallest of its corners' mask weights, so that one masked corner
 ///   cannot bring its (missing) value into the cell's mean. A cell of share
@@ -31,6 +31,8 @@ pub struct CellFeatures {
     dir: Vec<f64>,
     weight: Vec<f64>,
     signal: Option<Vec<f64>>,
+    /// Signal channels k (1 without a signal).
+    channels: usize,
     mask: Option<Vec<f64>>,
 }
 
@@ -45,7 +47,8 @@ pub struct FeatureGrad {
     pub dir: Vec<f64>,
     /// ∂/∂weight (n).
     pub weight: Vec<f64>,
-    /// ∂/∂signal (n); zero when the signal kernel is constant.
+    /// ∂/∂signal (n × k, as the signal); zero when the signal kernel is
+    /// constant.
     pub signal: Vec<f64>,
 }
 
@@ -71,10 +74,11 @@ impl CellFeatures {
     /// with its vertex index.
     pub fn of(shape: &FShape) -> Result<CellFeatures, VarifoldError> {
         let vertex_mask = shape.mask();
+        let nf = shape.n_channels().max(1);
         if let Some(f) = shape.signal()
-            && let Some(i) = (0..f.len()).position(|v| !f[v].is_finite() && vertex_mask.is_none_or(|m| m[v] > 0.0))
+            && let Some(i) = (0..f.len()).position(|i| !f[i].is_finite() && vertex_mask.is_none_or(|m| m[i / nf] > 0.0))
         {
-            return Err(VarifoldError::NonFiniteSignal { vertex: i, value: f[i] });
+            return Err(VarifoldError::NonFiniteSignal { vertex: i / nf, value: f[i] });
         }
         let (dim, kind) = (shape.dim(), shape.kind());
         let du = dir_len(kind, dim);
@@ -106,20 +110,19 @@ impl CellFeatures {
         let mask: Option<Vec<f64>> =
             vertex_mask.map(|m| shape.cell_iter().map(|cell| cell.iter().map(|&v| m[v]).fold(1.0, f64::min)).collect());
         let signal = shape.signal().map(|f| {
-            shape
-                .cell_iter()
-                .enumerate()
-                .map(|(t, cell)| {
-                    // A masked cell's corners are not read.
-                    if mask.as_ref().is_some_and(|m| m[t] == 0.0) {
-                        0.0
-                    } else {
-                        cell.iter().map(|&v| f[v]).sum::<f64>() / nc as f64
-                    }
-                })
-                .collect()
+            let mut out = vec![0.0; n * nf];
+            for (t, cell) in shape.cell_iter().enumerate() {
+                // A masked cell's corners are not read.
+                if mask.as_ref().is_some_and(|m| m[t] == 0.0) {
+                    continue;
+                }
+                for (c, o) in out[t * nf..(t + 1) * nf].iter_mut().enumerate() {
+                    *o = cell.iter().map(|&v| f[v * nf + c]).sum::<f64>() / nc as f64;
+                }
+            }
+            out
         });
-        Ok(CellFeatures { dim, du, centre, dir, weight, signal, mask })
+        Ok(CellFeatures { dim, du, centre, dir, weight, signal, channels: nf, mask })
     }
 
     /// The same cells with a functional share per cell in [0, 1] (see
@@ -152,13 +155,15 @@ impl CellFeatures {
         let part = |keep: &dyn Fn(f64) -> bool, mass: &dyn Fn(f64) -> f64, signal: bool| {
             let idx: Vec<usize> = (0..self.len()).filter(|&t| keep(share(t))).collect();
             let pick = |v: &[f64], w: usize| idx.iter().flat_map(|&t| v[t * w..(t + 1) * w].iter().copied()).collect();
+            let nf = self.channels;
             let features = CellFeatures {
                 dim: self.dim,
                 du: self.du,
                 centre: pick(&self.centre, self.dim),
                 dir: pick(&self.dir, self.du),
                 weight: idx.iter().map(|&t| mass(share(t)) * self.weight[t]).collect(),
-                signal: if signal { self.signal.as_ref().map(|f| idx.iter().map(|&t| f[t]).collect()) } else { None },
+                signal: if signal { self.signal.as_ref().map(|f| pick(f, nf)) } else { None },
+                channels: if signal { nf } else { 1 },
                 mask: None,
             };
             (features, idx)
@@ -167,7 +172,8 @@ impl CellFeatures {
     }
 
     /// Builds features directly (for measures that do not come from a mesh,
-    /// and for tests). `dir` rows should be unit vectors (or zero).
+    /// and for tests), with one signal value per cell. `dir` rows should be
+    /// unit vectors (or zero).
     pub fn from_parts(
         dim: usize,
         centre: Vec<f64>,
@@ -175,6 +181,22 @@ impl CellFeatures {
         weight: Vec<f64>,
         signal: Option<Vec<f64>>,
     ) -> Result<CellFeatures, VarifoldError> {
+        CellFeatures::from_parts_channels(dim, centre, dir, weight, signal, 1)
+    }
+
+    /// [`CellFeatures::from_parts`] with `channels` signal values per cell
+    /// (n × k, flat row-major).
+    pub fn from_parts_channels(
+        dim: usize,
+        centre: Vec<f64>,
+        dir: Vec<f64>,
+        weight: Vec<f64>,
+        signal: Option<Vec<f64>>,
+        channels: usize,
+    ) -> Result<CellFeatures, VarifoldError> {
+        if channels == 0 {
+            return Err(VarifoldError::Channels { what: "signal", expected: 1, found: 0 });
+        }
         if dim != 2 && dim != 3 {
             return Err(VarifoldError::PointDimension { found: dim });
         }
@@ -183,7 +205,7 @@ impl CellFeatures {
         let checks = [
             ("centres", centre.len(), n * dim),
             ("directions", dir.len(), n * du),
-            ("signal", signal.as_ref().map_or(n, Vec::len), n),
+            ("signal", signal.as_ref().map_or(n * channels, Vec::len), n * channels),
         ];
         for (what, found, expected) in checks {
             if found != expected {
@@ -197,14 +219,15 @@ impl CellFeatures {
             ("centre", &centre, dim),
             ("direction", &dir, du),
             ("weight", &weight, 1),
-            ("signal", signal.as_deref().unwrap_or(&[]), 1),
+            ("signal", signal.as_deref().unwrap_or(&[]), channels),
         ];
         for (what, v, w) in rows {
             if let Some(i) = v.iter().position(|v| !v.is_finite() || (what == "weight" && *v < 0.0)) {
                 return Err(VarifoldError::Feature { what, cell: i / w, value: v[i] });
             }
         }
-        Ok(CellFeatures { dim, du, centre, dir, weight, signal, mask: None })
+        let channels = if signal.is_some() { channels } else { 1 };
+        Ok(CellFeatures { dim, du, centre, dir, weight, signal, channels, mask: None })
     }
 
     /// Number of cells.
@@ -243,9 +266,14 @@ impl CellFeatures {
         &self.weight
     }
 
-    /// Cell signal values, if any.
+    /// Cell signal values, [`CellFeatures::n_channels`] per cell, if any.
     pub fn signal(&self) -> Option<&[f64]> {
         self.signal.as_deref()
+    }
+
+    /// Signal channels per cell: 0 without a signal, else k ≥ 1.
+    pub fn n_channels(&self) -> usize {
+        if self.signal.is_some() { self.channels } else { 0 }
     }
 
     /// Total mass Σ_τ r_τ.
@@ -256,7 +284,7 @@ impl CellFeatures {
 
 /// Pulls a gradient with respect to the cell features of `shape` back to
 /// its vertices: returns (∂/∂points, n_vertices × dim, and ∂/∂signal,
-/// n_vertices). With N the cell vector, r = |N| and u = N/r:
+/// n_vertices × k). With N the cell vector, r = |N| and u = N/r:
 /// ∂/∂N = g_r u + (g_u − (u·g_u) u)/r; centre and signal are corner means.
 /// A cell of zero volume has no direction and contributes only through its
 /// centre and signal (its weight is 0, so those terms vanish too).
@@ -265,13 +293,16 @@ pub(crate) fn pull_back(shape: &FShape, g: &FeatureGrad) -> (Vec<f64>, Vec<f64>)
     let du = dir_len(kind, dim);
     let nc = kind.n_corners();
     let mut gx = vec![0.0; shape.n_vertices() * dim];
-    let mut gf = vec![0.0; shape.n_vertices()];
+    let nf = shape.n_channels().max(1);
+    let mut gf = vec![0.0; shape.n_vertices() * nf];
     for (t, cell) in shape.cell_iter().enumerate() {
         for &v in cell {
             for k in 0..dim {
                 gx[v * dim + k] += g.centre[t * dim + k] / nc as f64;
             }
-            gf[v] += g.signal[t] / nc as f64;
+            for c in 0..nf {
+                gf[v * nf + c] += g.signal[t * nf + c] / nc as f64;
+            }
         }
         let nv = cell_vector(shape, t);
         let r = (nv[0] * nv[0] + nv[1] * nv[1] + nv[2] * nv[2]).sqrt();

@@ -5,16 +5,24 @@ use fshape_kernels::Kernel;
 
 use crate::VarifoldError;
 
-/// k_f, a function of v = (f − g)², the squared signal difference.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// k_f, a function of the signal difference f − g ∈ ℝᵏ (k channels per
+/// cell, [`crate::CellFeatures`]).
+#[derive(Clone, Debug, PartialEq)]
 pub enum SignalKernel {
     /// k_f ≡ 1: the purely geometric varifold or current (signals ignored).
     Constant,
-    /// exp(−v / (2σ_f²)) (the project's width convention; fshapesTk's σ is
-    /// this σ times √2).
+    /// exp(−|f − g|² / (2σ_f²)), one width for every channel (the
+    /// project's width convention; fshapesTk's σ is this σ times √2).
     Gaussian {
         /// Width σ_f > 0.
         sigma: f64,
+    },
+    /// Π_c exp(−(f_c − g_c)² / (2σ_c²)): a width per channel, for maps of
+    /// different units (thickness in mm, myelin as a ratio). A product of
+    /// positive definite kernels, so positive definite.
+    Channels {
+        /// Width σ_c > 0 of each channel; as many as the signal has.
+        sigmas: Vec<f64>,
     },
 }
 
@@ -98,8 +106,8 @@ impl VarifoldKernel {
     }
 
     /// k_f.
-    pub fn signal(&self) -> SignalKernel {
-        self.signal
+    pub fn signal(&self) -> &SignalKernel {
+        &self.signal
     }
 
     /// k_t.
@@ -115,14 +123,37 @@ impl VarifoldKernel {
 }
 
 impl SignalKernel {
-    /// (k_f(v), k_f'(v)) for v = (f − g)².
-    pub fn eval(self, v: f64) -> (f64, f64) {
+    /// k_f(f, g) for two signals of the same channel count (the obvious
+    /// formula, for oracles and tests).
+    pub fn eval(&self, f: &[f64], g: &[f64]) -> Result<f64, VarifoldError> {
+        if f.len() != g.len() {
+            return Err(VarifoldError::Channels { what: "signal values compared", expected: f.len(), found: g.len() });
+        }
+        let mut arg = 0.0;
+        for (c, (a, b)) in f.iter().zip(g).enumerate() {
+            if self.is_constant() {
+                return Ok(1.0);
+            }
+            let sigma = self.width(c, f.len())?;
+            arg -= (a - b) * (a - b) / (2.0 * sigma * sigma);
+        }
+        Ok(arg.exp())
+    }
+
+    /// Whether k_f ≡ 1 (signals not compared).
+    pub fn is_constant(&self) -> bool {
+        matches!(self, SignalKernel::Constant)
+    }
+
+    /// The width σ_c of channel `c` for signals of `channels` channels;
+    /// an error when a per-channel kernel has another number of widths.
+    pub fn width(&self, c: usize, channels: usize) -> Result<f64, VarifoldError> {
         match self {
-            SignalKernel::Constant => (1.0, 0.0),
-            SignalKernel::Gaussian { sigma } => {
-                let b = 0.5 / (sigma * sigma);
-                let e = (-b * v).exp();
-                (e, -b * e)
+            SignalKernel::Constant => Ok(f64::INFINITY),
+            SignalKernel::Gaussian { sigma } => Ok(*sigma),
+            SignalKernel::Channels { sigmas } if sigmas.len() == channels => Ok(sigmas[c]),
+            SignalKernel::Channels { sigmas } => {
+                Err(VarifoldError::Channels { what: "signal kernel widths", expected: channels, found: sigmas.len() })
             }
         }
     }
@@ -174,7 +205,7 @@ impl VarifoldKernel {
     /// ```
     /// use fshape_varifold::{GrassKernel, SignalKernel, VarifoldKernel};
     /// let k = VarifoldKernel::parse("gaussian:5", Some("gaussian:0.3"), "gaussian-unoriented:0.5")?;
-    /// assert_eq!(k.signal(), SignalKernel::Gaussian { sigma: 0.3 });
+    /// assert_eq!(k.signal(), &SignalKernel::Gaussian { sigma: 0.3 });
     /// assert_eq!(k.grass(), GrassKernel::UnorientedGaussian { sigma: 0.5 });
     /// assert!(VarifoldKernel::parse("gauss:5", None, "binet").is_err());
     /// # Ok::<(), fshape_varifold::VarifoldError>(())
@@ -214,11 +245,20 @@ pub fn parse_position(spec: &str) -> Result<Kernel, VarifoldError> {
 }
 
 impl SignalKernel {
-    /// Parses `gaussian:σ_f` (the width checked).
+    /// Parses `gaussian:σ_f` (one width for every channel) or
+    /// `gaussian:σ_1,σ_2,…` (a width per channel), the widths checked.
+    ///
+    /// ```
+    /// use fshape_varifold::SignalKernel;
+    /// assert_eq!(SignalKernel::parse("gaussian:0.5,2")?, SignalKernel::Channels { sigmas: vec![0.5, 2.0] });
+    /// assert!(SignalKernel::parse("gaussian:0.5,0").is_err());
+    /// # Ok::<(), fshape_varifold::VarifoldError>(())
+    /// ```
     pub fn parse(spec: &str) -> Result<SignalKernel, VarifoldError> {
-        const SIG: &str = "gaussian:σ_f";
+        const SIG: &str = "gaussian:σ_f or gaussian:σ_1,σ_2,... (a width per channel)";
         let k = match parse_spec("signal kernel", spec, SIG)? {
             (name, nums) if name == "gaussian" && nums.len() == 1 => SignalKernel::Gaussian { sigma: nums[0] },
+            (name, nums) if name == "gaussian" && nums.len() > 1 => SignalKernel::Channels { sigmas: nums },
             _ => return Err(VarifoldError::Parse { what: "signal kernel", input: spec.to_string(), expected: SIG }),
         };
         k.checked()
@@ -226,10 +266,19 @@ impl SignalKernel {
 
     /// Itself if its width (if any) is positive and finite.
     fn checked(self) -> Result<SignalKernel, VarifoldError> {
-        match self {
-            SignalKernel::Gaussian { sigma } => check_width("signal kernel", sigma).map(|()| self),
-            SignalKernel::Constant => Ok(self),
+        match &self {
+            SignalKernel::Gaussian { sigma } => check_width("signal kernel", *sigma)?,
+            SignalKernel::Channels { sigmas } => {
+                if sigmas.is_empty() {
+                    return Err(VarifoldError::Channels { what: "signal kernel widths", expected: 1, found: 0 });
+                }
+                for &sigma in sigmas {
+                    check_width("signal kernel", sigma)?;
+                }
+            }
+            SignalKernel::Constant => {}
         }
+        Ok(self)
     }
 }
 

@@ -45,6 +45,7 @@ mod features;
 mod kernel;
 
 pub use attach::{Attachment, Distance, ShapeGrad, distance, inner_product, inner_product_grad};
+pub use engine::MAX_CHANNELS;
 pub use features::{CellFeatures, FeatureGrad};
 pub use kernel::{GrassKernel, SignalKernel, VarifoldKernel, parse_position};
 
@@ -122,6 +123,17 @@ pub enum VarifoldError {
         input: String,
         /// The accepted forms.
         expected: &'static str,
+    },
+    /// Channel counts disagree: the source's and the target's signals, or
+    /// a per-channel signal kernel's widths and the signals.
+    #[error("{what}: expected {expected} channels, found {found}")]
+    Channels {
+        /// What was counted.
+        what: &'static str,
+        /// The channels expected.
+        expected: usize,
+        /// The channels found.
+        found: usize,
     },
     /// A signal kernel needs signals on both shapes.
     #[error(

@@ -1,5 +1,7 @@
 //! Integration tests of fshape-varifold (one binary, modules in `tests/varifold/`).
 
+#[path = "varifold/channels.rs"]
+mod channels;
 #[path = "varifold/convergence.rs"]
 mod convergence;
 #[path = "varifold/derivatives.rs"]

@@ -8,7 +8,7 @@
 use fshape_mesh::FShape;
 use fshape_mesh::generate::SplitMix64;
 use fshape_mesh::test_support::{check_gradient, random_direction};
-use fshape_varifold::{Attachment, CellFeatures, GrassKernel, SignalKernel, VarifoldKernel};
+use fshape_varifold::{Attachment, CellFeatures, GrassKernel, VarifoldKernel};
 
 use crate::{kernels, shape_pairs};
 
@@ -24,14 +24,14 @@ fn mask(n: usize, seed: u64) -> Vec<f64> {
         .collect()
 }
 
-fn masked(s: &FShape, seed: u64) -> FShape {
+pub fn masked(s: &FShape, seed: u64) -> FShape {
     s.clone().with_mask(Some(mask(s.n_vertices(), seed))).unwrap()
 }
 
 /// ⟨μ_X, μ_Y⟩ from the definition: Σ r r k_p k_t (m m' k_f + (1 − m)(1 − m')),
 /// without the second term when the masked geometry does not count.
 #[expect(clippy::needless_range_loop, reason = "the definition's double sum over cell indices")]
-fn brute_masked(x: &FShape, y: &FShape, k: &VarifoldKernel) -> f64 {
+pub fn brute_masked(x: &FShape, y: &FShape, k: &VarifoldKernel) -> f64 {
     let (ex, ey) = (CellFeatures::of(x).unwrap(), CellFeatures::of(y).unwrap());
     let one = |f: &CellFeatures| vec![1.0; f.len()];
     let (mx, my) =
@@ -42,12 +42,14 @@ fn brute_masked(x: &FShape, y: &FShape, k: &VarifoldKernel) -> f64 {
         for j in 0..ey.len() {
             let u: f64 = (0..d).map(|c| (ex.centres()[i * d + c] - ey.centres()[j * d + c]).powi(2)).sum();
             let s: f64 = (0..du).map(|c| ex.dirs()[i * du + c] * ey.dirs()[j * du + c]).sum();
-            let kf = match k.signal() {
-                SignalKernel::Constant => 1.0,
-                SignalKernel::Gaussian { sigma } => {
-                    let (fi, fj) = (ex.signal().unwrap()[i], ey.signal().unwrap()[j]);
-                    (-(fi - fj).powi(2) / (2.0 * sigma * sigma)).exp()
-                }
+            let nf = ex.n_channels();
+            let kf = match ex.signal().zip(ey.signal()) {
+                Some((fx, fy)) => crate::oracle::signal_factor(
+                    k.signal(),
+                    &fx[i * nf..(i + 1) * nf],
+                    &fy[j * ey.n_channels()..(j + 1) * ey.n_channels()],
+                ),
+                None => 1.0,
             };
             let kt = match k.grass() {
                 GrassKernel::Linear => s,

@@ -6,8 +6,9 @@ use fshape_varifold::{Attachment, CellFeatures, GrassKernel, SignalKernel, Varif
 
 use crate::{kernels, shape_pairs};
 
-/// One cell's (centre, direction, weight, signal) straight from its corners.
-fn features(s: &FShape) -> Vec<(Vec<f64>, Vec<f64>, f64, f64)> {
+/// One cell's (centre, direction, weight, signal channels) straight from
+/// its corners.
+fn features(s: &FShape) -> Vec<(Vec<f64>, Vec<f64>, f64, Vec<f64>)> {
     let d = s.dim();
     s.cell_iter()
         .map(|cell| {
@@ -17,7 +18,9 @@ fn features(s: &FShape) -> Vec<(Vec<f64>, Vec<f64>, f64, f64)> {
             };
             let n = cell.len() as f64;
             let centre: Vec<f64> = (0..d).map(|c| cell.iter().map(|&v| s.point(v)[c]).sum::<f64>() / n).collect();
-            let f = s.signal().map_or(0.0, |f| cell.iter().map(|&v| f[v]).sum::<f64>() / n);
+            let k = s.n_channels();
+            let f: Vec<f64> =
+                (0..k).map(|c| cell.iter().map(|&v| s.signal().unwrap()[v * k + c]).sum::<f64>() / n).collect();
             let e1: Vec<f64> = (0..3).map(|c| p(1)[c] - p(0)[c]).collect();
             let vector = match s.kind() {
                 CellKind::Segment => e1,
@@ -48,10 +51,7 @@ pub fn brute_inner(x: &FShape, y: &FShape, k: &VarifoldKernel) -> f64 {
         for (cj, uj, rj, fj) in &fy {
             let u: f64 = ci.iter().zip(cj).map(|(a, b)| (a - b).powi(2)).sum();
             let s: f64 = ui.iter().zip(uj).map(|(a, b)| a * b).sum();
-            let kf = match k.signal() {
-                SignalKernel::Constant => 1.0,
-                SignalKernel::Gaussian { sigma } => (-(fi - fj).powi(2) / (2.0 * sigma * sigma)).exp(),
-            };
+            let kf = signal_factor(k.signal(), fi, fj);
             let kt = match k.grass() {
                 GrassKernel::Linear => s,
                 GrassKernel::Binet => s * s,
@@ -62,6 +62,21 @@ pub fn brute_inner(x: &FShape, y: &FShape, k: &VarifoldKernel) -> f64 {
         }
     }
     total
+}
+
+/// k_f by its definition: Π_c exp(−(f_c − g_c)²/(2σ_c²)), one σ for
+/// every channel or one per channel.
+pub fn signal_factor(k: &SignalKernel, f: &[f64], g: &[f64]) -> f64 {
+    assert_eq!(f.len(), g.len());
+    let sigma = |c: usize| match k {
+        SignalKernel::Gaussian { sigma } => *sigma,
+        SignalKernel::Channels { sigmas } => sigmas[c],
+        _ => f64::INFINITY,
+    };
+    if k.is_constant() {
+        return 1.0;
+    }
+    (0..f.len()).map(|c| (-(f[c] - g[c]).powi(2) / (2.0 * sigma(c) * sigma(c))).exp()).product()
 }
 
 /// Σ r r k_p(0): the scale of an inner product (|k_f k_t| ≤ 1).
