@@ -2,12 +2,18 @@
 //! Hamiltonian (DESIGN.md "The discrete model") and its exact directional
 //! and transposed derivatives.
 //!
-//! State z = (x, f, p, p^f), flat: [x (P·n) | f (P) | p (P·n) | p^f (P)].
+//! State z = (x, f, p, p^f), flat: [x (P·n) | f (P·k) | p (P·n) | p^f (P·k)],
+//! with k signal channels stored vertex by vertex (f[v·k + c], as
+//! [`fshape_mesh::FShape`] holds them).
 //!
 //! - ẋ = K_{x,x} p / γ_V
-//! - ḟ = h / γ_f, h = D_s(x)⁻¹ p^f
-//! - ṗ = −∂_x(pᵀK p)/(2γ_V) + ∂_x(hᵀD_s(x)h)|_h/(2γ_f)
+//! - ḟ_c = h_c / γ_c, h_c = D_s(x)⁻¹ p^f_c for each channel c
+//! - ṗ = −∂_x(pᵀK p)/(2γ_V) + Σ_c ∂_x(h_cᵀD_s(x)h_c)|_h/(2γ_c)
 //! - ṗ^f = 0
+//!
+//! where γ_c = γ_f w_c, a channel's weight w_c scaling its signal norm
+//! (w_c = 1 by default). Every channel shares D_s(x) and its one
+//! factorisation per evaluation.
 //!
 //! With signal dynamics off (LDDMM, and the geometry of the tangential
 //! model) ḟ = 0 and the p^f terms vanish. F = 𝕁∇H with 𝕁(a_x, a_f, a_p,
@@ -28,23 +34,29 @@ pub(crate) struct Layout {
     pub(crate) p: usize,
     /// n.
     pub(crate) dim: usize,
+    /// k, the signal channels.
+    pub(crate) nf: usize,
 }
 
 impl Layout {
+    /// P·k, the length of the f and p^f blocks.
+    pub(crate) fn pk(&self) -> usize {
+        self.p * self.nf
+    }
     pub(crate) fn len(&self) -> usize {
-        2 * self.pn + 2 * self.p
+        2 * self.pn + 2 * self.pk()
     }
     pub(crate) fn x(&self) -> std::ops::Range<usize> {
         0..self.pn
     }
     pub(crate) fn f(&self) -> std::ops::Range<usize> {
-        self.pn..self.pn + self.p
+        self.pn..self.pn + self.pk()
     }
     pub(crate) fn mom(&self) -> std::ops::Range<usize> {
-        self.pn + self.p..2 * self.pn + self.p
+        self.pn + self.pk()..2 * self.pn + self.pk()
     }
     pub(crate) fn pf(&self) -> std::ops::Range<usize> {
-        2 * self.pn + self.p..self.len()
+        2 * self.pn + self.pk()..self.len()
     }
     /// out = 𝕁 v.
     pub(crate) fn symplectic(&self, v: &[f64], out: &mut [f64]) {
@@ -66,7 +78,8 @@ pub(crate) struct Dynamics<'a> {
     /// `Some` when the signal evolves (metamorphosis).
     pub(crate) fem: Option<&'a SignalNorm>,
     pub(crate) gamma_v: f64,
-    pub(crate) gamma_f: f64,
+    /// γ_c = γ_f w_c, one per signal channel.
+    pub(crate) gamma_f: &'a [f64],
     pub(crate) layout: Layout,
     /// Kernel sums in parallel (the FEM norm carries its own setting).
     pub(crate) parallel: bool,
@@ -121,8 +134,14 @@ struct FemScratch<'s> {
     /// P·n: the FEM x-derivatives.
     gd: Vec<f64>,
     hv: Vec<f64>,
-    /// P: (∂D·δx)h, then δh.
+    /// P (P·k with several channels): (∂D·δx)h, then δh.
     dd: Vec<f64>,
+    /// With several channels: one channel of h and of δh (P), and one
+    /// channel's x-derivatives (P·n) before they are summed.
+    hc: Vec<f64>,
+    dc: Vec<f64>,
+    gc: Vec<f64>,
+    vc: Vec<f64>,
 }
 
 impl<'s> Scratch<'s> {
@@ -138,7 +157,11 @@ impl<'s> Scratch<'s> {
                 },
                 gd: vec![0.0; pn],
                 hv: vec![0.0; pn],
-                dd: vec![0.0; p],
+                dd: vec![0.0; layout.pk()],
+                hc: vec![0.0; if layout.nf > 1 { p } else { 0 }],
+                dc: vec![0.0; if layout.nf > 1 { p } else { 0 }],
+                gc: vec![0.0; if layout.nf > 1 { pn } else { 0 }],
+                vc: vec![0.0; if layout.nf > 1 { pn } else { 0 }],
             },
             jv: vec![0.0; len],
             jw: vec![0.0; len],
@@ -147,14 +170,37 @@ impl<'s> Scratch<'s> {
 }
 
 impl FemScratch<'_> {
-    /// Refactors D at `x` and solves D h = pf into `h`.
-    fn solve_at(&mut self, x: &[f64], pf: &[f64], h: &mut [f64]) -> Result<(), ShootError> {
+    /// Refactors D at `x` and solves D h_c = pf_c into `h` for each of the
+    /// `nf` channels (stored vertex by vertex).
+    fn solve_at(&mut self, x: &[f64], pf: &[f64], h: &mut [f64], nf: usize) -> Result<(), ShootError> {
         if let Some(solver) = self.solver.as_mut() {
             solver.factor(x)?;
-            h.copy_from_slice(pf);
-            solver.solve_in_place(h)?;
+            if nf == 1 {
+                h.copy_from_slice(pf);
+                solver.solve_in_place(h)?;
+            } else {
+                for c in 0..nf {
+                    gather(pf, c, nf, &mut self.hc);
+                    solver.solve_in_place(&mut self.hc)?;
+                    scatter(&self.hc, c, nf, h);
+                }
+            }
         }
         Ok(())
+    }
+}
+
+/// out = channel `c` of the vertex-by-vertex `v` of `nf` channels.
+fn gather(v: &[f64], c: usize, nf: usize, out: &mut [f64]) {
+    for (o, a) in out.iter_mut().zip(v.iter().skip(c).step_by(nf)) {
+        *o = *a;
+    }
+}
+
+/// Channel `c` of the vertex-by-vertex `v` of `nf` channels = `a`.
+fn scatter(a: &[f64], c: usize, nf: usize, v: &mut [f64]) {
+    for (o, a) in v.iter_mut().skip(c).step_by(nf).zip(a) {
+        *o = *a;
     }
 }
 
@@ -235,17 +281,31 @@ impl Dynamics<'_> {
             // Each pair once where the kernel allows it (sums of Gaussians).
             |sums, k| Ok(sums.self_conv_and_grad_into(&mut k.sums, p, l.dim, &mut k.kp, &mut k.gk)?),
             |fem, fs| {
-                fs.solve_at(x, pf, h)?;
-                Ok(fem.grad_into(x, h, h, &mut fs.ws, &mut fs.gd)?)
+                fs.solve_at(x, pf, h, l.nf)?;
+                if l.nf == 1 {
+                    return Ok(fem.grad_into(x, h, h, &mut fs.ws, &mut fs.gd)?);
+                }
+                // Σ_c ∂_x(h_cᵀDh_c)/γ_c, brought to 1/γ_0's scale below.
+                fs.gd.fill(0.0);
+                for c in 0..l.nf {
+                    gather(h, c, l.nf, &mut fs.hc);
+                    fem.grad_into(x, &fs.hc, &fs.hc, &mut fs.ws, &mut fs.gc)?;
+                    let w = self.gamma_f[0] / self.gamma_f[c];
+                    for (o, v) in fs.gd.iter_mut().zip(&fs.gc) {
+                        *o += w * v;
+                    }
+                }
+                Ok(())
             },
         )?;
         self.kernel_rates(&s.kern, out);
         if signal {
+            let g0 = self.gamma_f[0];
             for (o, v) in out[l.mom()].iter_mut().zip(&s.fem.gd) {
-                *o += v / (2.0 * self.gamma_f);
+                *o += v / (2.0 * g0);
             }
-            for (o, v) in out[l.f()].iter_mut().zip(h.iter()) {
-                *o = v / self.gamma_f;
+            for (i, (o, v)) in out[l.f()].iter_mut().zip(h.iter()).enumerate() {
+                *o = v / self.gamma_f[i % l.nf];
             }
         } else {
             out[l.f()].fill(0.0);
@@ -274,26 +334,55 @@ impl Dynamics<'_> {
             t,
             |sums, k| Ok(sums.self_conv_and_grad_jvp_into(&mut k.sums, dx, p, dp, l.dim, &mut k.kp, &mut k.gk)?),
             |fem, fs| {
-                fs.solve_at(x, pf, h)?;
-                let Some(solver) = fs.solver.as_mut() else { return Ok(()) };
-                // δh = D⁻¹(δp^f − (∂D·δx) h).
-                fem.dmatvec_into(x, dx, h, &mut fs.ws, &mut fs.dd)?;
-                for (d, a) in fs.dd.iter_mut().zip(&w[l.pf()]) {
-                    *d = a - *d;
+                fs.solve_at(x, pf, h, l.nf)?;
+                if fs.solver.is_none() {
+                    return Ok(());
                 }
-                solver.solve_in_place(&mut fs.dd)?;
-                // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
-                fem.hvp_into(x, h, h, dx, &mut fs.ws, &mut fs.hv)?;
-                Ok(fem.grad_into(x, &fs.dd, h, &mut fs.ws, &mut fs.gd)?)
+                if l.nf == 1 {
+                    let solver = fs.solver.as_mut().expect("checked");
+                    // δh = D⁻¹(δp^f − (∂D·δx) h).
+                    fem.dmatvec_into(x, dx, h, &mut fs.ws, &mut fs.dd)?;
+                    for (d, a) in fs.dd.iter_mut().zip(&w[l.pf()]) {
+                        *d = a - *d;
+                    }
+                    solver.solve_in_place(&mut fs.dd)?;
+                    // δ[∂_x(hᵀDh)] = ∂²_x(hᵀDh)·δx + 2 ∂_x(δhᵀ D h).
+                    fem.hvp_into(x, h, h, dx, &mut fs.ws, &mut fs.hv)?;
+                    return Ok(fem.grad_into(x, &fs.dd, h, &mut fs.ws, &mut fs.gd)?);
+                }
+                // The same per channel, the x-derivatives summed with
+                // weights γ_0/γ_c (brought to 1/γ_0's scale below).
+                fs.hv.fill(0.0);
+                fs.gd.fill(0.0);
+                for c in 0..l.nf {
+                    gather(h, c, l.nf, &mut fs.hc);
+                    fem.dmatvec_into(x, dx, &fs.hc, &mut fs.ws, &mut fs.dc)?;
+                    for (d, a) in fs.dc.iter_mut().zip(w[l.pf()].iter().skip(c).step_by(l.nf)) {
+                        *d = a - *d;
+                    }
+                    fs.solver.as_mut().expect("checked").solve_in_place(&mut fs.dc)?;
+                    scatter(&fs.dc, c, l.nf, &mut fs.dd);
+                    let wc = self.gamma_f[0] / self.gamma_f[c];
+                    fem.hvp_into(x, &fs.hc, &fs.hc, dx, &mut fs.ws, &mut fs.vc)?;
+                    for (o, v) in fs.hv.iter_mut().zip(&fs.vc) {
+                        *o += wc * v;
+                    }
+                    fem.grad_into(x, &fs.dc, &fs.hc, &mut fs.ws, &mut fs.gc)?;
+                    for (o, v) in fs.gd.iter_mut().zip(&fs.gc) {
+                        *o += wc * v;
+                    }
+                }
+                Ok(())
             },
         )?;
         self.kernel_rates(&s.kern, out);
         if signal {
+            let g0 = self.gamma_f[0];
             for ((o, a), b) in out[l.mom()].iter_mut().zip(&s.fem.hv).zip(&s.fem.gd) {
-                *o += (a + 2.0 * b) / (2.0 * self.gamma_f);
+                *o += (a + 2.0 * b) / (2.0 * g0);
             }
-            for (o, v) in out[l.f()].iter_mut().zip(&s.fem.dd) {
-                *o = v / self.gamma_f;
+            for (i, (o, v)) in out[l.f()].iter_mut().zip(&s.fem.dd).enumerate() {
+                *o = v / self.gamma_f[i % l.nf];
             }
         } else {
             out[l.f()].fill(0.0);

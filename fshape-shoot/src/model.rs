@@ -84,6 +84,8 @@ pub struct Model {
     norm: Norm,
     gamma_v: f64,
     gamma_f: f64,
+    /// w_c per signal channel (empty: 1 for every channel).
+    channel_weights: Vec<f64>,
     gamma_w: f64,
     kernel: Kernel,
     integrator: Integrator,
@@ -113,6 +115,7 @@ impl Model {
             norm: Norm::L2Lumped,
             gamma_v: 1.0,
             gamma_f: 1.0,
+            channel_weights: Vec::new(),
             gamma_w: 1.0,
             kernel,
             integrator: Integrator::Rk4,
@@ -191,6 +194,23 @@ impl Model {
     /// γ_f.
     pub fn gamma_f(&self) -> f64 {
         self.gamma_f
+    }
+
+    /// A weight w_c > 0 per signal channel: channel c's signal norm is
+    /// weighted by γ_f w_c (its cost of changing; a channel in other units
+    /// needs its own). As many as the template has channels; empty (the
+    /// default) is 1 for every channel.
+    pub fn with_channel_weights(mut self, weights: Vec<f64>) -> Result<Model, ShootError> {
+        for &w in &weights {
+            positive("signal channel weight", w)?;
+        }
+        self.channel_weights = weights;
+        Ok(self)
+    }
+
+    /// The weights of [`Model::with_channel_weights`] (empty: all 1).
+    pub fn channel_weights(&self) -> &[f64] {
+        &self.channel_weights
     }
 
     /// γ_W.

@@ -96,7 +96,7 @@ impl Trajectory {
         &self.node(k)[self.layout.x()]
     }
 
-    /// Signal at step k.
+    /// Signal at step k (P × k values, vertex by vertex).
     ///
     /// # Panics
     ///
@@ -185,6 +185,8 @@ pub struct Problem {
     fem: Option<SignalNorm>,
     attachment: Option<Attachment>,
     layout: Layout,
+    /// γ_c = γ_f w_c for each signal channel.
+    gamma_f: Vec<f64>,
     parallel: bool,
 }
 
@@ -211,12 +213,19 @@ impl Problem {
         if template.signal().is_none() {
             template = template.with_signal(Some(vec![0.0; n]))?;
         }
+        let nf = template.n_channels();
+        let weights = model.channel_weights();
+        if !weights.is_empty() && weights.len() != nf {
+            return Err(ShootError::Dimension { what: "signal channel weights", expected: nf, found: weights.len() });
+        }
+        let gamma_f = (0..nf).map(|c| model.gamma_f() * weights.get(c).copied().unwrap_or(1.0)).collect();
         Ok(Problem {
             template,
             model,
             fem,
             attachment: None,
-            layout: Layout { pn: n * dim, p: n, dim },
+            layout: Layout { pn: n * dim, p: n, dim, nf },
+            gamma_f,
             parallel: true,
         })
     }
@@ -239,11 +248,12 @@ impl Problem {
     /// norm's symbolic analysis depends only on the cells, so it is kept.
     /// `signal` may be `None` for a zero signal.
     pub fn set_template(&mut self, points: &[f64], signal: Option<&[f64]>) -> Result<(), ShootError> {
-        let n = self.template.n_vertices();
-        let signal = signal.map_or_else(|| vec![0.0; n], <[f64]>::to_vec);
+        let pk = self.layout.pk();
+        let signal = signal.map_or_else(|| vec![0.0; pk], <[f64]>::to_vec);
         // (A cell the move degenerated is refused by the first shot, which
         // names it.)
-        self.template = self.template.clone().with_points(points.to_vec())?.with_signal(Some(signal))?;
+        let nf = self.layout.nf;
+        self.template = self.template.clone().with_points(points.to_vec())?.with_signals(Some(signal), nf)?;
         Ok(())
     }
 
@@ -293,7 +303,7 @@ impl Problem {
             kernel: self.model.kernel(),
             fem: if evolving { self.fem.as_ref() } else { None },
             gamma_v: self.model.gamma_v(),
-            gamma_f: self.model.gamma_f(),
+            gamma_f: &self.gamma_f,
             layout: self.layout,
             parallel: self.parallel,
         }
@@ -301,7 +311,7 @@ impl Problem {
 
     fn check(&self, p0: &[f64], pf: &[f64]) -> Result<(), ShootError> {
         let l = self.layout;
-        for (what, v, n) in [("momentum p0", p0, l.pn), ("signal momentum", pf, l.p)] {
+        for (what, v, n) in [("momentum p0", p0, l.pn), ("signal momentum", pf, l.pk())] {
             if v.len() != n {
                 return Err(ShootError::Dimension { what, expected: n, found: v.len() });
             }
@@ -345,7 +355,9 @@ impl Problem {
     fn unmasked<'a>(&self, pf: &'a [f64]) -> std::borrow::Cow<'a, [f64]> {
         match self.template.mask() {
             Some(m) if m.contains(&0.0) => {
-                std::borrow::Cow::Owned(pf.iter().zip(m).map(|(p, w)| if *w == 0.0 { 0.0 } else { *p }).collect())
+                let mut out = pf.to_vec();
+                self.project_masked(&mut out);
+                std::borrow::Cow::Owned(out)
             }
             _ => std::borrow::Cow::Borrowed(pf),
         }
@@ -354,16 +366,18 @@ impl Problem {
     /// Zeroes a gradient's masked entries (the adjoint of [`Problem::unmasked`]).
     fn project_masked(&self, g: &mut [f64]) {
         if let Some(m) = self.template.mask() {
-            for (g, w) in g.iter_mut().zip(m) {
+            // Every channel of a masked vertex.
+            for (g, w) in g.chunks_exact_mut(self.layout.nf).zip(m) {
                 if *w == 0.0 {
-                    *g = 0.0;
+                    g.fill(0.0);
                 }
             }
         }
     }
 
-    /// Shoots from the template with momenta p_0 (P × n) and p^f (P; for
-    /// the tangential model the signal residual ζ, for LDDMM ignored).
+    /// Shoots from the template with momenta p_0 (P × n) and p^f (P × k,
+    /// one per vertex and signal channel, vertex by vertex; for the
+    /// tangential model the signal residual ζ, for LDDMM ignored).
     pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
         self.check(p0, pf)?;
         let mut traj = self.shoot_from(self.initial(p0, pf))?;
@@ -390,7 +404,7 @@ impl Problem {
         let mut ham = Vec::with_capacity(n + 1);
         // Stage slopes k_i, and h = D⁻¹p^f (not kept).
         let mut ks = vec![0.0; s * len];
-        let mut h = vec![0.0; l.p];
+        let mut h = vec![0.0; l.pk()];
         nodes[..len].copy_from_slice(&z0);
         for step in 0..=n {
             let (done, rest) = nodes.split_at_mut((step + 1) * len);
@@ -453,14 +467,29 @@ impl Problem {
 
     /// The signal part of the energy and its gradient in the control pf.
     fn signal_energy(&self, pf: &[f64], t: &mut Timings) -> Result<(f64, Vec<f64>), ShootError> {
-        let g = self.model.gamma_f();
+        let nf = self.layout.nf;
         match (self.model.kind(), &self.fem) {
-            (ModelKind::Tangential, Some(fem)) => timed(&mut t.fem, || {
+            (ModelKind::Tangential, Some(fem)) if nf == 1 => timed(&mut t.fem, || {
                 // (γ_f/2) ζᵀD(x_0)ζ, gradient γ_f D(x_0)ζ.
+                let g = self.gamma_f[0];
                 let dz = fem.matvec(self.template.points(), pf)?;
                 Ok((0.5 * g * dot(pf, &dz), dz.iter().map(|v| g * v).collect()))
             }),
-            _ => Ok((0.0, vec![0.0; self.layout.p])),
+            // Σ_c (γ_c/2) ζ_cᵀD(x_0)ζ_c, channel by channel.
+            (ModelKind::Tangential, Some(fem)) => timed(&mut t.fem, || {
+                let (mut energy, mut grad) = (0.0, vec![0.0; pf.len()]);
+                for c in 0..nf {
+                    let zc: Vec<f64> = pf.iter().skip(c).step_by(nf).copied().collect();
+                    let dz = fem.matvec(self.template.points(), &zc)?;
+                    let g = self.gamma_f[c];
+                    energy += 0.5 * g * dot(&zc, &dz);
+                    for (o, v) in grad.iter_mut().skip(c).step_by(nf).zip(&dz) {
+                        *o = g * v;
+                    }
+                }
+                Ok((energy, grad))
+            }),
+            _ => Ok((0.0, vec![0.0; self.layout.pk()])),
         }
     }
 
@@ -478,7 +507,7 @@ impl Problem {
         let (es, ges) = self.signal_energy(&self.unmasked(pf), &mut t)?;
         let last = self.model.steps();
         let x1 = self.template.clone().with_points(traj.points(last).to_vec())?;
-        let x1 = x1.with_signal(Some(traj.signal(last).to_vec()))?;
+        let x1 = x1.with_signals(Some(traj.signal(last).to_vec()), self.layout.nf)?;
         let (a, ga) = if grad {
             let (d, g) = timed(&mut t.attachment, || att.eval_grad(&x1))?;
             (d.value, Some(g))
@@ -536,7 +565,7 @@ impl Problem {
         let grad_pf: Vec<f64> = match self.model.kind() {
             ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
             ModelKind::Tangential => lam[l.f()].iter().zip(&ges).map(|(a, b)| a + b).collect(),
-            ModelKind::Lddmm => vec![0.0; l.p],
+            ModelKind::Lddmm => vec![0.0; l.pk()],
         };
         // The template's gradient: ∂J/∂x_0 = λ_x + ∂H_0/∂x, and ∂H/∂x = −ṗ,
         // the momentum's slope at t = 0 with the sign changed; the
@@ -547,8 +576,16 @@ impl Problem {
         let mut grad_x: Vec<f64> = lam[l.x()].iter().zip(&k0[l.mom()]).map(|(a, b)| a - b).collect();
         if let (ModelKind::Tangential, Some(fem)) = (self.model.kind(), &self.fem) {
             let pf = self.unmasked(pf);
-            let g = timed(&mut t.fem, || fem.grad(self.template.points(), &pf, &pf))?;
-            axpy(&mut grad_x, 0.5 * self.model.gamma_f(), &g);
+            let nf = l.nf;
+            for c in 0..nf {
+                let zc: std::borrow::Cow<'_, [f64]> = if nf == 1 {
+                    std::borrow::Cow::Borrowed(&pf)
+                } else {
+                    std::borrow::Cow::Owned(pf.iter().skip(c).step_by(nf).copied().collect())
+                };
+                let g = timed(&mut t.fem, || fem.grad(self.template.points(), &zc, &zc))?;
+                axpy(&mut grad_x, 0.5 * self.gamma_f[c], &g);
+            }
         }
         let mut grad_f = lam[l.f()].to_vec();
         self.project_masked(&mut grad_f);
@@ -578,7 +615,7 @@ impl Problem {
         // ∂J/∂Z_i for the stages of one step, ∂J/∂k_i, and h at a stage.
         let mut gz = vec![0.0; s * len];
         let mut gk = vec![0.0; len];
-        let mut h = vec![0.0; l.p];
+        let mut h = vec![0.0; l.pk()];
         for step in (0..last).rev() {
             for i in (0..s).rev() {
                 // ∂J/∂k_i = dt b_i λ + Σ_{j>i} dt a_ji ∂J/∂Z_j.
@@ -620,7 +657,7 @@ impl Problem {
         end_f: &[f64],
     ) -> Result<(Vec<f64>, Vec<f64>), ShootError> {
         let l = self.layout;
-        for (what, v, n) in [("end co-state of x", end_x, l.pn), ("end co-state of f", end_f, l.p)] {
+        for (what, v, n) in [("end co-state of x", end_x, l.pn), ("end co-state of f", end_f, l.pk())] {
             if v.len() != n {
                 return Err(ShootError::Dimension { what, expected: n, found: v.len() });
             }
@@ -635,7 +672,7 @@ impl Problem {
         let grad_pf = match self.model.kind() {
             ModelKind::Metamorphosis => lam[l.pf()].iter().zip(&k0[l.f()]).map(|(a, b)| a + b).collect(),
             ModelKind::Tangential => lam[l.f()].to_vec(),
-            ModelKind::Lddmm => vec![0.0; l.p],
+            ModelKind::Lddmm => vec![0.0; l.pk()],
         };
         Ok((grad_p, grad_pf))
     }
@@ -700,12 +737,12 @@ pub struct Gradient {
     pub objective: Energies,
     /// ∂J/∂p_0 (P × n).
     pub p0: Vec<f64>,
-    /// ∂J/∂p^f (P): ∂J/∂ζ for the tangential model, zeros for LDDMM.
+    /// ∂J/∂p^f (P × k): ∂J/∂ζ for the tangential model, zeros for LDDMM.
     pub pf: Vec<f64>,
     /// ∂J/∂x_0 (P × n): the gradient in the template's vertex positions,
     /// momenta held fixed (an atlas's template gradient).
     pub x0: Vec<f64>,
-    /// ∂J/∂f_0 (P): the gradient in the template's signal, momenta held
+    /// ∂J/∂f_0 (P × k): the gradient in the template's signal, momenta held
     /// fixed.
     pub f0: Vec<f64>,
     /// Seconds in the forward pass (shooting + A).

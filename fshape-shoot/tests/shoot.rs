@@ -1,5 +1,7 @@
 //! Integration tests of fshape-shoot (one binary, modules in `tests/shoot/`).
 
+#[path = "shoot/channels.rs"]
+mod channels;
 #[path = "shoot/dynamics.rs"]
 mod dynamics;
 #[path = "shoot/gradient.rs"]
