@@ -176,6 +176,8 @@ pub struct NormMatrix {
     inv_mean_mass: f64,
     /// Where the p^f block starts in the unknowns.
     offset: usize,
+    /// Signal channels in the block (vertex by vertex); each gets D_s.
+    channels: usize,
 }
 
 impl NormMatrix {
@@ -188,14 +190,24 @@ impl NormMatrix {
         let mean = masses.iter().sum::<f64>() / masses.len().max(1) as f64;
         // Once here, so that `apply` cannot fail later.
         signal_norm.matvec(&points, &masses)?;
-        Ok(NormMatrix { norm: signal_norm, points, inv_mean_mass: 1.0 / mean, offset })
+        let channels = template.n_channels().max(1);
+        Ok(NormMatrix { norm: signal_norm, points, inv_mean_mass: 1.0 / mean, offset, channels })
     }
 
-    /// v ← (D_s/m̄) v on the p^f block of `v`.
+    /// v ← (D_s/m̄) v on the p^f block of `v`, channel by channel.
     pub fn apply(&self, v: &mut [f64]) {
         let block = &mut v[self.offset..];
-        let out = self.norm.matvec(&self.points, block).expect("checked when built");
-        block.iter_mut().zip(&out).for_each(|(x, o)| *x = o * self.inv_mean_mass);
+        let k = self.channels;
+        if k == 1 {
+            let out = self.norm.matvec(&self.points, block).expect("checked when built");
+            block.iter_mut().zip(&out).for_each(|(x, o)| *x = o * self.inv_mean_mass);
+            return;
+        }
+        for c in 0..k {
+            let channel: Vec<f64> = block.iter().skip(c).step_by(k).copied().collect();
+            let out = self.norm.matvec(&self.points, &channel).expect("checked when built");
+            block.iter_mut().skip(c).step_by(k).zip(&out).for_each(|(x, o)| *x = o * self.inv_mean_mass);
+        }
     }
 }
 

@@ -199,6 +199,7 @@ impl Runner<Pair> {
                 target.dim()
             )));
         }
+        one_channel([source, target])?;
         // With `[prealign]`, the registration runs on the aligned pair.
         let (source, target, alignment) = crate::prealign::prealigned(source, target, config)?;
         let (source, target) = (&source, &target);
@@ -404,6 +405,19 @@ impl crate::optimize::Objective for MatchObjective<'_> {
 /// of the setup.
 pub(crate) fn step_too_far(e: &ShootError) -> bool {
     !matches!(e, ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget)
+}
+
+/// Refuses shapes of several signal channels where their stages, outputs
+/// and reports do not carry them yet (a registration of several channels
+/// runs in [`minimize`]).
+pub(crate) fn one_channel<'a>(shapes: impl IntoIterator<Item = &'a FShape>) -> Result<(), MatchError> {
+    match shapes.into_iter().map(FShape::n_channels).find(|&k| k > 1) {
+        Some(k) => Err(MatchError::InvalidInput(format!(
+            "a shape carries {k} signal channels: sessions, atlases and their outputs take one so far \
+             (fshape_match::session::minimize registers several)"
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Minimises J from (p_0, p^f) with `settings`, in one stage and in

@@ -77,7 +77,7 @@ pub struct Unknowns {
     factor: Option<std::sync::Arc<MomentumMetric>>,
     /// The energy metric of p^f: the signal norm's matrix.
     signal_matrix: Option<std::sync::Arc<NormMatrix>>,
-    /// P·n and P.
+    /// P·n and P·k (k signal channels).
     pn: usize,
     p: usize,
     /// p^f = scale ⊙ q (empty: no signal control, LDDMM).
@@ -132,6 +132,11 @@ impl Unknowns {
     ) -> Result<Unknowns, ShootError> {
         let metrics = metrics.into();
         let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
+        // Every channel of a vertex shares its scale (p^f is vertex by vertex).
+        let k = t.n_channels().max(1);
+        let per_channel = |v: Vec<f64>| -> Vec<f64> {
+            if k == 1 { v } else { v.iter().flat_map(|s| std::iter::repeat_n(*s, k)).collect() }
+        };
         // √m per vertex for densities, 1/√m for functions.
         let mass_scale = |density: bool| -> Result<Vec<f64>, ShootError> {
             let masses = SignalNorm::try_new(t, Norm::L2Lumped)?.assemble(t.points())?;
@@ -142,9 +147,9 @@ impl Unknowns {
         };
         let mut scale = match (kind, metrics.signal) {
             (ModelKind::Lddmm, _) => Vec::new(),
-            (_, Metric::Euclidean | Metric::Energy) => vec![1.0; p],
-            (ModelKind::Metamorphosis, Metric::L2) => mass_scale(true)?,
-            (ModelKind::Tangential, Metric::L2) => mass_scale(false)?,
+            (_, Metric::Euclidean | Metric::Energy) => vec![1.0; p * k],
+            (ModelKind::Metamorphosis, Metric::L2) => per_channel(mass_scale(true)?),
+            (ModelKind::Tangential, Metric::L2) => per_channel(mass_scale(false)?),
         };
         let mut scale_p = match metrics.momentum {
             Metric::Euclidean | Metric::Energy => vec![1.0; pn],
@@ -163,7 +168,7 @@ impl Unknowns {
             scale_p.iter_mut().for_each(|v| *v *= c0);
             scale.iter_mut().for_each(|v| *v *= cf);
         }
-        Ok(Unknowns { factor: None, signal_matrix: None, pn, p, scale, scale_p })
+        Ok(Unknowns { factor: None, signal_matrix: None, pn, p: p * k, scale, scale_p })
     }
 
     /// Number of unknowns.

@@ -2,6 +2,8 @@
 
 #[path = "matching/atlas.rs"]
 mod atlas;
+#[path = "matching/channels.rs"]
+mod channels;
 #[path = "matching/config.rs"]
 mod config;
 #[path = "matching/errors.rs"]

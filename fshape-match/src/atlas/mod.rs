@@ -326,6 +326,7 @@ impl Runner<Population> {
     /// scales (length L, signal S) are the initial template's against the
     /// first subject's, as [`Config::plan`] takes them for one match.
     pub fn new(template: &FShape, subjects: &[FShape], config: &Config) -> Result<Atlas, MatchError> {
+        crate::session::one_channel(std::iter::once(template).chain(subjects))?;
         let first = subjects.first().ok_or(MatchError::NoSubjects)?;
         for (i, s) in subjects.iter().enumerate() {
             if s.dim() != template.dim() || s.kind() != template.kind() {
