@@ -380,7 +380,10 @@ kernel_spec!(
 pub struct AttachmentSection {
     /// Position kernel, as `fshape distance --kernel-geom`.
     pub kernel_geom: PositionKernel,
-    /// Signal kernel (omit for a geometric term).
+    /// Signal kernel (omit for a geometric term): `gaussian:σ_f`, or
+    /// `gaussian:σ_1,σ_2,…` with a width per signal channel for shapes of
+    /// several channels (the library's `minimize`; the program's commands
+    /// read one map so far).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel_signal: Option<SignalKernelSpec>,
     /// Direction kernel (default binet).

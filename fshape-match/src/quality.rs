@@ -501,6 +501,7 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     if shape.dim() != target.dim() || shape.kind() != target.kind() {
         return Err(MatchError::Kinds("quality: the matched shape and the target differ".into()));
     }
+    crate::session::one_channel([shape, target])?;
     let diagonal = target.bounding_box().diagonal();
     if !(diagonal > 0.0 && diagonal.is_finite()) {
         return Err(MatchError::Degenerate(format!("quality: the target's bounding-box diagonal is {diagonal}")));
