@@ -44,9 +44,10 @@ class FShapeError(ValueError):
 
 class FShape:
     """A functional shape: vertices (n x d, d = 2 or 3), cells (m x 2
-    segments or m x 3 triangles), an optional signal (one value per vertex)
-    and an optional mask (a weight in [0, 1] per vertex; where it is 0 the
-    signal has no value and is NaN). Immutable; every value is checked on
+    segments or m x 3 triangles), an optional signal (one value per vertex,
+    or n x k for k maps per vertex) and an optional mask (a weight in
+    [0, 1] per vertex; where it is 0 the signal has no value and is NaN, in
+    every map). Immutable; every value is checked on
     creation (finite coordinates, a finite signal where the mask is
     positive, indices in range, no repeated index in a cell).
     """
@@ -66,7 +67,10 @@ class FShape:
         """The cells, m x 2 or m x 3 vertex indices (a copy)."""
     @property
     def signal(self) -> Optional[npt.NDArray[np.float64]]:
-        """The signal, one value per vertex, or None."""
+        """The signal, one value per vertex (n x k with k maps), or None."""
+    @property
+    def n_channels(self) -> int:
+        """The maps per vertex (0 without a signal)."""
     @property
     def mask(self) -> Optional[npt.NDArray[np.float64]]:
         """The mask, one weight in [0, 1] per vertex, or None."""
@@ -84,7 +88,8 @@ class FShape:
         """The same shape with another mask (or none); the signal is NaN where
         the mask is 0 and must be finite elsewhere."""
     def with_signal(self, signal: Optional[npt.ArrayLike]) -> "FShape":
-        """The same shape with another signal (or none); a mask is kept."""
+        """The same shape with another signal (n values, n x k, or none); a
+        mask is kept."""
     def validate(self) -> "Validation":
         """Errors and warnings, each with its code and a message naming the
         vertex or cell (unused vertices, zero-area cells, boundaries...)."""
@@ -258,19 +263,22 @@ def write_signal(
     .mgh/.mgz, lh.thickness...); faces is recorded by curv files."""
 
 def signal_norm(shape: FShape, norm: Literal["l2-lumped", "l2", "h1"] = "h1", length: float = 1.0) -> float:
-    """The squared signal norm f^T D_s(x) f (H1: P1 mass + length^2 x stiffness)."""
+    """The squared signal norm f^T D_s(x) f (H1: P1 mass + length^2 x stiffness),
+    summed over the maps when there are several."""
 
 def attachment(
     source: FShape, target: FShape, kernel_geom: str, kernel_grass: str, kernel_signal: Optional[str] = None
 ) -> Distance:
     """The data attachment A(X, Y) of `fshape distance`; kernels as there:
     kernel_geom "gaussian:0.1", kernel_grass "binet" | "linear" |
-    "gaussian-oriented:s" | "gaussian-unoriented:s", kernel_signal "gaussian:s"."""
+    "gaussian-oriented:s" | "gaussian-unoriented:s", kernel_signal "gaussian:s"
+    (or "gaussian:s1,s2,..." with a width per map)."""
 
 def attachment_grad(
     source: FShape, target: FShape, kernel_geom: str, kernel_grass: str, kernel_signal: Optional[str] = None
 ) -> Tuple[Distance, npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """A(X, Y) with its gradient in the source's vertices (n x d) and signal (n)."""
+    """A(X, Y) with its gradient in the source's vertices (n x d) and signal (n, or
+    n x k with k maps)."""
 
 def quality(shape: FShape, target: FShape) -> Quality:
     """How close shape is to target (the numbers every result reports)."""

@@ -2,22 +2,31 @@
 //! gradient, the match quality.
 
 use fshape_mesh::FShape;
-use numpy::{IntoPyArray, PyArray1};
+use numpy::{IntoPyArray, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::conversions::{rows, shape_of, to_py};
 use crate::err;
 
-/// The squared signal norm fᵀ D_s(x) f of the shape's signal: `norm` is
-/// "l2-lumped", "l2" or "h1" (P1 mass + length² × stiffness).
+/// The squared signal norm fᵀ D_s(x) f of the shape's signal (summed over
+/// its maps when it has several): `norm` is "l2-lumped", "l2" or "h1" (P1
+/// mass + length² × stiffness).
 #[pyfunction]
 #[pyo3(signature = (shape, norm = "h1", length = 1.0))]
 pub(crate) fn signal_norm(py: Python<'_>, shape: &Bound<'_, PyAny>, norm: &str, length: f64) -> PyResult<f64> {
     let s = shape_of(shape)?;
     let norm = fshape_fem::Norm::parse(norm, length).map_err(err)?;
+    let k = s.n_channels();
     let f = s.signal().ok_or_else(|| err("the shape has no signal"))?.to_vec();
-    py.detach(|| fshape_fem::SignalNorm::try_new(&s, norm).and_then(|n| n.quadratic(s.points(), &f))).map_err(err)
+    py.detach(|| {
+        let n = fshape_fem::SignalNorm::try_new(&s, norm)?;
+        if k == 1 {
+            return n.quadratic(s.points(), &f);
+        }
+        (0..k).map(|c| n.quadratic(s.points(), &f.iter().skip(c).step_by(k).copied().collect::<Vec<_>>())).sum()
+    })
+    .map_err(err)
 }
 
 /// The attachment's inputs: the two shapes and the kernel parsed as
@@ -59,7 +68,8 @@ pub(crate) fn attachment<'py>(
 }
 
 /// A(X, Y) as `attachment`, with its gradient in the source's vertices
-/// (n × d) and signal (n): returns (values, grad_points, grad_signal).
+/// (n × d) and signal (n, or n × k with k maps): returns (values,
+/// grad_points, grad_signal).
 #[pyfunction]
 #[pyo3(signature = (source, target, kernel_geom, kernel_grass, kernel_signal = None))]
 #[allow(clippy::type_complexity)]
@@ -70,10 +80,14 @@ pub(crate) fn attachment_grad<'py>(
     kernel_geom: &str,
     kernel_grass: &str,
     kernel_signal: Option<&str>,
-) -> PyResult<(Bound<'py, PyDict>, Bound<'py, numpy::PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
+) -> PyResult<(Bound<'py, PyDict>, Bound<'py, numpy::PyArray2<f64>>, Bound<'py, numpy::PyUntypedArray>)> {
     let (x, y, k) = attachment_inputs(source, target, (kernel_geom, kernel_grass, kernel_signal))?;
     let (d, g) = py.detach(|| fshape_varifold::Attachment::new(&y, k).and_then(|a| a.eval_grad(&x))).map_err(err)?;
-    Ok((distance_dict(py, &d)?, rows(py, g.points, x.dim()), g.signal.into_pyarray(py)))
+    let signal = match x.n_channels() {
+        0 | 1 => g.signal.into_pyarray(py).as_untyped().clone(),
+        k => rows(py, g.signal, k).as_untyped().clone(),
+    };
+    Ok((distance_dict(py, &d)?, rows(py, g.points, x.dim()), signal))
 }
 
 /// The match quality of `shape` against `target` (as in every result):

@@ -2,7 +2,9 @@
 
 use fshape_mesh::{CellKind, FShape};
 use numpy::ndarray::Array2;
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyArrayLike2};
+use numpy::{
+    AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyArrayLike2, PyArrayLikeDyn, PyArrayMethods, PyUntypedArray,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -11,9 +13,10 @@ use crate::err;
 
 /// A functional shape: vertices (n × d, d = 2 or 3), cells (m × 2
 /// segments or m × 3 triangles, vertex indices), an optional signal (one
-/// value per vertex) and an optional mask (a weight in [0, 1] per vertex:
-/// where it is 0 the signal has no value and is NaN). Immutable; every
-/// value is checked on creation.
+/// value per vertex, or n × k for k maps per vertex) and an optional mask
+/// (a weight in [0, 1] per vertex: where it is 0 the signal has no value
+/// and is NaN, in every map). Immutable; every value is checked on
+/// creation.
 #[pyclass(name = "FShape", module = "fshape", frozen)]
 #[derive(Clone)]
 pub(crate) struct PyFShape {
@@ -27,7 +30,7 @@ impl PyFShape {
     fn new(
         points: PyArrayLike2<'_, f64, AllowTypeChange>,
         cells: PyArrayLike2<'_, i64, AllowTypeChange>,
-        signal: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
+        signal: Option<PyArrayLikeDyn<'_, f64, AllowTypeChange>>,
         mask: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
     ) -> PyResult<Self> {
         let p = points.as_array();
@@ -43,10 +46,10 @@ impl PyFShape {
             flat_cells
                 .push(usize::try_from(v).map_err(|_| err(format!("cells: cell {t} has the negative index {v}")))?);
         }
-        let signal = signal.map(|s| s.as_array().iter().copied().collect());
+        let (signal, channels) = channels(signal)?;
         let mask = mask.map(|m| m.as_array().iter().copied().collect());
         let inner = FShape::try_new(dim, kind, p.iter().copied().collect(), flat_cells, None)
-            .and_then(|s| s.with_signal_and_mask(signal, mask))
+            .and_then(|s| s.with_signals_and_mask(signal, channels, mask))
             .map_err(err)?;
         Ok(PyFShape { inner })
     }
@@ -65,10 +68,20 @@ impl PyFShape {
         Array2::from_shape_vec((c.len() / k, k), c).expect("whole cells").into_pyarray(py)
     }
 
-    /// The signal (one value per vertex), or None.
+    /// The signal (one value per vertex, or n × k with k maps), or None.
     #[getter]
-    fn signal<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
-        self.inner.signal().map(|f| PyArray1::from_slice(py, f))
+    fn signal<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyUntypedArray>> {
+        let k = self.inner.n_channels();
+        self.inner.signal().map(|f| match k {
+            1 => PyArray1::from_slice(py, f).as_untyped().clone(),
+            _ => rows(py, f.to_vec(), k).as_untyped().clone(),
+        })
+    }
+
+    /// The number of maps per vertex (0 without a signal).
+    #[getter]
+    fn n_channels(&self) -> usize {
+        self.inner.n_channels()
     }
 
     /// The mask (one weight in [0, 1] per vertex), or None.
@@ -109,11 +122,12 @@ impl PyFShape {
         Ok(PyFShape { inner: self.inner.clone().with_mask(m).map_err(err)? })
     }
 
-    /// The same shape with another signal (or none); a mask is kept.
+    /// The same shape with another signal (n values, n × k, or none); a
+    /// mask is kept.
     #[pyo3(signature = (signal))]
-    fn with_signal(&self, signal: Option<PyArrayLike1<'_, f64, AllowTypeChange>>) -> PyResult<Self> {
-        let f = signal.map(|s| s.as_array().iter().copied().collect());
-        Ok(PyFShape { inner: self.inner.clone().with_signal(f).map_err(err)? })
+    fn with_signal(&self, signal: Option<PyArrayLikeDyn<'_, f64, AllowTypeChange>>) -> PyResult<Self> {
+        let (f, channels) = channels(signal)?;
+        Ok(PyFShape { inner: self.inner.clone().with_signals(f, channels).map_err(err)? })
     }
 
     /// The validation report: `{"errors": [...], "warnings": [...]}`, each
@@ -158,11 +172,12 @@ impl PyFShape {
             self.inner.n_cells(),
             self.inner.kind().name(),
             self.inner.dim(),
-            match (self.inner.signal(), self.inner.mask()) {
-                (Some(_), Some(_)) => "with a signal and a mask",
-                (Some(_), None) => "with a signal",
-                (None, Some(_)) => "no signal, a mask",
-                (None, None) => "no signal",
+            match (self.inner.n_channels(), self.inner.mask()) {
+                (1, Some(_)) => "with a signal and a mask".to_string(),
+                (1, None) => "with a signal".to_string(),
+                (0, Some(_)) => "no signal, a mask".to_string(),
+                (0, None) => "no signal".to_string(),
+                (k, m) => format!("with {k} signal channels{}", if m.is_some() { " and a mask" } else { "" }),
             }
         )
     }
@@ -170,4 +185,18 @@ impl PyFShape {
     fn __eq__(&self, other: &Self) -> bool {
         self.inner == other.inner
     }
+}
+
+/// A signal given as n values (one channel) or n × k (k channels), flat
+/// vertex by vertex.
+fn channels(signal: Option<PyArrayLikeDyn<'_, f64, AllowTypeChange>>) -> PyResult<(Option<Vec<f64>>, usize)> {
+    let Some(s) = signal else { return Ok((None, 1)) };
+    let a = s.as_array();
+    let k = match a.shape() {
+        [_] => 1,
+        [_, k] => *k,
+        other => return Err(err(format!("signal: {} dimensions; give n values or n x k (k maps)", other.len()))),
+    };
+    // Row-major order: vertex by vertex, whatever the array's strides.
+    Ok((Some(a.iter().copied().collect()), k))
 }

@@ -153,6 +153,35 @@ def test_the_attachment_gradient_matches_central_differences():
     assert abs((up - down) / (2 * h) - gf[3]) < 1e-6 * max(1.0, abs(gf[3]))
 
 
+def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
+    src, tgt = sphere_pair()
+    x = src.points[:, 0]
+    two = src.with_signal(np.column_stack([src.signal, x]))
+    assert two.n_channels == 2 and src.n_channels == 1 and two.signal.shape == (12, 2)
+    assert np.array_equal(two.signal[:, 0], src.signal) and "2 signal channels" in repr(two)
+    # A second map that is the same constant on both sides changes no bit.
+    const = lambda s: s.with_signal(np.column_stack([s.signal, np.full(s.n_vertices, 2.5)]))  # noqa: E731
+    assert fshape.attachment(src, tgt, "gaussian:0.2", "binet", "gaussian:0.5") == fshape.attachment(
+        const(src), const(tgt), "gaussian:0.2", "binet", "gaussian:0.5,0.1")
+    # A change in the second map alone is seen, with the gradient of both maps.
+    kernels = ("gaussian:0.2", "binet", "gaussian:0.5,0.3")
+    moved = two.with_signal(two.signal + [0.0, 0.3])
+    value, _, gf = fshape.attachment_grad(two, moved, *kernels)
+    assert value["value"] > 0 and gf.shape == (12, 2)
+    h = 1e-6
+    for v, c in [(4, 0), (7, 1)]:
+        up, down = two.signal.copy(), two.signal.copy()
+        up[v, c] += h
+        down[v, c] -= h
+        a = lambda f: fshape.attachment(two.with_signal(f), moved, *kernels)["value"]  # noqa: E731
+        assert abs((a(up) - a(down)) / (2 * h) - gf[v, c]) < 1e-6 * max(1.0, abs(gf[v, c]))
+    # The norm sums over the maps; maps against another count are refused.
+    both = fshape.signal_norm(src, "l2") + fshape.signal_norm(src.with_signal(x), "l2")
+    assert fshape.signal_norm(two, "l2") == pytest.approx(both, rel=1e-12)
+    with pytest.raises(fshape.FShapeError, match="channels"):
+        fshape.attachment(two, src, "gaussian:0.2", "binet", "gaussian:0.5")
+
+
 def test_signal_norms_of_a_constant_signal_are_the_area():
     src, _ = sphere_pair()
     one = src.with_signal(np.ones(src.n_vertices))
