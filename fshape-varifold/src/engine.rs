@@ -190,7 +190,7 @@ impl<const D: usize, const DU: usize, const GRAD: bool, const NF: usize> Tile<'_
             }
             for c in 1..nf {
                 for l in 0..L {
-                    arg[l] = arg[l] - bs[c] * df[c][l] * df[c][l];
+                    arg[l] -= bs[c] * df[c][l] * df[c][l];
                 }
             }
             let (p, p1, q, arg_t) = grass_lanes(self.grass, &s);

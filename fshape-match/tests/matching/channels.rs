@@ -97,7 +97,7 @@ fn two_channels_changed_in_two_places_are_each_recovered_where_they_changed() {
 #[test]
 fn sessions_and_atlases_name_what_they_do_not_carry_yet() {
     let s = icosphere(1, 1.0);
-    let f: Vec<f64> = s.points().iter().copied().collect();
+    let f = s.points().to_vec();
     let three = s.clone().with_signals(Some(f), 3).unwrap();
     let config =
         fshape_match::Config::parse("[deformation]\nwidths = [0.5]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n")

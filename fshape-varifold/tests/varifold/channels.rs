@@ -17,9 +17,9 @@ fn with_channels(s: &FShape, k: usize, seed: u64) -> FShape {
     let mut rng = SplitMix64(seed);
     let f0 = s.signal().expect("test shapes carry a signal");
     let mut f = Vec::with_capacity(s.n_vertices() * k);
-    for v in 0..s.n_vertices() {
+    for (v, &first) in f0.iter().enumerate() {
         let p = s.point(v);
-        f.push(f0[v]);
+        f.push(first);
         for c in 1..k {
             f.push(c as f64 * (2.0 * p[0] - c as f64 * p[1]).sin() + 0.2 * rng.normal());
         }

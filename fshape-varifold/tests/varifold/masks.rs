@@ -30,7 +30,6 @@ pub fn masked(s: &FShape, seed: u64) -> FShape {
 
 /// ⟨μ_X, μ_Y⟩ from the definition: Σ r r k_p k_t (m m' k_f + (1 − m)(1 − m')),
 /// without the second term when the masked geometry does not count.
-#[expect(clippy::needless_range_loop, reason = "the definition's double sum over cell indices")]
 pub fn brute_masked(x: &FShape, y: &FShape, k: &VarifoldKernel) -> f64 {
     let (ex, ey) = (CellFeatures::of(x).unwrap(), CellFeatures::of(y).unwrap());
     let one = |f: &CellFeatures| vec![1.0; f.len()];

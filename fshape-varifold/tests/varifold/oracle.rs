@@ -6,9 +6,11 @@ use fshape_varifold::{Attachment, CellFeatures, GrassKernel, SignalKernel, Varif
 
 use crate::{kernels, shape_pairs};
 
-/// One cell's (centre, direction, weight, signal channels) straight from
-/// its corners.
-fn features(s: &FShape) -> Vec<(Vec<f64>, Vec<f64>, f64, Vec<f64>)> {
+/// One cell's centre, direction, weight and signal channels.
+type Cell = (Vec<f64>, Vec<f64>, f64, Vec<f64>);
+
+/// Every cell's [`Cell`] straight from its corners.
+fn features(s: &FShape) -> Vec<Cell> {
     let d = s.dim();
     s.cell_iter()
         .map(|cell| {
