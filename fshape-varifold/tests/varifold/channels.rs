@@ -11,11 +11,11 @@ use crate::masks::{brute_masked, masked};
 use crate::oracle::{brute_inner, scale};
 use crate::{GRASS, position_kernels, shape_pairs};
 
-/// `s` with `k` channels: its own signal, then k − 1 smooth maps of the
+/// `s` with `k` channels: its (first) signal channel, then k − 1 smooth maps of the
 /// coordinates of other amplitudes (up to 3) plus noise.
 fn with_channels(s: &FShape, k: usize, seed: u64) -> FShape {
     let mut rng = SplitMix64(seed);
-    let f0 = s.signal().expect("test shapes carry a signal");
+    let f0 = s.channel(0).expect("test shapes carry a signal");
     let mut f = Vec::with_capacity(s.n_vertices() * k);
     for (v, &first) in f0.iter().enumerate() {
         let p = s.point(v);
