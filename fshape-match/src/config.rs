@@ -237,6 +237,8 @@ impl Scales {
     /// L from `target`, S from the target's signal, else the template's,
     /// else 1; d from the template.
     pub fn of(template: &FShape, target: &FShape) -> Result<Scales, MatchError> {
+        // One deviation S for the signal: channels of other units need one each.
+        crate::session::one_channel([template, target])?;
         let length = target.bounding_box().diagonal();
         if !(length > 0.0 && length.is_finite()) {
             return Err(bad(

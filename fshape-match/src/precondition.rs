@@ -168,6 +168,9 @@ impl KernelFactor {
 /// L² norm it is the L² metric (D_s = D_0). In the energy metric p^f = c·q
 /// with c a constant, left out like the kernel factor's; dividing by m̄
 /// makes the shape the same for a copy of the data scaled in length.
+/// With several signal channels D_s applies to each; their weights w_c
+/// (γ_f w_c) are left out like c, so the Hessian is the identity up to a
+/// constant per channel.
 #[derive(Debug)]
 pub struct NormMatrix {
     norm: SignalNorm,

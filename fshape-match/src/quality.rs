@@ -434,8 +434,12 @@ fn signal_at(shape: &FShape, cell: usize, bary: [f64; 3]) -> Option<f64> {
 /// per triangle, area × dfᵀ G⁻¹ df with G the Gram matrix of two edges and
 /// df the value differences along them; per segment (f_b − f_a)²/length.
 /// Cells of zero volume carry no gradient and are skipped. `None` without
-/// a signal.
+/// a signal, and with several channels (one seminorm per channel is not
+/// computed yet).
 pub fn dirichlet_seminorm(shape: &FShape) -> Option<f64> {
+    if shape.n_channels() > 1 {
+        return None;
+    }
     Some(dirichlet_energies(shape)?.iter().sum::<f64>().sqrt())
 }
 

@@ -305,6 +305,7 @@ pub fn prolongate(
 /// enters; the mask read is Σ bᵢ mᵢ, 0 (and the signal NaN) where every
 /// corner is masked, a soft edge in between.
 pub fn sample_signal(coarse: &FShape, fine: &FShape) -> Result<(Vec<f64>, Option<Vec<f64>>), MatchError> {
+    crate::session::one_channel([coarse])?;
     let signal = coarse.signal().ok_or_else(|| MatchError::InvalidInput("resampling: no signal to read".into()))?;
     let Some(mask) = coarse.mask() else {
         return Ok((sample(coarse, fine, signal, 1)?, None));

@@ -36,6 +36,9 @@ pub(crate) fn report(
 ) -> PyResult<()> {
     let source = shape_of(source)?;
     let target = shape_of(target)?;
+    if let Some(k) = [&source, &target].iter().map(|s| s.n_channels()).find(|&k| k > 1) {
+        return Err(err(format!("report: a shape carries {k} maps per vertex; reports show one so far")));
+    }
     let geodesic = result
         .get_item("geodesic")?
         .ok_or_else(|| err("report: the result has no `geodesic` (pass what fshape.match returns)"))?;

@@ -58,6 +58,9 @@ pub(crate) fn shoot<'py>(
              none: set normalize = false, or shoot with the weights a registration used (its result's config)",
         ));
     }
+    if s.n_channels() > 1 {
+        return Err(err(format!("the shape carries {} maps per vertex; shoot takes one so far", s.n_channels())));
+    }
     let (n, dim) = (s.n_vertices(), s.dim());
     let p0a = p0.as_array();
     if p0a.shape() != [n, dim] {

@@ -180,6 +180,12 @@ def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
     assert fshape.signal_norm(two, "l2") == pytest.approx(both, rel=1e-12)
     with pytest.raises(fshape.FShapeError, match="channels"):
         fshape.attachment(two, src, "gaussian:0.2", "binet", "gaussian:0.5")
+    # What does not carry several maps yet says so.
+    config = {"model": {"normalize": False}, "deformation": {"widths": [0.3]}, "integrator": {"steps": 4}}
+    with pytest.raises(fshape.FShapeError, match="2 maps per vertex"):
+        fshape.shoot(two, np.zeros((12, 3)), config)
+    with pytest.raises(fshape.FShapeError, match="2 signal channels"):
+        fshape.match(two, two, CONFIG)
 
 
 def test_signal_norms_of_a_constant_signal_are_the_area():

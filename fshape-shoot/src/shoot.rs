@@ -127,7 +127,8 @@ impl Trajectory {
     }
 
     /// The velocities (ẋ, ḟ) at node k: K p / γ_V at the points and, for
-    /// metamorphosis, the signal velocity D_s⁻¹p^f/γ_f (zeros otherwise).
+    /// metamorphosis, the signal velocity D_s⁻¹p^f_c/(γ_f w_c) of each
+    /// channel c (zeros otherwise).
     /// ⟨p, ẋ⟩ + ⟨p^f, ḟ⟩ is twice the Hamiltonian there.
     pub fn velocity(&self, k: usize) -> (&[f64], &[f64]) {
         let z = self.slope(k);

@@ -106,6 +106,9 @@ pub fn vertex_normals(shape: &FShape) -> Option<Vec<[f64; 3]>> {
 /// initial momenta `p0` (d per vertex) and the template shot onto it,
 /// `matched` (the template's cells).
 pub fn subject_map(kind: MapKind, template: &FShape, p0: &[f64], matched: &FShape) -> Result<Vec<f64>, StatsError> {
+    if let Some(k) = [template, matched].iter().map(|s| s.n_channels()).find(|&k| k > 1) {
+        return Err(StatsError::Maps { message: format!("a shape carries {k} signal channels; maps take one so far") });
+    }
     let (n, d) = (template.n_vertices(), template.dim());
     if matched.n_vertices() != n || matched.dim() != d || matched.cells() != template.cells() {
         return Err(StatsError::Maps {

@@ -25,7 +25,7 @@ pub struct Distance {
 pub struct ShapeGrad {
     /// ∂A/∂x (n_vertices × dim, flat). Unused vertices get 0.
     pub points: Vec<f64>,
-    /// ∂A/∂f (n_vertices); all 0 when the signal kernel is constant.
+    /// ∂A/∂f (n_vertices × k); all 0 when the signal kernel is constant.
     pub signal: Vec<f64>,
 }
 
@@ -56,7 +56,7 @@ fn compatible(x: &CellFeatures, y: &CellFeatures, k: &VarifoldKernel) -> Result<
     Ok(())
 }
 
-/// ⟨μ_X, μ_Y⟩ = Σ_τ Σ_σ r_τ r_σ k_p(|c_τ − c_σ|²) k_f((f_τ − f_σ)²) k_t(u_τ·u_σ).
+/// ⟨μ_X, μ_Y⟩ = Σ_τ Σ_σ r_τ r_σ k_p(|c_τ − c_σ|²) k_f(f_τ − f_σ) k_t(u_τ·u_σ).
 ///
 /// ```
 /// use fshape_kernels::Kernel;

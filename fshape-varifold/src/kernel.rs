@@ -47,7 +47,7 @@ pub enum GrassKernel {
 }
 
 /// The product kernel of a (functional) varifold:
-/// k((c, u, f), (c', u', f')) = k_p(|c − c'|²) · k_f((f − f')²) · k_t(u·u').
+/// k((c, u, f), (c', u', f')) = k_p(|c − c'|²) · k_f(f − f') · k_t(u·u').
 ///
 /// Every factor here is positive definite (k_t's Gaussians are power series
 /// in s with non-negative coefficients), so A(X, Y) ≥ 0 for an untruncated

@@ -12,7 +12,7 @@
 //! geometric shapes) and direction k_t (linear = currents, Binet, oriented
 //! and unoriented Gaussians):
 //!
-//! ⟨μ_X, μ_Y⟩ = Σ_τ Σ_σ r_τ r_σ k_p(|c_τ − c_σ|²) k_f((f_τ − f_σ)²) k_t(u_τ·u_σ),
+//! ⟨μ_X, μ_Y⟩ = Σ_τ Σ_σ r_τ r_σ k_p(|c_τ − c_σ|²) k_f(f_τ − f_σ) k_t(u_τ·u_σ),
 //! A(X, Y) = ⟨X,X⟩ − 2⟨X,Y⟩ + ⟨Y,Y⟩.
 //!
 //! **Width convention**: a Gaussian of width σ is exp(−u/(2σ²)) for k_p and

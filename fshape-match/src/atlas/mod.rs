@@ -80,6 +80,7 @@ use crate::{Config, MatchError, StageRecord};
 /// population on one standard mesh, such as fs_LR 32k). A vertex of the
 /// template's mask without any subject's value takes the overall mean.
 pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape, MatchError> {
+    crate::session::one_channel(std::iter::once(&template).chain(subjects))?;
     if template.signal().is_some() {
         return Ok(template);
     }

@@ -157,6 +157,7 @@ impl StageTemplates {
         given: bool,
     ) -> Result<StageTemplates, MatchError> {
         let (n, start, what) = (staged.stages().plan.stages.len(), &staged.stages().start, S::START);
+        crate::session::one_channel(templates.iter().flatten())?;
         if templates.len() != n {
             return Err(MatchError::StageTemplates(format!(
                 "{} given for a schedule of {n} stages (one per stage, the last None)",

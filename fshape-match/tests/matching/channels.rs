@@ -104,6 +104,11 @@ fn sessions_and_atlases_name_what_they_do_not_carry_yet() {
             .unwrap();
     let e = fshape_match::Session::new(&three, &three, &config).err().expect("refused").to_string();
     assert!(e.contains("3 signal channels") && e.contains("minimize"), "{e}");
-    let e = fshape_match::Atlas::new(&s, &[three.clone(), three], &config).err().expect("refused").to_string();
+    let e = fshape_match::Atlas::new(&s, &[three.clone(), three.clone()], &config).err().expect("refused").to_string();
+    assert!(e.contains("3 signal channels"), "{e}");
+    // A stage template of several channels, given to a one-channel session.
+    let one = s.clone().with_signal(Some(vec![0.0; s.n_vertices()])).unwrap();
+    let session = fshape_match::Session::new(&one, &one, &config).unwrap();
+    let e = session.with_stage_templates(vec![Some(three)]).err().expect("refused").to_string();
     assert!(e.contains("3 signal channels"), "{e}");
 }

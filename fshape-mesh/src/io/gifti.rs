@@ -966,6 +966,7 @@ pub fn write_arrays(w: &mut impl Write, arrays: &[DataArray], opts: WriteOptions
 ///
 /// `InvalidInput` if the shape is not a triangle surface in 3-D.
 pub fn surface_arrays(shape: &FShape, signal_name: &str) -> io::Result<Vec<DataArray>> {
+    super::one_map(shape)?;
     if shape.kind() != CellKind::Triangle || shape.dim() != 3 {
         return Err(io::Error::new(
             io::ErrorKind::InvalidInput,

@@ -488,6 +488,17 @@ fn refuse_bz2(path: &Path) -> Result<(), WriteError> {
     Ok(())
 }
 
+/// Refuses a shape of several signal channels where a mesh file carries
+/// one map (every writer with a signal calls it first).
+pub(crate) fn one_map(shape: &FShape) -> std::io::Result<()> {
+    match shape.n_channels() {
+        0 | 1 => Ok(()),
+        k => Err(std::io::Error::other(format!(
+            "the shape carries {k} signal channels; mesh files carry one (write each channel as a signal file)"
+        ))),
+    }
+}
+
 /// Writes a mesh in the format its extension names (`.ply`, `.obj`,
 /// `.vtk`, `.gii`, each optionally followed by `.gz`, or a FreeSurfer
 /// surface name such as `lh.pial`). OBJ and FreeSurfer surfaces carry no
@@ -504,12 +515,6 @@ pub fn write_mesh(path: &Path, shape: &FShape, encoding: Encoding) -> Result<(),
 /// Writes a mesh in the given format to any writer (uncompressed). OBJ
 /// ignores `encoding` and carries no signal.
 pub fn write_to(w: &mut impl Write, shape: &FShape, format: Format, encoding: Encoding) -> std::io::Result<()> {
-    if shape.n_channels() > 1 && !matches!(format, Format::Obj | Format::FreeSurfer) {
-        return Err(std::io::Error::other(format!(
-            "the shape carries {} signal channels; mesh files carry one (write each channel as a signal file)",
-            shape.n_channels()
-        )));
-    }
     match format {
         Format::Ply => ply::write(w, shape, encoding),
         Format::Vtk => vtk::write(w, shape, encoding),

@@ -448,6 +448,7 @@ fn skip(cur: &mut Cursor, body: Body, el: &Element) -> Result<(), ParseError> {
 
 /// Writes `shape` as PLY with `double` coordinates (and signal).
 pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
+    super::one_map(shape)?;
     let fmt = match encoding {
         Encoding::Ascii => "ascii",
         Encoding::Binary => "binary_little_endian",

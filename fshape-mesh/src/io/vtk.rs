@@ -405,6 +405,7 @@ fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErro
 
 /// Writes `shape` as VTK legacy POLYDATA, version 4.2.
 pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
+    super::one_map(shape)?;
     let ascii = encoding == Encoding::Ascii;
     let title = if shape.dim() == 2 { PLANAR_TITLE } else { "fshape" };
     let enc = if ascii { "ASCII" } else { "BINARY" };

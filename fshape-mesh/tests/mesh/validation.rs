@@ -175,4 +175,13 @@ fn several_channels_are_checked_masked_and_carried_vertex_by_vertex() {
     let e = fshape_mesh::io::write_mesh(&path, &a, fshape_mesh::io::Encoding::Binary).unwrap_err();
     assert!(e.to_string().contains("3 signal channels"), "{e}");
     assert!(!path.exists());
+    // Every writer with a signal, not only the one the extension picks.
+    let gii = path.with_extension("gii");
+    let e = fshape_mesh::io::gifti::write_file(&gii, &a, Default::default()).unwrap_err();
+    assert!(e.to_string().contains("3 signal channels") && !gii.exists(), "{e}");
+    for format in [fshape_mesh::io::Format::Vtk, fshape_mesh::io::Format::Ply, fshape_mesh::io::Format::Gifti] {
+        let mut out = Vec::new();
+        assert!(fshape_mesh::io::write_to(&mut out, &a, format, fshape_mesh::io::Encoding::Ascii).is_err());
+        assert!(fshape_mesh::io::vtk::write(&mut Vec::new(), &a, fshape_mesh::io::Encoding::Ascii).is_err());
+    }
 }
