@@ -107,15 +107,9 @@ fn inner(
     let ([(xf, xfi), (xg, xgi)], [(yf, _), (yg, _)]) = (x.split(), y.split());
     let geometric = k.geometric();
     let mut value = 0.0;
-    let n = x.len();
     let (d, du) = (x.dim(), x.dir_len());
     let nf = x.n_channels().max(1);
-    let mut g = FeatureGrad {
-        centre: vec![0.0; n * d],
-        dir: vec![0.0; n * du],
-        weight: vec![0.0; n],
-        signal: vec![0.0; n * nf],
-    };
+    let mut g = FeatureGrad::zeros(x);
     let share = x.mask();
     for (xp, idx, yp, kp, functional) in [(&xf, &xfi, &yf, k, true), (&xg, &xgi, &yg, &geometric, false)] {
         if xp.is_empty() || yp.is_empty() || (!functional && !k.masked_geometry()) {
@@ -164,16 +158,10 @@ fn inner_plain(
     if !grad {
         return Ok((value, None));
     }
-    let n = x.len();
     // The gradient in the signal has the signal's shape (one channel of
     // zeros for a geometric kernel).
     let xf = x.n_channels().max(1);
-    let mut g = FeatureGrad {
-        centre: vec![0.0; n * d],
-        dir: vec![0.0; n * du],
-        weight: vec![0.0; n],
-        signal: vec![0.0; n * xf],
-    };
+    let mut g = FeatureGrad::zeros(x);
     for (i, row) in rows.chunks_exact(w).enumerate() {
         g.weight[i] = row[0];
         for c in 0..d {

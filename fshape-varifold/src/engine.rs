@@ -341,10 +341,11 @@ fn run<const D: usize, const DU: usize, const GRAD: bool>(
     k: &VarifoldKernel,
     parallel: bool,
 ) -> Result<Vec<f64>, VarifoldError> {
-    if channels(x, k)?.0 == 1 {
-        run_channels::<D, DU, GRAD, 1>(x, y, k, parallel)
+    let (nf, b) = channels(x, k)?;
+    if nf == 1 {
+        run_channels::<D, DU, GRAD, 1>(x, y, k, (nf, b), parallel)
     } else {
-        run_channels::<D, DU, GRAD, MAX_CHANNELS>(x, y, k, parallel)
+        run_channels::<D, DU, GRAD, MAX_CHANNELS>(x, y, k, (nf, b), parallel)
     }
 }
 
@@ -352,9 +353,9 @@ fn run_channels<const D: usize, const DU: usize, const GRAD: bool, const NF: usi
     x: &CellFeatures,
     y: &CellFeatures,
     k: &VarifoldKernel,
+    (nf, b): (usize, [f64; MAX_CHANNELS]),
     parallel: bool,
 ) -> Result<Vec<f64>, VarifoldError> {
-    let (nf, b) = channels(x, k)?;
     let pairs = BlockPairs::try_new(x.centres(), y.centres(), D, k.position())?;
     let order = pairs.source_order();
     // Without a signal kernel the signals are not read (one channel of 0).

@@ -52,6 +52,20 @@ pub struct FeatureGrad {
     pub signal: Vec<f64>,
 }
 
+impl FeatureGrad {
+    /// A zero gradient for the features `x` (the signal's block one
+    /// channel wide when `x` has no signal).
+    pub(crate) fn zeros(x: &CellFeatures) -> FeatureGrad {
+        let n = x.len();
+        FeatureGrad {
+            centre: vec![0.0; n * x.dim()],
+            dir: vec![0.0; n * x.dir_len()],
+            weight: vec![0.0; n],
+            signal: vec![0.0; n * x.n_channels().max(1)],
+        }
+    }
+}
+
 /// Number of direction components for a cell kind in a dimension.
 pub(crate) fn dir_len(kind: CellKind, dim: usize) -> usize {
     match kind {
