@@ -12,6 +12,7 @@
 //! gamma_f = 0.1            # weight γ_f of the signal energy      (default 0.1)
 //! gamma_w = 1000.0         # weight γ_W of the data attachment    (default 1000)
 //! normalize = true         # weights relative to the data's scale (default true; see below)
+//! channel_weights = [1, 2] # w_c: channel c's γ_f is γ_f·w_c      (default all 1; one per channel)
 //!
 //! [deformation]
 //! widths = [0.2, 0.1]      # Gaussian widths σ_i, exp(−u/(2σ²))   (required)
@@ -74,7 +75,12 @@
 //! side 2 and a cortex in millimetres. L is the target's bounding-box
 //! diagonal and S the standard deviation of the target's vertex signal
 //! (of the template's when the target's is constant or absent; 1 when
-//! both are). Shooting alone has no target: [`Config::model`] takes the
+//! both are). With several channels, channel c's γ_f is
+//! γ_f·w_c/(S_c²·L^d), S_c that channel's deviation and w_c its
+//! `channel_weights` entry, so each map counts as if it had a deviation of
+//! 1 whatever its units (thickness in mm beside myelin as a ratio).
+//! Deviations skip masked and missing vertices and weigh the rest by
+//! their mask. Shooting alone has no target: [`Config::model`] takes the
 //! weights as written, and a registration's output has its effective
 //! weights ([`Config::resolved`]) for shooting its momenta again. Kernel widths and the H¹ length stay in the data's units:
 //! choose them as fractions of the shapes' size. What each weight does:
@@ -205,6 +211,11 @@ pub struct ModelSection {
     /// Weights relative to the data's scale ("Scale-free weights" below;
     /// false: as written, in the data's units).
     pub normalize: bool,
+    /// A weight w_c per signal channel, multiplying γ_f for channel c
+    /// (empty, the default: 1 for each; as many as the shapes have
+    /// channels otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub channel_weights: Vec<f64>,
 }
 
 impl Default for ModelSection {
@@ -217,28 +228,32 @@ impl Default for ModelSection {
             gamma_f: 0.1,
             gamma_w: 1e3,
             normalize: true,
+            channel_weights: Vec::new(),
         }
     }
 }
 
 /// The scales of the data that normalised weights are relative to
 /// (module docs): L, S and d.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Scales {
     /// L: the bounding-box diagonal.
     pub length: f64,
-    /// S: the signal's standard deviation (1 without one).
+    /// S: the signal's standard deviation (1 without one); with several
+    /// channels, the first channel's.
     pub signal: f64,
     /// d: the dimension of the cells (1 curves, 2 surfaces).
     pub cell_dim: usize,
+    /// S_c, one per channel when there are several (empty with one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub channels: Vec<f64>,
 }
 
 impl Scales {
-    /// L from `target`, S from the target's signal, else the template's,
-    /// else 1; d from the template.
+    /// L from `target`, S (per channel) from the target's signal, else the
+    /// template's, else 1; d from the template. A deviation is taken over
+    /// the vertices that carry a value, weighted by their mask.
     pub fn of(template: &FShape, target: &FShape) -> Result<Scales, MatchError> {
-        // One deviation S for the signal: channels of other units need one each.
-        crate::session::one_channel([template, target])?;
         let length = target.bounding_box().diagonal();
         if !(length > 0.0 && length.is_finite()) {
             return Err(bad(
@@ -246,15 +261,10 @@ impl Scales {
                 format!("the shapes' bounding-box diagonal is {length}; normalize = false"),
             ));
         }
-        let std = |s: &FShape| -> Option<f64> {
-            let f = s.signal().filter(|f| !f.is_empty())?;
-            let n = f.len() as f64;
-            let mean = f.iter().sum::<f64>() / n;
-            let sd = (f.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt();
-            (sd > 0.0 && sd.is_finite()).then_some(sd)
-        };
-        let signal = std(target).or_else(|| std(template)).unwrap_or(1.0);
-        Ok(Scales { length, signal, cell_dim: template.kind().dim() })
+        let k = target.n_channels().max(template.n_channels()).max(1);
+        let deviation = |c: usize| deviation(target, c).or_else(|| deviation(template, c)).unwrap_or(1.0);
+        let channels: Vec<f64> = if k > 1 { (0..k).map(deviation).collect() } else { Vec::new() };
+        Ok(Scales { length, signal: deviation(0), cell_dim: template.kind().dim(), channels })
     }
 
     /// The effective (γ_V, γ_f, γ_W) of the written ones: γ_V/L²,
@@ -263,6 +273,41 @@ impl Scales {
         let (l, d) = (self.length, self.cell_dim as i32);
         (gamma_v / (l * l), gamma_f / (self.signal * self.signal * l.powi(d)), gamma_w / l.powi(2 * d))
     }
+
+    /// The effective channel weights of the written ones `w` (empty: all
+    /// 1): w_c·S²/S_c², so that channel c's γ_f is γ_f w_c/(S_c²·L^d) with
+    /// [`Scales::effective`]'s γ_f. Empty with one channel.
+    pub fn channel_weights(&self, w: &[f64]) -> Vec<f64> {
+        let s2 = self.signal * self.signal;
+        self.channels.iter().enumerate().map(|(c, sc)| w.get(c).copied().unwrap_or(1.0) * s2 / (sc * sc)).collect()
+    }
+
+    /// S_c of channel `c` (S with one channel).
+    pub fn channel(&self, c: usize) -> f64 {
+        self.channels.get(c).copied().unwrap_or(self.signal)
+    }
+}
+
+/// The standard deviation of channel `c` of a shape's signal over the
+/// vertices with a value, weighted by the mask; `None` without a signal,
+/// or when it is constant there. Unmasked, it is the plain deviation
+/// (weights of 1 change no bit).
+fn deviation(s: &FShape, c: usize) -> Option<f64> {
+    let k = s.n_channels();
+    let f = s.signal().filter(|f| !f.is_empty() && c < k)?;
+    let weight = |v: usize| s.mask().map_or(1.0, |m| m[v]);
+    let values = || {
+        f.iter()
+            .skip(c)
+            .step_by(k)
+            .enumerate()
+            .map(move |(v, &x)| (weight(v), x))
+            .filter(|(w, x)| *w > 0.0 && !x.is_nan())
+    };
+    let total: f64 = values().map(|(w, _)| w).sum();
+    let mean = values().map(|(w, x)| w * x).sum::<f64>() / total;
+    let sd = (values().map(|(w, x)| w * (x - mean) * (x - mean)).sum::<f64>() / total).sqrt();
+    (sd > 0.0 && sd.is_finite()).then_some(sd)
 }
 
 /// `[deformation]`: a sum of Gaussians.
@@ -644,11 +689,15 @@ impl Config {
     /// `normalize`, the weights relative to the data's [`Scales`], which
     /// are returned too.
     pub fn model_for(&self, template: &FShape, target: &FShape) -> Result<(Model, Option<Scales>), MatchError> {
+        let (w, k) = (self.model.channel_weights.len(), template.n_channels().max(1));
+        if w != 0 && w != k {
+            return Err(bad("model.channel_weights", format!("{w} weights for shapes of {k} signal channels")));
+        }
         let scales = if self.model.normalize { Some(Scales::of(template, target)?) } else { None };
-        Ok((self.model_scaled(scales)?, scales))
+        Ok((self.model_scaled(scales.as_ref())?, scales))
     }
 
-    fn model_scaled(&self, scales: Option<Scales>) -> Result<Model, MatchError> {
+    fn model_scaled(&self, scales: Option<&Scales>) -> Result<Model, MatchError> {
         let m = &self.model;
         let d = &self.deformation;
         for (key, v) in [("model.gamma_v", m.gamma_v), ("model.gamma_f", m.gamma_f), ("model.gamma_w", m.gamma_w)] {
@@ -675,13 +724,19 @@ impl Config {
             Some(s) => s.effective(m.gamma_v, m.gamma_f, m.gamma_w),
             None => (m.gamma_v, m.gamma_f, m.gamma_w),
         };
+        let channel_weights = match scales {
+            Some(s) if !s.channels.is_empty() => s.channel_weights(&m.channel_weights),
+            _ => m.channel_weights.clone(),
+        };
         let model = Model::new(kernel)
             .with_kind(m.kind)
             .with_norm(norm)
             .and_then(|model| model.with_weights(gamma_v, gamma_f, gamma_w))
             .and_then(|model| model.with_integrator(self.integrator.scheme, self.integrator.steps))
             .and_then(|model| model.with_max_drift(self.integrator.max_drift))
-            .map_err(|e| bad("model", e.to_string()))?;
+            .map_err(|e| bad("model", e.to_string()))?
+            .with_channel_weights(channel_weights)
+            .map_err(|e| bad("model.channel_weights", e.to_string()))?;
         Ok(model)
     }
 
@@ -844,11 +899,14 @@ impl Config {
     /// This configuration with the weights a model normalised by `scales`
     /// uses, written out (`normalize = false`): what shooting the
     /// registration's momenta again needs.
-    pub fn resolved(&self, scales: Option<Scales>) -> Config {
+    pub fn resolved(&self, scales: Option<&Scales>) -> Config {
         let mut c = self.clone();
         if let (true, Some(s)) = (c.model.normalize, scales) {
             let (v, f, w) = s.effective(c.model.gamma_v, c.model.gamma_f, c.model.gamma_w);
             (c.model.gamma_v, c.model.gamma_f, c.model.gamma_w) = (v, f, w);
+            if !s.channels.is_empty() {
+                c.model.channel_weights = s.channel_weights(&c.model.channel_weights);
+            }
         }
         c.model.normalize = false;
         c

@@ -53,7 +53,7 @@ pub use config::{
     StageSpec, TemplateKind,
 };
 pub use prealign::{AlignKind, Alignment, Moving, PrealignSection};
-pub use quality::{Quality, quality};
+pub use quality::{ChannelQuality, Quality, quality};
 pub use runner::{
     CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Outcome, Runner, StageRecord, StageSetup,
     Staged, UNCHECKED_FORMAT,

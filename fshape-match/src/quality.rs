@@ -54,7 +54,7 @@ use serde::{Deserialize, Serialize};
 use crate::MatchError;
 
 /// How close a shape is to a target (see the module docs).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Quality {
     /// The target's bounding-box diagonal, in the shapes' units (the unit
     /// of the distances below).
@@ -130,6 +130,28 @@ pub struct Quality {
     pub signal_roughness_past_boundary: Option<f64>,
     /// The target signal's range (max − min), in its units (0 without one).
     pub signal_range: f64,
+    /// With several signal channels, each channel's signal error (the
+    /// fields above are the first channel's); empty with one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub channels: Vec<ChannelQuality>,
+}
+
+/// One channel's signal error: [`Quality`]'s signal fields, measured on
+/// that channel alone (each a fraction of that channel's range).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub struct ChannelQuality {
+    pub signal_rms: Option<f64>,
+    pub signal_p99: Option<f64>,
+    pub signal_rms_within_1pct: Option<f64>,
+    pub signal_rms_beyond_1pct: Option<f64>,
+    pub signal_roughness: Option<f64>,
+    pub signal_rms_on_shape: Option<f64>,
+    pub signal_rms_on_shape_beyond_1pct: Option<f64>,
+    pub signal_roughness_beyond_1pct: Option<f64>,
+    pub signal_rms_past_boundary: Option<f64>,
+    pub signal_roughness_past_boundary: Option<f64>,
+    pub signal_range: f64,
 }
 
 impl Quality {
@@ -169,6 +191,14 @@ impl Quality {
             }
             if !parts.is_empty() {
                 s.push_str(&format!(" ({})", parts.join("; ")));
+            }
+        }
+        for (c, q) in self.channels.iter().enumerate().skip(1) {
+            if let Some(e) = q.signal_rms {
+                s.push_str(&format!(", channel {}: signal error {:.2}%", c + 1, 100.0 * e));
+                if let Some(p) = q.signal_p99 {
+                    s.push_str(&format!(" ({:.2}% 99th percentile)", 100.0 * p));
+                }
             }
         }
         if let Some(r) = self.signal_roughness {
@@ -423,11 +453,12 @@ impl<'a> ClosestPoints<'a> {
     }
 }
 
-fn signal_at(shape: &FShape, cell: usize, bary: [f64; 3]) -> Option<f64> {
-    let f = shape.signal()?;
-    let k = shape.kind().n_corners();
-    let ids = &shape.cells()[cell * k..(cell + 1) * k];
-    Some(ids.iter().zip(bary).map(|(&v, w)| w * f[v]).sum())
+/// Channel `c` of the signal interpolated in `cell` at `bary`.
+fn signal_at(shape: &FShape, c: usize, cell: usize, bary: [f64; 3]) -> Option<f64> {
+    let (f, k) = (shape.signal()?, shape.n_channels());
+    let n = shape.kind().n_corners();
+    let ids = &shape.cells()[cell * n..(cell + 1) * n];
+    Some(ids.iter().zip(bary).map(|(&v, w)| w * f[v * k + c]).sum())
 }
 
 /// (∫ |∇f|²)^½ over the shape for the P1 interpolant f of its signal:
@@ -440,21 +471,22 @@ pub fn dirichlet_seminorm(shape: &FShape) -> Option<f64> {
     if shape.n_channels() > 1 {
         return None;
     }
-    Some(dirichlet_energies(shape)?.iter().sum::<f64>().sqrt())
+    Some(dirichlet_energies(shape, 0)?.iter().sum::<f64>().sqrt())
 }
 
-/// ∫_c |∇f|² on each cell c (see [`dirichlet_seminorm`]).
-fn dirichlet_energies(shape: &FShape) -> Option<Vec<f64>> {
-    let f = shape.signal()?;
+/// ∫_c |∇f|² of channel `channel` on each cell c (see [`dirichlet_seminorm`]).
+fn dirichlet_energies(shape: &FShape, channel: usize) -> Option<Vec<f64>> {
+    let (signal, channels) = (shape.signal()?, shape.n_channels());
+    let f = |v: usize| signal[v * channels + channel];
     let k = shape.kind().n_corners();
     let energy = |(c, ids): (usize, &[usize])| {
         let p = corners(shape, c);
-        let (e1, d1) = (sub(p[1], p[0]), f[ids[1]] - f[ids[0]]);
+        let (e1, d1) = (sub(p[1], p[0]), f(ids[1]) - f(ids[0]));
         if k == 2 {
             let len = dot(e1, e1).sqrt();
             return if len > 0.0 { d1 * d1 / len } else { 0.0 };
         }
-        let (e2, d2) = (sub(p[2], p[0]), f[ids[2]] - f[ids[0]]);
+        let (e2, d2) = (sub(p[2], p[0]), f(ids[2]) - f(ids[0]));
         let (g11, g12, g22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
         let det = g11 * g22 - g12 * g12;
         // dfᵀ G⁻¹ df × area, area = ½√det.
@@ -505,7 +537,13 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     if shape.dim() != target.dim() || shape.kind() != target.kind() {
         return Err(MatchError::Kinds("quality: the matched shape and the target differ".into()));
     }
-    crate::session::one_channel([shape, target])?;
+    if shape.signal().is_some() && target.signal().is_some() && shape.n_channels() != target.n_channels() {
+        return Err(MatchError::InvalidInput(format!(
+            "quality: the matched shape carries {} signal channels, the target {}",
+            shape.n_channels(),
+            target.n_channels()
+        )));
+    }
     let diagonal = target.bounding_box().diagonal();
     if !(diagonal > 0.0 && diagonal.is_finite()) {
         return Err(MatchError::Degenerate(format!("quality: the target's bounding-box diagonal is {diagonal}")));
@@ -528,8 +566,60 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         .collect();
     let max_distance = pooled.iter().map(|p| p.0).fold(0.0, f64::max) / diagonal;
     let p95_distance = quantile(pooled, 0.95) / diagonal;
+    let sides = Sides { diagonal, xs, ys, dx, dy, wx, wy };
+    let k = shape.n_channels().max(target.n_channels()).max(1);
+    let (first, shape_beyond_1pct, shape_past_boundary) = signal_quality(shape, target, 0, &sides);
+    let channels =
+        if k > 1 { (0..k).map(|c| signal_quality(shape, target, c, &sides).0).collect() } else { Vec::new() };
+    let near = |c: &Closest| c.distance <= 0.01 * diagonal;
+    let within = sides.dy.iter().zip(&sides.ys.weights).filter(|(c, _)| near(c)).fold(0.0, |a, (_, w)| a + w);
+    Ok(Quality {
+        diagonal,
+        mean_distance,
+        p95_distance,
+        max_distance,
+        target_within_1pct: within / wy,
+        signal_rms: first.signal_rms,
+        signal_p99: first.signal_p99,
+        signal_rms_within_1pct: first.signal_rms_within_1pct,
+        signal_rms_beyond_1pct: first.signal_rms_beyond_1pct,
+        signal_roughness: first.signal_roughness,
+        signal_rms_on_shape: first.signal_rms_on_shape,
+        signal_rms_on_shape_beyond_1pct: first.signal_rms_on_shape_beyond_1pct,
+        shape_beyond_1pct,
+        signal_roughness_beyond_1pct: first.signal_roughness_beyond_1pct,
+        shape_past_boundary,
+        signal_rms_past_boundary: first.signal_rms_past_boundary,
+        signal_roughness_past_boundary: first.signal_roughness_past_boundary,
+        signal_range: first.signal_range,
+        channels,
+    })
+}
+
+/// Both shapes' samples and their closest points on the other: what
+/// every channel's signal error is measured on.
+struct Sides {
+    diagonal: f64,
+    xs: Samples,
+    ys: Samples,
+    dx: Vec<Closest>,
+    dy: Vec<Closest>,
+    wx: f64,
+    wy: f64,
+}
+
+/// The signal error of channel `channel` (module docs), and the shares of the
+/// shape's area beyond 1 % and past the target's boundary.
+fn signal_quality(shape: &FShape, target: &FShape, channel: usize, sides: &Sides) -> (ChannelQuality, f64, f64) {
+    let Sides { diagonal, xs, ys, dx, dy, wx, wy } = sides;
+    let diagonal = *diagonal;
+    let k = target.n_channels().max(1);
     let range = target.signal().map_or(0.0, |f| {
-        let (lo, hi) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+        let (lo, hi) = f
+            .iter()
+            .skip(channel)
+            .step_by(k)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
         if hi >= lo { hi - lo } else { 0.0 }
     });
     let near = |c: &Closest| c.distance <= 0.01 * diagonal;
@@ -540,8 +630,8 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
             .iter()
             .enumerate()
             .map(|(i, c)| {
-                let ft = signal_at(target, ys.cells[i], ys.bary[i]).unwrap_or(0.0);
-                let fs = signal_at(shape, c.cell, c.bary).unwrap_or(0.0);
+                let ft = signal_at(target, channel, ys.cells[i], ys.bary[i]).unwrap_or(0.0);
+                let fs = signal_at(shape, channel, c.cell, c.bary).unwrap_or(0.0);
                 ((fs - ft).abs(), ys.weights[i])
             })
             // A masked cell on either side has no value (NaN): not counted.
@@ -551,7 +641,7 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         let rms = |keep: &dyn Fn(&Closest) -> bool| {
             let (sum, area) = errors
                 .iter()
-                .zip(&dy)
+                .zip(dy)
                 .filter(|(_, c)| keep(c))
                 .fold((0.0, 0.0), |(s, a), ((e, w), _)| (s + w * e * e, a + w));
             (area > 0.0).then(|| (sum / area).sqrt() / range)
@@ -561,9 +651,9 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         signal_rms_beyond_1pct = rms(&|c| !near(c));
         signal_p99 = Some(quantile(errors, 0.99) / range);
     }
-    let energies = dirichlet_energies(shape);
+    let energies = dirichlet_energies(shape, channel);
     // ∫|∇f|² over the whole target, None without a signal or if constant.
-    let target_energy = dirichlet_energies(target).map(|e| e.iter().sum::<f64>()).filter(|e| *e > 0.0);
+    let target_energy = dirichlet_energies(target, channel).map(|e| e.iter().sum::<f64>()).filter(|e| *e > 0.0);
     let signal_roughness = match (&energies, target_energy) {
         (Some(a), Some(b)) => Some((a.iter().sum::<f64>() / b).sqrt()),
         _ => None,
@@ -574,12 +664,17 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
         .then(|| {
             dx.iter()
                 .enumerate()
-                .map(|(i, c)| Some(signal_at(shape, xs.cells[i], xs.bary[i])? - signal_at(target, c.cell, c.bary)?))
+                .map(|(i, c)| {
+                    Some(
+                        signal_at(shape, channel, xs.cells[i], xs.bary[i])?
+                            - signal_at(target, channel, c.cell, c.bary)?,
+                    )
+                })
                 .collect()
         })
         .flatten();
     let samples_per_cell = xs.points.len() / shape.n_cells();
-    let target_density = target_energy.map(|e| e / wy);
+    let target_density = target_energy.map(|e| e / *wy);
     // (share of the shape's area, signal rms, roughness) over the samples
     // `keep` selects (each sample weighs its share of its cell's area);
     // each cell's energy counts in proportion to its samples there.
@@ -609,31 +704,27 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
             }
             _ => None,
         };
-        (area / wx, rms, roughness)
+        (area / *wx, rms, roughness)
     };
     let (_, signal_rms_on_shape, _) = region(&|_| true);
     let (shape_beyond_1pct, signal_rms_on_shape_beyond_1pct, signal_roughness_beyond_1pct) = region(&|c| !near(c));
     let past = past_boundary(target);
     let (shape_past_boundary, signal_rms_past_boundary, signal_roughness_past_boundary) = region(&|c| past(c));
-    let within = dy.iter().zip(&ys.weights).filter(|(c, _)| near(c)).fold(0.0, |a, (_, w)| a + w);
-    Ok(Quality {
-        diagonal,
-        mean_distance,
-        p95_distance,
-        max_distance,
-        target_within_1pct: within / wy,
-        signal_rms,
-        signal_p99,
-        signal_rms_within_1pct,
-        signal_rms_beyond_1pct,
-        signal_roughness,
-        signal_rms_on_shape,
-        signal_rms_on_shape_beyond_1pct,
+    (
+        ChannelQuality {
+            signal_rms,
+            signal_p99,
+            signal_rms_within_1pct,
+            signal_rms_beyond_1pct,
+            signal_roughness,
+            signal_rms_on_shape,
+            signal_rms_on_shape_beyond_1pct,
+            signal_roughness_beyond_1pct,
+            signal_rms_past_boundary,
+            signal_roughness_past_boundary,
+            signal_range: range,
+        },
         shape_beyond_1pct,
-        signal_roughness_beyond_1pct,
         shape_past_boundary,
-        signal_rms_past_boundary,
-        signal_roughness_past_boundary,
-        signal_range: range,
-    })
+    )
 }

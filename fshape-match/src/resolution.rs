@@ -254,10 +254,11 @@ fn conjugate_gradients(
     Ok(q)
 }
 
-/// The momenta (p_0: P_c × n, p^f: P_c) of `coarse` carried to `fine`
-/// (the same surface at another resolution): fine areas times the coarse
-/// densities interpolated at the fine vertices. For the tangential model
-/// (`kind`) the signal control ζ is a function and is interpolated as one.
+/// The momenta (p_0: P_c × n, p^f: P_c × k, k the coarse template's
+/// signal channels) of `coarse` carried to `fine` (the same surface at
+/// another resolution): fine areas times the coarse densities
+/// interpolated at the fine vertices. For the tangential model (`kind`)
+/// the signal control ζ is a function and is interpolated as one.
 pub fn prolongate(
     coarse: &FShape,
     fine: &FShape,
@@ -266,13 +267,13 @@ pub fn prolongate(
     kind: ModelKind,
 ) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
     let signal_density = kind != ModelKind::Tangential;
-    let (nc, dim) = (coarse.n_vertices(), coarse.dim());
+    let (nc, dim, k) = (coarse.n_vertices(), coarse.dim(), coarse.n_channels().max(1));
     if fine.dim() != dim || fine.kind() != coarse.kind() {
         return Err(MatchError::Kinds("prolongation: the coarse and fine templates differ".into()));
     }
-    if p0.len() != nc * dim || pf.len() != nc {
+    if p0.len() != nc * dim || pf.len() != nc * k {
         return Err(MatchError::InvalidInput(format!(
-            "prolongation: {} and {} momentum values for a coarse template of {nc} vertices in R^{dim}",
+            "prolongation: {} and {} momentum values for a coarse template of {nc} vertices in R^{dim} and {k} signal channels",
             p0.len(),
             pf.len()
         )));
@@ -285,36 +286,49 @@ pub fn prolongate(
     }
     let density0: Vec<f64> = p0.iter().enumerate().map(|(i, p)| p / mc[i / dim]).collect();
     let densityf: Vec<f64> =
-        if signal_density { pf.iter().zip(&mc).map(|(p, m)| p / m).collect() } else { pf.to_vec() };
-    // Both densities in one pass of closest points: dim + 1 values a vertex.
-    let both: Vec<f64> =
-        density0.chunks_exact(dim).zip(&densityf).flat_map(|(d, f)| d.iter().chain([f])).copied().collect();
-    let rho = sample(coarse, fine, &both, dim + 1)?;
-    let (mut q0, mut qf) = (Vec::with_capacity(mf.len() * dim), Vec::with_capacity(mf.len()));
-    for (r, m) in rho.chunks_exact(dim + 1).zip(&mf) {
+        if signal_density { pf.iter().enumerate().map(|(i, p)| p / mc[i / k]).collect() } else { pf.to_vec() };
+    // Both densities in one pass of closest points: dim + k values a vertex.
+    let both: Vec<f64> = density0
+        .chunks_exact(dim)
+        .zip(densityf.chunks_exact(k))
+        .flat_map(|(d, f)| d.iter().chain(f))
+        .copied()
+        .collect();
+    let rho = sample(coarse, fine, &both, dim + k)?;
+    let (mut q0, mut qf) = (Vec::with_capacity(mf.len() * dim), Vec::with_capacity(mf.len() * k));
+    for (r, m) in rho.chunks_exact(dim + k).zip(&mf) {
         q0.extend(r[..dim].iter().map(|r| m * r));
-        qf.push(if signal_density { m * r[dim] } else { r[dim] });
+        qf.extend(r[dim..].iter().map(|r| if signal_density { m * r } else { *r }));
     }
     Ok((q0, qf))
 }
 
 /// `coarse`'s signal (and mask) read at `fine`'s vertices as [`sample`]
-/// reads values. With a mask m the signal read is the mask-weighted
-/// mean Σ bᵢ mᵢ fᵢ / Σ bᵢ mᵢ of the closest cell's corners (b the
-/// barycentric weights), so a masked corner's missing value never
-/// enters; the mask read is Σ bᵢ mᵢ, 0 (and the signal NaN) where every
-/// corner is masked, a soft edge in between.
+/// reads values, every channel alike (k values a vertex). With a mask m
+/// the signal read is the mask-weighted mean Σ bᵢ mᵢ fᵢ / Σ bᵢ mᵢ of the
+/// closest cell's corners (b the barycentric weights), so a masked
+/// corner's missing value never enters; the mask read is Σ bᵢ mᵢ, 0 (and
+/// the signal NaN) where every corner is masked, a soft edge in between.
 pub fn sample_signal(coarse: &FShape, fine: &FShape) -> Result<(Vec<f64>, Option<Vec<f64>>), MatchError> {
-    crate::session::one_channel([coarse])?;
     let signal = coarse.signal().ok_or_else(|| MatchError::InvalidInput("resampling: no signal to read".into()))?;
+    let k = coarse.n_channels();
     let Some(mask) = coarse.mask() else {
-        return Ok((sample(coarse, fine, signal, 1)?, None));
+        return Ok((sample(coarse, fine, signal, k)?, None));
     };
-    let pairs: Vec<f64> = signal.iter().zip(mask).flat_map(|(&f, &m)| [if m > 0.0 { m * f } else { 0.0 }, m]).collect();
-    let read = sample(coarse, fine, &pairs, 2)?;
-    let (signal, mask) =
-        read.chunks_exact(2).map(|r| if r[1] > 0.0 { (r[0] / r[1], r[1].min(1.0)) } else { (f64::NAN, 0.0) }).unzip();
-    Ok((signal, Some(mask)))
+    let rows: Vec<f64> = signal
+        .chunks_exact(k)
+        .zip(mask)
+        .flat_map(|(f, &m)| f.iter().map(move |&f| if m > 0.0 { m * f } else { 0.0 }).chain([m]))
+        .collect();
+    let read = sample(coarse, fine, &rows, k + 1)?;
+    let mut out = Vec::with_capacity(fine.n_vertices() * k);
+    let mut weights = Vec::with_capacity(fine.n_vertices());
+    for r in read.chunks_exact(k + 1) {
+        let m = r[k];
+        out.extend(r[..k].iter().map(|f| if m > 0.0 { f / m } else { f64::NAN }));
+        weights.push(if m > 0.0 { m.min(1.0) } else { 0.0 });
+    }
+    Ok((out, Some(weights)))
 }
 
 /// The piecewise-linear function of `coarse` with `width` values per

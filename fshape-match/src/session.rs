@@ -87,14 +87,23 @@ impl Pair {
     /// The number of unknowns of stage k.
     fn unknowns_len(&self, k: usize) -> usize {
         let t = self.stages.template_of(k).1;
-        let signal = if self.stages.plan.model.kind() == fshape_shoot::ModelKind::Lddmm { 0 } else { t.n_vertices() };
+        let signal = if self.stages.plan.model.kind() == fshape_shoot::ModelKind::Lddmm {
+            0
+        } else {
+            t.n_vertices() * t.n_channels().max(1)
+        };
         t.n_vertices() * t.dim() + signal
     }
 
     /// The packing of stage k's unknowns.
     fn unknowns_of(&self, k: usize) -> Result<Unknowns, MatchError> {
         let t = self.stages.template_of(k).1;
-        Ok(Unknowns::for_template(t, self.stages.plan.model.kind(), self.stages.plan.metrics, self.stages.plan.scales)?)
+        Ok(Unknowns::for_template(
+            t,
+            self.stages.plan.model.kind(),
+            self.stages.plan.metrics,
+            self.stages.plan.scales.as_ref(),
+        )?)
     }
 
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
@@ -106,7 +115,8 @@ impl Pair {
             self.metric_built = false;
         }
         if !self.metric_built {
-            self.unknowns = Unknowns::scaled(&self.problem, self.stages.plan.metrics, self.stages.plan.scales)?;
+            self.unknowns =
+                Unknowns::scaled(&self.problem, self.stages.plan.metrics, self.stages.plan.scales.as_ref())?;
             self.metric_built = true;
         }
         if self.staged != Some(k) {
@@ -199,7 +209,13 @@ impl Runner<Pair> {
                 target.dim()
             )));
         }
-        one_channel([source, target])?;
+        if source.signal().is_some() && target.signal().is_some() && source.n_channels() != target.n_channels() {
+            return Err(MatchError::InvalidInput(format!(
+                "the source carries {} signal channels, the target {}",
+                source.n_channels(),
+                target.n_channels()
+            )));
+        }
         // With `[prealign]`, the registration runs on the aligned pair.
         let (source, target, alignment) = crate::prealign::prealigned(source, target, config)?;
         let (source, target) = (&source, &target);
@@ -219,7 +235,7 @@ impl Runner<Pair> {
         let problem = Problem::new(templates.first().and_then(Option::as_ref).unwrap_or(source), plan.model.clone())?;
         // The metric's matrices (a dense kernel factor) wait for the first
         // stage on the source: it may run on a stage template first.
-        let unknowns = Unknowns::for_template(source, plan.model.kind(), plan.metrics, plan.scales)?;
+        let unknowns = Unknowns::for_template(source, plan.model.kind(), plan.metrics, plan.scales.as_ref())?;
         let pair = Pair {
             stages: Stages::new(plan, source.clone()),
             problem,
@@ -322,7 +338,7 @@ impl Runner<Pair> {
         let matched = template
             .clone()
             .with_points(trajectory.points(last).to_vec())?
-            .with_signal(Some(trajectory.signal(last).to_vec()))?;
+            .with_signals(Some(trajectory.signal(last).to_vec()), template.n_channels().max(1))?;
         let quality = crate::quality(&matched, &pair.target)?;
         let initial_quality = crate::quality(template, &pair.target)?;
         let alignment = pair.alignment.clone();
@@ -408,13 +424,13 @@ pub(crate) fn step_too_far(e: &ShootError) -> bool {
 }
 
 /// Refuses shapes of several signal channels where their stages, outputs
-/// and reports do not carry them yet (a registration of several channels
-/// runs in [`minimize`]).
+/// and reports do not carry them yet (atlases; a registration of several
+/// channels runs in a [`crate::Session`]).
 pub(crate) fn one_channel<'a>(shapes: impl IntoIterator<Item = &'a FShape>) -> Result<(), MatchError> {
     match shapes.into_iter().map(FShape::n_channels).find(|&k| k > 1) {
         Some(k) => Err(MatchError::InvalidInput(format!(
-            "a shape carries {k} signal channels: sessions, atlases and their outputs take one so far \
-             (fshape_match::session::minimize registers several)"
+            "a shape carries {k} signal channels: atlases take one so far \
+             (a registration, fshape_match::Session, takes several)"
         ))),
         None => Ok(()),
     }

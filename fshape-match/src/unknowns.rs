@@ -101,7 +101,7 @@ impl Unknowns {
     pub fn scaled(
         problem: &Problem,
         metrics: impl Into<Metrics>,
-        scales: Option<crate::Scales>,
+        scales: Option<&crate::Scales>,
     ) -> Result<Unknowns, crate::MatchError> {
         let metrics = metrics.into();
         let mut unknowns = Unknowns::for_template(problem.template(), problem.model().kind(), metrics, scales)?;
@@ -128,7 +128,7 @@ impl Unknowns {
         t: &fshape_mesh::FShape,
         kind: ModelKind,
         metrics: impl Into<Metrics>,
-        scales: Option<crate::Scales>,
+        scales: Option<&crate::Scales>,
     ) -> Result<Unknowns, ShootError> {
         let metrics = metrics.into();
         let (p, pn, dim) = (t.n_vertices(), t.n_vertices() * t.dim(), t.dim());
@@ -161,12 +161,15 @@ impl Unknowns {
             let half_d = sc.length.powf(0.5 * sc.cell_dim as f64);
             let l2 = |m: Metric| if m == Metric::L2 { half_d } else { 1.0 };
             let c0 = 1.0 / (sc.length * l2(metrics.momentum));
-            let cf = match kind {
-                ModelKind::Tangential => sc.signal * l2(metrics.signal),
-                _ => 1.0 / (sc.signal * l2(metrics.signal)),
-            };
+            // S_c of each channel (channel c's unknowns are c, c + k, …).
+            let cf: Vec<f64> = (0..k)
+                .map(|c| match kind {
+                    ModelKind::Tangential => sc.channel(c) * l2(metrics.signal),
+                    _ => 1.0 / (sc.channel(c) * l2(metrics.signal)),
+                })
+                .collect();
             scale_p.iter_mut().for_each(|v| *v *= c0);
-            scale.iter_mut().for_each(|v| *v *= cf);
+            scale.iter_mut().zip(cf.iter().cycle()).for_each(|(v, c)| *v *= c);
         }
         Ok(Unknowns { factor: None, signal_matrix: None, pn, p: p * k, scale, scale_p })
     }

@@ -94,7 +94,7 @@ pub(crate) fn match_shapes<'py>(
             Outcome::Interrupted if observer.error.is_none() => session.result_so_far()?,
             Outcome::Interrupted => None,
         };
-        let used = config.resolved(session.plan().scales);
+        let used = config.resolved(session.plan().scales.as_ref());
         let template = session.problem().template().clone();
         Ok((result, used, template, session.target().clone()))
     });

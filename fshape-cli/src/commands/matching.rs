@@ -183,7 +183,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let shoot = format!(
         "# {} with the weights fshape match used (normalize = false): shoot p0.csv and pf.csv with it.\n\n{}",
         a.config.display(),
-        config.resolved(session.plan().scales).to_toml()
+        config.resolved(session.plan().scales.as_ref()).to_toml()
     );
     outputs.push((a.out.join("shoot.toml"), shoot.into_bytes()));
     files.push("shoot.toml".into());
@@ -251,7 +251,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         gamma_v: config.model.gamma_v,
         gamma_f: config.model.gamma_f,
         gamma_w: config.model.gamma_w,
-        scales: session.plan().scales,
+        scales: session.plan().scales.clone(),
         effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
         steps: model.steps(),
         metrics,
@@ -261,8 +261,8 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         final_attachment: e.attachment,
         geodesic_distance: e.energy.max(0.0).sqrt(),
         hamiltonian: traj.hamiltonian.clone(),
-        quality: result.quality,
-        quality_before: result.initial_quality,
+        quality: result.quality.clone(),
+        quality_before: result.initial_quality.clone(),
         prealign: result.alignment.as_ref(),
         iterations: result.iterations,
         evaluations: result.evaluations,

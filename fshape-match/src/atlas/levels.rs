@@ -50,13 +50,13 @@ impl Level {
             }
         };
         let deformation = first.model().kernel().path().to_string();
-        let unknowns = Unknowns::scaled(first, plan.metrics, plan.scales)?;
-        let metric = TemplateMetric::new(template, plan.model.kernel(), plan.scales)?;
+        let unknowns = Unknowns::scaled(first, plan.metrics, plan.scales.as_ref())?;
+        let metric = TemplateMetric::new(template, plan.model.kernel(), plan.scales.as_ref())?;
         let hyper = match hyper {
             None => None,
             Some(model) => {
                 let problem = Problem::new(template, model.clone())?;
-                let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales)?;
+                let unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales.as_ref())?;
                 Some(Hyper { problem, unknowns })
             }
         };

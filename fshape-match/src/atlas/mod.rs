@@ -288,7 +288,7 @@ impl Staged for Population {
         let source = &self.stages.start;
         let (signal, mask) = crate::resolution::sample_signal(source, &template)?;
         let mask = template.mask().map(<[f64]>::to_vec).or(mask);
-        Ok(template.with_signal_and_mask(Some(signal), mask)?)
+        Ok(template.with_signals_and_mask(Some(signal), source.n_channels(), mask)?)
     }
 
     fn len_at(&self, k: usize) -> usize {
@@ -373,7 +373,7 @@ impl Runner<Population> {
                         message: format!("must be positive and finite, got {g}"),
                     });
                 }
-                let gamma_v0 = match plan.scales {
+                let gamma_v0 = match &plan.scales {
                     Some(s) if config.model.normalize => s.effective(g, 1.0, 1.0).0,
                     _ => g,
                 };

@@ -32,7 +32,7 @@ pub(super) struct TemplateMetric {
 }
 
 impl TemplateMetric {
-    pub(super) fn new(template: &FShape, kernel: &Kernel, scales: Option<crate::Scales>) -> Result<Self, ShootError> {
+    pub(super) fn new(template: &FShape, kernel: &Kernel, scales: Option<&crate::Scales>) -> Result<Self, ShootError> {
         let masses = SignalNorm::try_new(template, Norm::L2Lumped)?.assemble(template.points())?;
         if let Some(v) = masses.iter().position(|m| m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
             return Err(fshape_fem::FemError::Singular { vertex: v }.into());

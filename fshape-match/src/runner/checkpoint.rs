@@ -279,8 +279,13 @@ impl Fnv {
         self.eat(&s.points().iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
         self.eat(&s.cells().iter().flat_map(|c| (*c as u64).to_le_bytes()).collect::<Vec<u8>>());
         self.eat(&s.signal().unwrap_or(&[]).iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());
-        // A mask enters only when present, so unmasked inputs keep their
-        // fingerprints (and their checkpoints) from before masks existed.
+        // The channel count and a mask enter only when they are not the
+        // defaults, so one-channel unmasked inputs keep their fingerprints
+        // (and their checkpoints) from before channels and masks existed.
+        if s.n_channels() > 1 {
+            self.eat(b"channels");
+            self.eat(&(s.n_channels() as u64).to_le_bytes());
+        }
         if let Some(m) = s.mask() {
             self.eat(b"mask");
             self.eat(&m.iter().flat_map(|v| v.to_bits().to_le_bytes()).collect::<Vec<u8>>());

@@ -157,7 +157,15 @@ impl StageTemplates {
         given: bool,
     ) -> Result<StageTemplates, MatchError> {
         let (n, start, what) = (staged.stages().plan.stages.len(), &staged.stages().start, S::START);
-        crate::session::one_channel(templates.iter().flatten())?;
+        if let Some(t) =
+            templates.iter().flatten().find(|t| t.signal().is_some() && t.n_channels() != start.n_channels())
+        {
+            return Err(MatchError::StageTemplates(format!(
+                "a stage template carries {} signal channels, the {what} {}",
+                t.n_channels(),
+                start.n_channels()
+            )));
+        }
         if templates.len() != n {
             return Err(MatchError::StageTemplates(format!(
                 "{} given for a schedule of {n} stages (one per stage, the last None)",

@@ -367,3 +367,38 @@ fn masked_values_count_in_no_signal_error() {
     assert!((q.signal_range - 1.5).abs() < 0.05, "{}", q.signal_range);
     assert!(q.signal_roughness.unwrap().is_finite());
 }
+
+#[test]
+fn each_channel_is_judged_on_its_own_range() {
+    // Channel 1 is x + 0.1 against x (range 2); channel 2 is 3y against
+    // 3y + 0.6 (range 6): errors of 5 % and 10 % of their ranges.
+    let with = |s: FShape, c: [f64; 2]| -> FShape {
+        let rows: Vec<f64> = s.points().chunks_exact(3).flat_map(|p| [p[0] + c[0], 3.0 * p[1] + c[1]]).collect();
+        s.with_signals(Some(rows), 2).unwrap()
+    };
+    let (shape, target) = (with(square_at(0.01, 0.0), [0.1, 0.0]), with(square_at(0.0, 0.0), [0.0, 0.6]));
+    let q = quality(&shape, &target).unwrap();
+    assert_eq!(q.channels.len(), 2);
+    for (c, (range, rms)) in [(2.0, 0.05), (6.0, 0.1)].into_iter().enumerate() {
+        let ch = &q.channels[c];
+        assert!((ch.signal_range - range).abs() < 1e-12, "channel {c}: {ch:?}");
+        assert!((ch.signal_rms.unwrap() - rms).abs() < 1e-12, "channel {c}: {ch:?}");
+        assert!((ch.signal_rms_on_shape.unwrap() - rms).abs() < 1e-12, "channel {c}: {ch:?}");
+        assert!((ch.signal_roughness.unwrap() - 1.0).abs() < 1e-12, "channel {c}: {ch:?}");
+    }
+    // Channel 1's figures are the top-level ones; each channel alone is
+    // judged as a one-channel shape would be.
+    assert_eq!((q.signal_rms, q.signal_range), (q.channels[0].signal_rms, q.channels[0].signal_range));
+    for c in 0..2 {
+        let alone = |s: &FShape| s.clone().with_signal(Some(s.channel(c).unwrap())).unwrap();
+        let one = quality(&alone(&shape), &alone(&target)).unwrap();
+        assert_eq!(one.signal_rms, q.channels[c].signal_rms, "channel {c}");
+        assert_eq!(one.signal_p99, q.channels[c].signal_p99, "channel {c}");
+        assert!(one.channels.is_empty());
+    }
+    assert!(q.describe().contains("channel 2: signal error 10"), "{}", q.describe());
+    // Shapes of different channel counts are not compared.
+    let one = square_at(0.0, 0.0);
+    let e = quality(&shape, &one).expect_err("refused").to_string();
+    assert!(e.contains("channel"), "{e}");
+}

@@ -146,7 +146,7 @@ fn the_fields_read_from_the_source_are_the_keys_the_types_write() {
     // A configuration with every optional key set, serialised: its keys
     // per table must be the fields the reference lists.
     let full = Config::parse(
-        "[model]\n[deformation]\nwidths = [1.0]\nweights = [1.0]\ntolerance = 1e-6\n[integrator]\n\
+        "[model]\nchannel_weights = [1.0]\n[deformation]\nwidths = [1.0]\nweights = [1.0]\ntolerance = 1e-6\n[integrator]\n\
          [attachment]\nkernel_geom = \"gaussian:1\"\nkernel_signal = \"gaussian:1\"\ntolerance = 1e-6\nmasked_geometry = false\n[optimizer]\n\
          [schedule]\nkernel_geom = [\"gaussian:1\"]\nscheme = [\"rk4\"]\nsteps = [10]\nmax_iterations = [5]\n\
          decrease_tolerance = [1e-3]\ndecrease_window = [5]\nvertices = []\ncoarse_targets = true\n[atlas]\n[prealign]\n",

@@ -153,3 +153,39 @@ fn fitted_momenta_keep_the_velocity_of_rough_momenta() {
     eprintln!("velocity error, iterative fit: {err_i:.2e}");
     assert!(err_i < err_d / 20.0, "velocity error: density {err_d}, iterative fit {err_i}");
 }
+
+#[test]
+fn momenta_and_signals_of_two_channels_are_carried_as_each_channel_alone() {
+    // Per channel, the same bits as a one-channel shape carrying that
+    // channel: the channels are interleaved, never mixed.
+    let (coarse1, fine1) = spheres();
+    let (p0, pf_a) = momenta(&coarse1);
+    let pf_b: Vec<f64> = pf_a.iter().enumerate().map(|(i, v)| v * (1.0 + (i % 7) as f64) - 0.01).collect();
+    let two = |s: &FShape, a: &[f64], b: &[f64]| -> FShape {
+        let rows = a.iter().zip(b).flat_map(|(x, y)| [*x, *y]).collect();
+        s.clone().with_signals(Some(rows), 2).unwrap()
+    };
+    let (signal_a, signal_b): (Vec<f64>, Vec<f64>) =
+        coarse1.points().chunks_exact(3).map(|x| (x[0] + 0.5 * x[1], x[2] * x[2])).unzip();
+    let coarse2 = two(&coarse1, &signal_a, &signal_b);
+    let fine2 = two(&fine1, &vec![0.0; fine1.n_vertices()], &vec![0.0; fine1.n_vertices()]);
+    let rows: Vec<f64> = pf_a.iter().zip(&pf_b).flat_map(|(x, y)| [*x, *y]).collect();
+    for kind in [fshape_shoot::ModelKind::Metamorphosis, fshape_shoot::ModelKind::Tangential] {
+        let (q0, qf) = prolongate(&coarse2, &fine2, &p0, &rows, kind).unwrap();
+        assert_eq!(qf.len(), 2 * fine1.n_vertices());
+        for (c, pf) in [&pf_a, &pf_b].into_iter().enumerate() {
+            let (q0_1, qf_1) = prolongate(&coarse1, &fine1, &p0, pf, kind).unwrap();
+            assert_eq!(q0, q0_1, "{kind:?}: p_0");
+            let got: Vec<f64> = qf.iter().skip(c).step_by(2).copied().collect();
+            assert_eq!(got, qf_1, "{kind:?}: channel {c}");
+        }
+    }
+    // Resampling the signal: each channel as itself alone.
+    let (rows, _) = fshape_match::resolution::sample_signal(&coarse2, &fine1).unwrap();
+    for (c, f) in [&signal_a, &signal_b].into_iter().enumerate() {
+        let one = coarse1.clone().with_signal(Some(f.clone())).unwrap();
+        let (alone, _) = fshape_match::resolution::sample_signal(&one, &fine1).unwrap();
+        let got: Vec<f64> = rows.iter().skip(c).step_by(2).copied().collect();
+        assert_eq!(got, alone, "channel {c}");
+    }
+}

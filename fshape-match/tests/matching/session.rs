@@ -254,7 +254,7 @@ fn normalised_weights_give_the_same_registration_at_any_scale() {
             for (u, v) in a.iter().zip(&b) {
                 assert!((u - v).abs() <= 1e-9 * u.abs(), "{name}, L = {l}, S = {s}: J {u} against {v}");
             }
-            let (qa, qb) = (unit.quality, other.quality);
+            let (qa, qb) = (&unit.quality, &other.quality);
             assert!((qa.mean_distance - qb.mean_distance).abs() < 1e-9, "{name}");
             assert!((qa.signal_rms.unwrap() - qb.signal_rms.unwrap()).abs() < 1e-9, "{name}");
             // Without normalisation the same weights fit differently.
@@ -268,7 +268,7 @@ fn normalised_weights_give_the_same_registration_at_any_scale() {
 fn the_scales_are_the_targets_diagonal_and_signal_deviation() {
     let (source, target, config) = inputs();
     let session = Session::new(&source, &target, &config).unwrap();
-    let s = session.plan().scales.expect("normalised by default");
+    let s = session.plan().scales.clone().expect("normalised by default");
     assert_eq!(s.length, target.bounding_box().diagonal());
     let f = target.signal().unwrap();
     let mean = f.iter().sum::<f64>() / f.len() as f64;
@@ -279,6 +279,39 @@ fn the_scales_are_the_targets_diagonal_and_signal_deviation() {
     assert!((m.gamma_w() - gw / l.powi(4)).abs() < 1e-12 * m.gamma_w());
     assert!((m.gamma_v() - config.model.gamma_v / (l * l)).abs() < 1e-15);
     assert!((m.gamma_f() - config.model.gamma_f / (sd * sd * l * l)).abs() < 1e-12 * m.gamma_f());
+}
+
+#[test]
+fn the_signal_scale_skips_masked_and_missing_vertices_and_weighs_the_rest() {
+    // The first ten target vertices are masked out with no value (NaN),
+    // the next ten half in: S is the mask-weighted deviation of the rest.
+    let (source, target, _) = inputs();
+    let n = target.n_vertices();
+    let mut f = target.signal().unwrap().to_vec();
+    let mask: Vec<f64> = (0..n)
+        .map(|v| {
+            if v < 10 {
+                0.0
+            } else if v < 20 {
+                0.5
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    f[..10].fill(f64::NAN);
+    let masked = target.clone().with_signal_and_mask(Some(f.clone()), Some(mask.clone())).unwrap();
+    let s = fshape_match::Scales::of(&source, &masked).unwrap();
+    let total: f64 = mask.iter().sum();
+    let mean = f.iter().zip(&mask).skip(10).map(|(x, w)| w * x).sum::<f64>() / total;
+    let sd = (f.iter().zip(&mask).skip(10).map(|(x, w)| w * (x - mean).powi(2)).sum::<f64>() / total).sqrt();
+    assert!((s.signal - sd).abs() < 1e-14 * sd, "{} against {sd}", s.signal);
+    // Unmasked, the plain deviation, to the bit.
+    let plain = fshape_match::Scales::of(&source, &target).unwrap();
+    let g = target.signal().unwrap();
+    let mean = g.iter().sum::<f64>() / n as f64;
+    let sd = (g.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+    assert_eq!(plain.signal, sd);
 }
 
 #[test]
@@ -352,7 +385,7 @@ fn coarse_stages_on_coarser_templates_carry_their_momenta_to_the_fine_one() {
         .unwrap()
         .with_target(&target, plan.stages[1].kernel.clone())
         .unwrap();
-    let unknowns = fshape_match::unknowns::Unknowns::scaled(&coarse, plan.metrics, plan.scales).unwrap();
+    let unknowns = fshape_match::unknowns::Unknowns::scaled(&coarse, plan.metrics, plan.scales.as_ref()).unwrap();
     let (p0, pf) = unknowns.unpack(&x0);
     let on_coarse = coarse.objective(&p0, &pf).unwrap().0.attachment;
     let n = sphere(2).n_vertices();
