@@ -50,7 +50,7 @@ impl View {
                     hi[k] = hi[k].max(c[k]);
                 }
             }
-            for &f in s.signal().unwrap_or(&[]) {
+            for f in s.channel(0).unwrap_or_default() {
                 flo = flo.min(f);
                 fhi = fhi.max(f);
             }
@@ -65,7 +65,7 @@ impl View {
     /// only (e.g. the source and the target, so that overshoots along the
     /// path saturate instead of washing the pictures out).
     pub fn with_range_of(mut self, shapes: &[&FShape]) -> View {
-        let vals = shapes.iter().flat_map(|s| s.signal().unwrap_or(&[]).iter().copied());
+        let vals = shapes.iter().flat_map(|s| s.channel(0).unwrap_or_default());
         let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
         if lo < hi {
             self.range = (lo, hi);
@@ -138,8 +138,8 @@ pub fn picture(shape: &FShape, view: &View) -> anyhow::Result<Vec<u8>> {
 pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
     let mut rgb = vec![255u8; SIZE * SIZE * 3];
     let mut depth = vec![f64::NEG_INFINITY; SIZE * SIZE];
-    let zero = vec![0.0; shape.n_vertices()];
-    let f = shape.signal().unwrap_or(&zero);
+    // A shape of several channels is coloured by its first.
+    let f = shape.channel(0).unwrap_or_else(|| vec![0.0; shape.n_vertices()]);
     let dim = shape.dim();
     let px: Vec<[f64; 3]> = shape.points().chunks_exact(dim).map(|p| view.pixel(p)).collect();
     let (lo, hi) = view.range;

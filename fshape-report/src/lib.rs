@@ -138,7 +138,8 @@ fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Optio
             let p = f.point(v);
             [p[0], p[1], if d == 3 { p[2] } else { 0.0 }]
         })));
-        if let Some(s) = f.signal() {
+        // Several channels: the first is shown.
+        if let Some(s) = f.channel(0) {
             signals.push(packed_f32(order.iter().map(|&v| s[v])));
         }
     }
@@ -181,8 +182,14 @@ pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Opt
     if let (Some(k), Some(c)) = (companion_simplified, companion) {
         notes.push(format!("the {companion_name} is shown simplified from {} to {k} vertices", c.n_vertices()));
     }
-    let values = frames[0].signal().into_iter().chain(companion.and_then(FShape::signal)).flatten();
-    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    if frames[0].n_channels() > 1 {
+        notes.push(format!(
+            "the colours show the first of its {} signal channels (the files hold each)",
+            frames[0].n_channels()
+        ));
+    }
+    let values = frames[0].channel(0).into_iter().chain(companion.and_then(|c| c.channel(0))).flatten();
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     Ok(Scene {
         name: name.to_string(),
         labels,

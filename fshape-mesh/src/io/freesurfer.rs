@@ -133,7 +133,7 @@ pub(crate) fn parse_surface(data: &[u8]) -> Result<RawMesh, ParseError> {
             );
         }
     }
-    Ok(RawMesh { dim: 3, cell_size: Some(3), points, cells, signal: None, mask: None, scalars: Vec::new() })
+    Ok(RawMesh { dim: 3, cell_size: Some(3), points, cells, ..RawMesh::default() })
 }
 
 /// Writes a triangle surface file (coordinates rounded to `f32`), as

@@ -842,7 +842,9 @@ pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseEr
     let n = g.arrays[p].dims[0];
     let scalars: Vec<usize> = (0..g.arrays.len()).filter(|&k| g.arrays[k].per_vertex(Some(n))).collect();
     let labels = scalars.iter().map(|&k| g.arrays[k].label(k)).collect();
-    let signal = scalars.iter().find(|&&k| g.arrays[k].name() == Some(signal_name)).copied();
+    let channels = super::channel_columns(signal_name, |name| {
+        scalars.iter().find(|&&k| g.arrays[k].name() == Some(name)).copied()
+    });
     let mask = scalars.iter().find(|&&k| g.arrays[k].name() == Some("mask") && signal_name != "mask").copied();
     let mask = mask.map(|k| std::mem::take(&mut g.arrays[k].values));
     // The arrays are ours: move the values out rather than copy them.
@@ -851,7 +853,14 @@ pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseEr
         cell_size: Some(3),
         points: std::mem::take(&mut g.arrays[p].values),
         cells,
-        signal: signal.map(|k| std::mem::take(&mut g.arrays[k].values)),
+        channels: channels.len(),
+        signal: match channels[..] {
+            [] => None,
+            [one] => Some(std::mem::take(&mut g.arrays[one].values)),
+            _ => Some(super::interleave(
+                &channels.iter().map(|&k| std::mem::take(&mut g.arrays[k].values)).collect::<Vec<_>>(),
+            )),
+        },
         mask,
         scalars: labels,
     })
@@ -959,14 +968,13 @@ pub fn write_arrays(w: &mut impl Write, arrays: &[DataArray], opts: WriteOptions
 }
 
 /// The data arrays of a surface: POINTSET (`FLOAT32`), TRIANGLE (`INT32`)
-/// and, if the shape has a signal, a SHAPE array (`FLOAT32`) named
-/// `signal_name`.
+/// and, if the shape has a signal, a SHAPE array (`FLOAT32`) per channel
+/// named `signal_name`, `signal_name_2`, … ([`super::channel_name`]).
 ///
 /// # Errors
 ///
 /// `InvalidInput` if the shape is not a triangle surface in 3-D.
 pub fn surface_arrays(shape: &FShape, signal_name: &str) -> io::Result<Vec<DataArray>> {
-    super::one_map(shape)?;
     if shape.kind() != CellKind::Triangle || shape.dim() != 3 {
         return Err(io::Error::new(
             io::ErrorKind::InvalidInput,
@@ -990,8 +998,9 @@ pub fn surface_arrays(shape: &FShape, signal_name: &str) -> io::Result<Vec<DataA
             meta: Vec::new(),
         },
     ];
-    if let Some(f) = shape.signal() {
-        arrays.push(signal_array(signal_name, f));
+    for c in 0..shape.n_channels() {
+        let f = shape.channel(c).unwrap_or_default();
+        arrays.push(signal_array(&super::channel_name(signal_name, c), &f));
     }
     if let Some(m) = shape.mask() {
         arrays.push(signal_array("mask", m));

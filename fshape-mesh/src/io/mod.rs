@@ -318,7 +318,33 @@ pub struct ReadOptions {
     /// property [`DEFAULT_SIGNAL_NAME`] if present and no signal otherwise;
     /// a named property must exist. Scanner fields (`confidence`,
     /// `intensity`, ...) are never taken as a signal unless named here.
+    /// Properties `name_2`, `name_3`, … beside it are read as its further
+    /// channels ([`channel_name`]).
     pub signal_name: Option<String>,
+}
+
+/// The name of channel `c` (from 0) of a signal named `base` in a file
+/// with one property or array per channel (PLY, VTK, GIfTI): `base`, then
+/// `base_2`, `base_3`, …, so that a reader that knows one signal reads
+/// the first channel.
+pub fn channel_name(base: &str, c: usize) -> String {
+    if c == 0 { base.to_string() } else { format!("{base}_{}", c + 1) }
+}
+
+/// What `find` finds for the channels of a signal named `base`: `base`,
+/// then `base_2`, `base_3`, … while they exist.
+pub(crate) fn channel_columns<T>(base: &str, find: impl Fn(&str) -> Option<T>) -> Vec<T> {
+    let mut found = Vec::new();
+    while let Some(t) = find(&channel_name(base, found.len())) {
+        found.push(t);
+    }
+    found
+}
+
+/// Columns of one value per vertex as rows of k values per vertex.
+pub fn interleave(columns: &[Vec<f64>]) -> Vec<f64> {
+    let n = columns.first().map_or(0, Vec::len);
+    (0..n).flat_map(|v| columns.iter().map(move |c| c[v])).collect()
 }
 
 /// Mesh file formats.
@@ -404,6 +430,8 @@ pub(crate) struct RawMesh {
     pub(crate) points: Vec<f64>,
     pub(crate) cells: Vec<usize>,
     pub(crate) signal: Option<Vec<f64>>,
+    /// The signal's channel count (0 or 1: one).
+    pub(crate) channels: usize,
     /// The vertex mask (PLY property `mask`), if the file has one.
     pub(crate) mask: Option<Vec<f64>>,
     /// Names of every per-vertex scalar in the file.
@@ -416,11 +444,8 @@ impl RawMesh {
             return Err(ReadError::SignalNotFound { path: path.into(), name: name.clone(), available: self.scalars });
         }
         let kind = if self.cell_size == Some(2) { CellKind::Segment } else { CellKind::Triangle };
-        let shape = match self.mask {
-            None => FShape::try_new(self.dim, kind, self.points, self.cells, self.signal),
-            mask => FShape::try_new(self.dim, kind, self.points, self.cells, None)
-                .and_then(|s| s.with_signal_and_mask(self.signal, mask)),
-        };
+        let shape = FShape::try_new(self.dim, kind, self.points, self.cells, None)
+            .and_then(|s| s.with_signals_and_mask(self.signal, self.channels.max(1), self.mask));
         shape.map_err(|source| ReadError::Shape { path: path.into(), source })
     }
 }
@@ -486,17 +511,6 @@ fn refuse_bz2(path: &Path) -> Result<(), WriteError> {
         });
     }
     Ok(())
-}
-
-/// Refuses a shape of several signal channels where a mesh file carries
-/// one map (every writer with a signal calls it first).
-pub(crate) fn one_map(shape: &FShape) -> std::io::Result<()> {
-    match shape.n_channels() {
-        0 | 1 => Ok(()),
-        k => Err(std::io::Error::other(format!(
-            "the shape carries {k} signal channels; mesh files carry one (write each channel as a signal file)"
-        ))),
-    }
 }
 
 /// Writes a mesh in the format its extension names (`.ply`, `.obj`,

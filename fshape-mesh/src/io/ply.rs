@@ -300,13 +300,15 @@ fn read_vertices(
     let x = el.find("x").ok_or_else(|| missing("vertex property `x`"))?;
     let y = el.find("y").ok_or_else(|| missing("vertex property `y`"))?;
     let z = el.find("z");
-    let s = el.find(signal_name).filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)));
+    let s = super::channel_columns(signal_name, |name| {
+        el.find(name).filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)))
+    });
     // fshape writes a masked shape's mask as the property `mask`.
     let m = el.find("mask").filter(|&i| matches!(el.props[i].kind, Kind::Scalar(_)) && signal_name != "mask");
     raw.dim = if z.is_some() { 3 } else { 2 };
     let n = el.count as usize;
     raw.points = Vec::with_capacity(n * raw.dim);
-    let mut signal = s.map(|_| Vec::with_capacity(n));
+    let mut signal = (!s.is_empty()).then(|| Vec::with_capacity(n.saturating_mul(s.len())));
     let mut mask = m.map(|_| Vec::with_capacity(n));
     let mut vals = vec![0.0; el.props.len()];
     for _ in 0..n {
@@ -326,14 +328,15 @@ fn read_vertices(
         if let Some(z) = z {
             raw.points.push(vals[z]);
         }
-        if let (Some(sig), Some(s)) = (signal.as_mut(), s) {
-            sig.push(vals[s]);
+        if let Some(sig) = signal.as_mut() {
+            sig.extend(s.iter().map(|&s| vals[s]));
         }
         if let (Some(mask), Some(m)) = (mask.as_mut(), m) {
             mask.push(vals[m]);
         }
     }
     raw.signal = signal;
+    raw.channels = s.len();
     raw.mask = mask;
     Ok(())
 }
@@ -446,9 +449,9 @@ fn skip(cur: &mut Cursor, body: Body, el: &Element) -> Result<(), ParseError> {
     Ok(())
 }
 
-/// Writes `shape` as PLY with `double` coordinates (and signal).
+/// Writes `shape` as PLY with `double` coordinates (and signal: a
+/// property per channel, `signal`, `signal_2`, …).
 pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
-    super::one_map(shape)?;
     let fmt = match encoding {
         Encoding::Ascii => "ascii",
         Encoding::Binary => "binary_little_endian",
@@ -459,8 +462,9 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
     }
     writeln!(w, "element vertex {}", shape.n_vertices())?;
     writeln!(w, "property double x\nproperty double y\nproperty double z")?;
-    if shape.signal().is_some() {
-        writeln!(w, "property double signal")?;
+    let k = if shape.signal().is_some() { shape.n_channels().max(1) } else { 0 };
+    for c in 0..k {
+        writeln!(w, "property double {}", super::channel_name(super::DEFAULT_SIGNAL_NAME, c))?;
     }
     if shape.mask().is_some() {
         writeln!(w, "property double mask")?;
@@ -477,7 +481,7 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
         let p = shape.point(v);
         let z = if shape.dim() == 3 { p[2] } else { 0.0 };
         let vals = [p[0], p[1], z];
-        let sig = shape.signal().map(|f| f[v]);
+        let sig = shape.signal().map_or(&[][..], |f| &f[v * k..(v + 1) * k]);
         let mask = shape.mask().map(|m| m[v]);
         if ascii {
             write!(w, "{:e} {:e} {:e}", vals[0], vals[1], vals[2])?;
@@ -486,7 +490,7 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
             }
             writeln!(w)?;
         } else {
-            for x in vals.iter().chain(sig.as_ref()).chain(mask.as_ref()) {
+            for x in vals.iter().chain(sig).chain(mask.as_ref()) {
                 w.write_all(&x.to_le_bytes())?;
             }
         }

@@ -356,7 +356,13 @@ pub(crate) fn parse(data: &[u8], signal_name: &str) -> Result<RawMesh, ParseErro
     if signal_name != "mask" {
         raw.mask = arrays.iter().find(|a| a.0 == "mask").map(|a| a.1.clone());
     }
-    raw.signal = arrays.into_iter().find(|a| a.0 == signal_name).map(|a| a.1);
+    let channels = super::channel_columns(signal_name, |name| arrays.iter().position(|a| a.0 == name));
+    raw.channels = channels.len();
+    raw.signal = match channels[..] {
+        [] => None,
+        [one] => Some(arrays.swap_remove(one).1),
+        _ => Some(super::interleave(&channels.iter().map(|&c| std::mem::take(&mut arrays[c].1)).collect::<Vec<_>>())),
+    };
     if title == PLANAR_TITLE && raw.points.chunks_exact(3).all(|p| p[2] == 0.0) {
         raw.points = raw.points.chunks_exact(3).flat_map(|p| [p[0], p[1]]).collect();
         raw.dim = 2;
@@ -405,7 +411,6 @@ fn fill_cells(raw: &mut RawMesh, blocks: Vec<CellBlock>) -> Result<(), ParseErro
 
 /// Writes `shape` as VTK legacy POLYDATA, version 4.2.
 pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Result<()> {
-    super::one_map(shape)?;
     let ascii = encoding == Encoding::Ascii;
     let title = if shape.dim() == 2 { PLANAR_TITLE } else { "fshape" };
     let enc = if ascii { "ASCII" } else { "BINARY" };
@@ -446,8 +451,10 @@ pub fn write(w: &mut impl Write, shape: &FShape, encoding: Encoding) -> io::Resu
     if !ascii {
         writeln!(w)?;
     }
-    let fields = [("signal", shape.signal()), ("mask", shape.mask())];
-    for (k, (name, values)) in fields.iter().filter_map(|(n, v)| v.map(|v| (n, v))).enumerate() {
+    let mut fields: Vec<(String, Vec<f64>)> =
+        (0..shape.n_channels()).filter_map(|c| Some((super::channel_name("signal", c), shape.channel(c)?))).collect();
+    fields.extend(shape.mask().map(|m| ("mask".to_string(), m.to_vec())));
+    for (k, (name, values)) in fields.iter().enumerate() {
         if k == 0 {
             writeln!(w, "POINT_DATA {}", shape.n_vertices())?;
         }

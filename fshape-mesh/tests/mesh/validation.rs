@@ -170,18 +170,34 @@ fn several_channels_are_checked_masked_and_carried_vertex_by_vertex() {
     let (r, _) = sq.repaired(repairs);
     assert_eq!((r.n_vertices(), r.n_channels(), r.mask()), (4, 2, Some(&[1.0, 0.0, 1.0, 0.5][..])));
     assert_eq!(r.channel(1).unwrap()[3], -3.0);
-    // Mesh files carry one map: several are refused, not cut.
-    let path = std::env::temp_dir().join(format!("fshape-channels-{}.ply", std::process::id()));
-    let e = fshape_mesh::io::write_mesh(&path, &a, fshape_mesh::io::Encoding::Binary).unwrap_err();
-    assert!(e.to_string().contains("3 signal channels"), "{e}");
-    assert!(!path.exists());
-    // Every writer with a signal, not only the one the extension picks.
-    let gii = path.with_extension("gii");
-    let e = fshape_mesh::io::gifti::write_file(&gii, &a, Default::default()).unwrap_err();
-    assert!(e.to_string().contains("3 signal channels") && !gii.exists(), "{e}");
-    for format in [fshape_mesh::io::Format::Vtk, fshape_mesh::io::Format::Ply, fshape_mesh::io::Format::Gifti] {
-        let mut out = Vec::new();
-        assert!(fshape_mesh::io::write_to(&mut out, &a, format, fshape_mesh::io::Encoding::Ascii).is_err());
-        assert!(fshape_mesh::io::vtk::write(&mut Vec::new(), &a, fshape_mesh::io::Encoding::Ascii).is_err());
+    // Mesh files carry a property or array per channel (signal,
+    // signal_2, …) and read them back as channels, masked or not; a reader
+    // that knows one signal reads the first channel, and any channel is
+    // read alone by its name.
+    use fshape_mesh::io::{Encoding, Format, ReadOptions, parse_mesh, write_to};
+    let path = std::path::Path::new("channels");
+    for (shape, what) in [(&a, "plain"), (&b, "masked")] {
+        for format in [Format::Ply, Format::Vtk, Format::Gifti] {
+            for encoding in [Encoding::Ascii, Encoding::Binary] {
+                let mut bytes = Vec::new();
+                write_to(&mut bytes, shape, format, encoding).unwrap();
+                let back = parse_mesh(&bytes, format, &ReadOptions::default(), path).unwrap();
+                let label = format!("{what} {format:?} {encoding:?}");
+                assert_eq!(back.n_channels(), 3, "{label}");
+                assert_eq!(back.mask(), shape.mask(), "{label}");
+                for c in 0..3 {
+                    let (got, want) = (back.channel(c).unwrap(), shape.channel(c).unwrap());
+                    assert!(
+                        got.iter().zip(&want).all(|(x, y)| x == y || x.is_nan() && y.is_nan()),
+                        "{label}: channel {c}"
+                    );
+                }
+                let opts = ReadOptions { signal_name: Some("signal_3".into()) };
+                let third = parse_mesh(&bytes, format, &opts, path).unwrap();
+                assert_eq!(third.n_channels(), 1, "{label}");
+                let (got, want) = (third.signal().unwrap(), shape.channel(2).unwrap());
+                assert!(got.iter().zip(&want).all(|(x, y)| x == y || x.is_nan() && y.is_nan()), "{label}");
+            }
+        }
     }
 }
