@@ -140,12 +140,13 @@ pub struct Signals {
     pub signal_name: Option<String>,
     /// Per-vertex signal file for the source (CSV, GIfTI, FreeSurfer curv,
     /// MGH, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT, with :MAP after
-    /// it to pick a map).
+    /// it to pick a map). Repeated, one signal channel per file (thickness,
+    /// then myelin, ...), in the same order for the target.
     #[arg(long, visible_alias = "signal")]
-    pub source_signal: Option<PathBuf>,
+    pub source_signal: Vec<PathBuf>,
     /// Per-vertex signal file for the target (as --source-signal).
     #[arg(long)]
-    pub target_signal: Option<PathBuf>,
+    pub target_signal: Vec<PathBuf>,
     /// The source's mask: a FreeSurfer .label (its vertices count, the
     /// rest is masked), regions of a parcellation (lh.aparc.annot:insula,
     /// also .label.gii) or a per-vertex column of weights in [0, 1]. A
@@ -163,8 +164,8 @@ pub struct Signals {
 
 impl Signals {
     /// The source's and the target's signal files.
-    pub fn files(&self) -> (Option<&std::path::Path>, Option<&std::path::Path>) {
-        (self.source_signal.as_deref(), self.target_signal.as_deref())
+    pub fn files(&self) -> (&[PathBuf], &[PathBuf]) {
+        (&self.source_signal, &self.target_signal)
     }
 
     /// The source's and the target's masking.

@@ -47,7 +47,8 @@ pub fn message(e: &anyhow::Error) -> String {
 /// Reads a mesh and, if given, replaces its signal by a signal file's (CSV
 /// column, GIfTI data array, FreeSurfer curv or MGH).
 pub fn load(path: &Path, signal_name: Option<String>, signal: Option<&Path>) -> Result<FShape> {
-    load_masked(path, signal_name, signal, &Masking::default())
+    let signals: Vec<PathBuf> = signal.map(Path::to_path_buf).into_iter().collect();
+    load_masked(path, signal_name, &signals, &Masking::default())
 }
 
 /// How a shape's signal is masked: a mask file, and whether a signal
@@ -61,30 +62,39 @@ pub struct Masking<'a> {
     pub allow_missing: bool,
 }
 
-/// [`load`] with a mask: the mask file's weights, with 0 wherever the
-/// signal file has NaN when missing values are allowed.
-pub fn load_masked(path: &Path, signal_name: Option<String>, signal: Option<&Path>, m: &Masking) -> Result<FShape> {
+/// [`load`] with a mask and any number of signal files, one channel each:
+/// the mask file's weights, with 0 wherever a signal file has NaN when
+/// missing values are allowed.
+pub fn load_masked(path: &Path, signal_name: Option<String>, signals: &[PathBuf], m: &Masking) -> Result<FShape> {
     let shape = io::read_mesh(path, &ReadOptions { signal_name })?;
     let n = shape.n_vertices();
     let mut mask = m.mask.map(|p| io::read_mask(p, n)).transpose()?;
-    let Some(file) = signal else {
+    if signals.is_empty() {
         return match mask {
             Some(mask) => shape.with_mask(Some(mask)).with_context(|| format!("masking {}", path.display())),
             None => Ok(shape),
         };
-    };
-    let column = io::read_signal_for(file, Some(n), m.allow_missing)?;
-    if column.values.iter().any(|v| v.is_nan()) {
-        let weights = mask.get_or_insert_with(|| vec![1.0; n]);
-        for (w, v) in weights.iter_mut().zip(&column.values) {
-            if v.is_nan() {
-                *w = 0.0;
+    }
+    let columns: Vec<Vec<f64>> = signals
+        .iter()
+        .map(|file| Ok(io::read_signal_for(file, Some(n), m.allow_missing)?.values))
+        .collect::<Result<_>>()?;
+    for column in &columns {
+        if column.iter().any(|v| v.is_nan()) {
+            let weights = mask.get_or_insert_with(|| vec![1.0; n]);
+            for (w, v) in weights.iter_mut().zip(column) {
+                if v.is_nan() {
+                    *w = 0.0;
+                }
             }
         }
     }
+    let k = columns.len();
+    let rows = if k == 1 { columns.into_iter().next().unwrap_or_default() } else { io::interleave(&columns) };
+    let names: Vec<String> = signals.iter().map(|f| f.display().to_string()).collect();
     shape
-        .with_signal_and_mask(Some(column.values), mask)
-        .with_context(|| format!("attaching the signal of {} to {}", file.display(), path.display()))
+        .with_signals_and_mask(Some(rows), k, mask)
+        .with_context(|| format!("attaching the signal of {} to {}", names.join(", "), path.display()))
 }
 
 /// Warns when `--resume` reads a format-3 checkpoint: it has no checksum,

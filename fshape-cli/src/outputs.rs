@@ -22,7 +22,7 @@ pub fn trajectory_files(
     let mut steps: Vec<(f64, String)> = Vec::new();
     for (k, &t) in times.iter().enumerate() {
         let (x, f) = traj.at(t);
-        let state = template.clone().with_points(x)?.with_signal(Some(f))?;
+        let state = template.clone().with_points(x)?.with_signals(Some(f), template.n_channels().max(1))?;
         for ext in ["vtk", "ply"] {
             let name = format!("state_{k:03}.{ext}");
             let format = if ext == "vtk" { io::Format::Vtk } else { io::Format::Ply };

@@ -2128,3 +2128,148 @@ fn every_instruction_set_gives_the_same_registration_bits() {
     assert!(o.status.code() == Some(1) && err.contains("FSHAPE_SIMD") && err.contains("auto, avx2 or scalar"), "{err}");
     assert!(!tmp("simd_bad").exists());
 }
+
+#[test]
+fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
+    use fshape_mesh::io::{Encoding, ReadOptions, read_mesh, write_mesh};
+    // An ellipsoid onto a sphere, each with two maps in two files: the
+    // target's first map NaN on a cap (its wall, --allow-missing), its
+    // second map in other units.
+    let dir = tmp("two_maps");
+    std::fs::create_dir_all(&dir).unwrap();
+    let sphere = fshape_mesh::generate::icosphere(2, 0.5);
+    let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.2 * p[0], p[1], p[2] / 1.2]).collect();
+    let ellipsoid = sphere.clone().with_points(pts).unwrap();
+    write_mesh(&dir.join("source.ply"), &ellipsoid, Encoding::Binary).unwrap();
+    write_mesh(&dir.join("target.ply"), &sphere, Encoding::Binary).unwrap();
+    let column = |name: &str, values: Vec<f64>| -> PathBuf {
+        let path = dir.join(format!("{name}.csv"));
+        let text: String =
+            std::iter::once("value\n".to_string()).chain(values.iter().map(|v| format!("{v}\n"))).collect();
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let map = |s: &fshape_mesh::FShape, f: &dyn Fn(&[f64]) -> f64| -> Vec<f64> {
+        s.points().chunks_exact(3).map(f).collect()
+    };
+    let wall = |p: &[f64]| p[2] > 0.35;
+    let files = [
+        column("source1", map(&ellipsoid, &|p| p[0])),
+        column("source2", map(&ellipsoid, &|p| 100.0 * p[1])),
+        column("target1", map(&sphere, &|p| if wall(p) { f64::NAN } else { p[0] + 0.1 })),
+        column("target2", map(&sphere, &|p| 100.0 * p[1] - 10.0)),
+    ];
+    let config = dir.join("config.toml");
+    std::fs::write(&config, sphere_config(15).replace("\"gaussian:0.5\"", "\"gaussian:0.5,50\"")).unwrap();
+    let s = |p: &std::path::Path| p.display().to_string();
+    let out = dir.join("run");
+    let (source, target, config) = (s(&dir.join("source.ply")), s(&dir.join("target.ply")), s(&config));
+    let f: Vec<String> = files.iter().map(|p| s(p)).collect();
+    let o = fshape(&[
+        "match",
+        &source,
+        &target,
+        "--signal",
+        &f[0],
+        "--signal",
+        &f[1],
+        "--target-signal",
+        &f[2],
+        "--target-signal",
+        &f[3],
+        "--allow-missing",
+        "--config",
+        &config,
+        "--out",
+        &s(&out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The outputs carry both channels: states and matched shape as signal
+    // and signal_2, the signal momentum as pf and pf_2.
+    let matched = read_mesh(&out.join("matched.ply"), &ReadOptions::default()).unwrap();
+    assert_eq!(matched.n_channels(), 2);
+    let target_back = read_mesh(&out.join("target.ply"), &ReadOptions::default()).unwrap();
+    assert_eq!(target_back.n_channels(), 2);
+    let walled = sphere.points().chunks_exact(3).filter(|p| wall(p)).count();
+    assert_eq!(target_back.mask().unwrap().iter().filter(|w| **w == 0.0).count(), walled);
+    let pf = std::fs::read_to_string(out.join("pf.csv")).unwrap();
+    assert!(pf.starts_with("pf,pf_2\n"), "{}", &pf[..40]);
+    let vtk = String::from_utf8_lossy(&std::fs::read(out.join("momenta.vtk")).unwrap()).to_string();
+    assert!(vtk.contains("SCALARS pf double") && vtk.contains("SCALARS pf_2 double"));
+    assert_eq!(read_mesh(&out.join("state_000.vtk"), &ReadOptions::default()).unwrap().n_channels(), 2);
+    // Each channel's error fell, judged on its own range.
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    for c in 0..2 {
+        let rms = |q: &str| summary[q]["channels"][c]["signal_rms"].as_f64().unwrap();
+        assert!(rms("quality") < 0.5 * rms("quality_before"), "channel {c}: {summary}");
+    }
+    assert!(std::fs::read_to_string(out.join("report.html")).unwrap().contains("first of its 2 signal channels"));
+    // Its momenta shot again from its first state (both maps, the walls
+    // masked) with the shoot.toml it wrote end where it ended.
+    let file = |f: &str| s(&out.join(f));
+    let again = dir.join("shot");
+    let o = fshape(&[
+        "shoot",
+        &file("state_000.ply"),
+        "--momentum",
+        &file("p0.csv"),
+        "--signal-momentum",
+        &file("pf.csv"),
+        "--config",
+        &file("shoot.toml"),
+        "--out",
+        &s(&again),
+        "--times",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let shot = read_mesh(&again.join("state_000.ply"), &ReadOptions::default()).unwrap();
+    let close = |a: &[f64], b: &[f64]| {
+        a.iter().zip(b).all(|(u, v)| (u - v).abs() < 1e-9 * (1.0 + v.abs()) || u.is_nan() && v.is_nan())
+    };
+    assert_eq!(shot.n_channels(), 2);
+    assert!(close(shot.points(), matched.points()) && close(shot.signal().unwrap(), matched.signal().unwrap()));
+    // `fshape info` and `fshape quality` read several maps alike.
+    let v = json(&fshape(&["info", &target, "--signal", &f[2], "--signal", &f[3], "--allow-missing", "--json"]));
+    assert_eq!(v["channels"].as_array().map(Vec::len), Some(2), "{v}");
+    assert!((v["channels"][1]["max"].as_f64().unwrap() - 40.0).abs() < 1e-9, "{v}");
+    let q = json(&fshape(&[
+        "quality",
+        &source,
+        &target,
+        "--signal",
+        &f[0],
+        "--signal",
+        &f[1],
+        "--target-signal",
+        &f[2],
+        "--target-signal",
+        &f[3],
+        "--allow-missing",
+        "--json",
+    ]));
+    assert_eq!(q["channels"], summary["quality_before"]["channels"]);
+    // Two maps against one: refused, with the counts.
+    let o = fshape(&[
+        "match",
+        &source,
+        &target,
+        "--signal",
+        &f[0],
+        "--signal",
+        &f[1],
+        "--target-signal",
+        &f[2],
+        "--allow-missing",
+        "--config",
+        &config,
+        "--out",
+        &s(&dir.join("refused")),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("2 signal channels, the target 1"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

@@ -429,8 +429,7 @@ pub struct AttachmentSection {
     pub kernel_geom: PositionKernel,
     /// Signal kernel (omit for a geometric term): `gaussian:σ_f`, or
     /// `gaussian:σ_1,σ_2,…` with a width per signal channel for shapes of
-    /// several channels (the library's `minimize`; the program's commands
-    /// read one map so far).
+    /// several channels (one `--signal` file per channel).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel_signal: Option<SignalKernelSpec>,
     /// Direction kernel (default binet).

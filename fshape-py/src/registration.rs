@@ -107,7 +107,13 @@ pub(crate) fn match_shapes<'py>(
     d.set_item("stopped", !r.finished)?;
     let dim = template.dim();
     d.set_item("p0", rows(py, r.p0.clone(), dim))?;
-    d.set_item("pf", PyArray1::from_slice(py, &r.pf))?;
+    // n, or n × k with several signal channels.
+    let channels = template.n_channels().max(1);
+    if channels == 1 {
+        d.set_item("pf", PyArray1::from_slice(py, &r.pf))?;
+    } else {
+        d.set_item("pf", rows(py, r.pf.clone(), channels))?;
+    }
     d.set_item("energies", to_py(py, &r.energies)?)?;
     d.set_item("quality", to_py(py, &r.quality)?)?;
     d.set_item("initial_quality", to_py(py, &r.initial_quality)?)?;
@@ -118,7 +124,7 @@ pub(crate) fn match_shapes<'py>(
     d.set_item("seconds", r.seconds)?;
     d.set_item("geodesic", geodesic(py, &r.trajectory, dim, &times)?)?;
     let (x1, f1) = r.trajectory.at(1.0);
-    let matched = template.with_points(x1).and_then(|s| s.with_signal(Some(f1))).map_err(err)?;
+    let matched = template.with_points(x1).and_then(|s| s.with_signals(Some(f1), channels)).map_err(err)?;
     d.set_item("matched", PyFShape { inner: matched })?;
     d.set_item("target", PyFShape { inner: matched_target })?;
     d.set_item("config", to_py(py, &used)?)?;

@@ -18,17 +18,23 @@ pub(crate) fn geodesic<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut points = Vec::new();
     let mut signals = Vec::new();
-    let mut n = 0;
+    let (mut n, mut k) = (0, 1);
     for &t in times {
         let (x, f) = traj.at(t);
-        n = f.len();
+        n = x.len() / dim.max(1);
+        k = f.len().checked_div(n).unwrap_or(1).max(1);
         points.extend(x);
         signals.extend(f);
     }
     let d = PyDict::new(py);
     d.set_item("times", PyArray1::from_slice(py, times))?;
     d.set_item("points", Array3::from_shape_vec((times.len(), n, dim), points).map_err(err)?.into_pyarray(py))?;
-    d.set_item("signals", Array2::from_shape_vec((times.len(), n), signals).map_err(err)?.into_pyarray(py))?;
+    // T × n, or T × n × k with several signal channels.
+    if k == 1 {
+        d.set_item("signals", Array2::from_shape_vec((times.len(), n), signals).map_err(err)?.into_pyarray(py))?;
+    } else {
+        d.set_item("signals", Array3::from_shape_vec((times.len(), n, k), signals).map_err(err)?.into_pyarray(py))?;
+    }
     d.set_item("hamiltonian", PyArray1::from_slice(py, &traj.hamiltonian))?;
     Ok(d)
 }

@@ -184,8 +184,15 @@ def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
     config = {"model": {"normalize": False}, "deformation": {"widths": [0.3]}, "integrator": {"steps": 4}}
     with pytest.raises(fshape.FShapeError, match="2 maps per vertex"):
         fshape.shoot(two, np.zeros((12, 3)), config)
-    with pytest.raises(fshape.FShapeError, match="2 signal channels"):
-        fshape.match(two, two, CONFIG)
+    # A registration of two maps: each channel's error falls, the results
+    # are n × k.
+    two_tgt = tgt.with_signal(np.column_stack([tgt.signal, tgt.points[:, 0] + 0.2]))
+    widths = {**CONFIG, "attachment": {"kernel_geom": "gaussian:0.1", "kernel_signal": "gaussian:0.5,0.5"}}
+    r = fshape.match(two, two_tgt, widths)
+    assert r["matched"].n_channels == 2 and r["pf"].shape == (12, 2)
+    assert r["geodesic"]["signals"].shape[1:] == (12, 2)
+    for c in range(2):
+        assert r["quality"]["channels"][c]["signal_rms"] < r["initial_quality"]["channels"][c]["signal_rms"]
 
 
 def test_signal_norms_of_a_constant_signal_are_the_area():

@@ -229,12 +229,12 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         .iter()
         .map(|s| {
             let masking = crate::inputs::Masking { mask: s.mask.as_deref(), allow_missing: a.allow_missing };
-            crate::inputs::load_masked(&s.mesh, a.signal_name.clone(), s.signal.as_deref(), &masking)
+            crate::inputs::load_masked(&s.mesh, a.signal_name.clone(), s.signal.as_slice(), &masking)
         })
         .collect::<Result<_>>()?;
     let template_masking = crate::inputs::Masking { mask: a.template_mask, allow_missing: a.allow_missing };
     let (template_path, template) = match a.template {
-        Some(p) => (p.to_path_buf(), crate::inputs::load_masked(p, a.signal_name.clone(), None, &template_masking)?),
+        Some(p) => (p.to_path_buf(), crate::inputs::load_masked(p, a.signal_name.clone(), &[], &template_masking)?),
         None if a.template_mask.is_some() => bail!("--template-mask needs --template (the first subject has its own)"),
         None => (paths[0].mesh.clone(), subjects[0].clone()),
     };

@@ -313,7 +313,7 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
         ),
         source: &row.source,
         target: &row.target,
-        signals: (row.source_signal.as_deref(), row.target_signal.as_deref()),
+        signals: (row.source_signal.as_slice(), row.target_signal.as_slice()),
         config: a.config,
         out: &dir,
         resume,

@@ -7,8 +7,6 @@ use fshape_mesh::FShape;
 use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
-use crate::inputs::load;
-
 /// `fshape distance`'s arguments (its help is on the command).
 #[derive(clap::Args)]
 pub struct Args {
@@ -55,7 +53,7 @@ struct DistanceArgs<'a> {
     kernel: (&'a str, Option<&'a str>, &'a str),
     tolerance: Option<f64>,
     signal_name: Option<String>,
-    signals: (Option<&'a Path>, Option<&'a Path>),
+    signals: (&'a [std::path::PathBuf], &'a [std::path::PathBuf]),
     json: bool,
 }
 
@@ -94,8 +92,8 @@ fn distance(a: &DistanceArgs<'_>) -> Result<()> {
     if let Some(tol) = a.tolerance {
         kernel = kernel.truncated(tol)?;
     }
-    let x = load(a.source, a.signal_name.clone(), a.signals.0)?;
-    let y = load(a.target, a.signal_name.clone(), a.signals.1)?;
+    let x = crate::inputs::load_masked(a.source, a.signal_name.clone(), a.signals.0, &Default::default())?;
+    let y = crate::inputs::load_masked(a.target, a.signal_name.clone(), a.signals.1, &Default::default())?;
     warn_massless(a.source, &x);
     warn_massless(a.target, &y);
     let start = std::time::Instant::now();

@@ -19,9 +19,9 @@ pub struct Args {
     /// Per-vertex signal file replacing the mesh's signal: a CSV column with a
     /// header, GIfTI (.shape.gii, .func.gii), FreeSurfer curv (lh.thickness),
     /// .mgh/.mgz, or a CIFTI map as FILE.dscalar.nii:CORTEX_LEFT, with :MAP
-    /// after it to pick a map.
+    /// after it to pick a map. Repeated, one signal channel per file.
     #[arg(long)]
-    pub signal: Option<PathBuf>,
+    pub signal: Vec<PathBuf>,
     /// A mask: a FreeSurfer .label, regions of a parcellation
     /// (lh.aparc.annot:insula, also .label.gii) or a per-vertex column of
     /// weights in [0, 1].
@@ -37,7 +37,7 @@ pub struct Args {
 
 pub fn run(a: Args) -> Result<()> {
     let masking = crate::inputs::Masking { mask: a.mask.as_deref(), allow_missing: a.allow_missing };
-    info(&a.file, a.signal_name, a.signal.as_deref(), &masking, a.json)
+    info(&a.file, a.signal_name, &a.signal, &masking, a.json)
 }
 
 #[derive(Serialize)]
@@ -52,6 +52,18 @@ struct SignalSummary {
     min: f64,
     max: f64,
     mean: f64,
+}
+
+impl SignalSummary {
+    /// Over the values there are (NaN where masked); `None` without one.
+    fn of(f: &[f64]) -> Option<SignalSummary> {
+        let values = || f.iter().copied().filter(|v| !v.is_nan());
+        (values().count() > 0).then(|| SignalSummary {
+            min: values().fold(f64::INFINITY, f64::min),
+            max: values().fold(f64::NEG_INFINITY, f64::max),
+            mean: values().sum::<f64>() / values().count() as f64,
+        })
+    }
 }
 
 /// How many vertices a mask leaves without a value, in part, or whole.
@@ -73,7 +85,11 @@ struct Info {
     bbox_max: Vec<f64>,
     bbox_diagonal: f64,
     total_volume: f64,
+    /// The first channel's.
     signal: Option<SignalSummary>,
+    /// Each channel's, with several.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    channels: Vec<Option<SignalSummary>>,
     mask: Option<MaskSummary>,
     closed: bool,
     boundary_loops: usize,
@@ -115,11 +131,11 @@ fn summary(path: &Path, s: &FShape) -> Info {
         bbox_max: bbox.max,
         total_volume: s.total_volume(),
         // Over the values there are (a masked vertex's is NaN).
-        signal: s.signal().filter(|f| f.iter().any(|v| !v.is_nan())).map(|f| SignalSummary {
-            min: f.iter().copied().fold(f64::INFINITY, f64::min),
-            max: f.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-            mean: f.iter().filter(|v| !v.is_nan()).sum::<f64>() / f.iter().filter(|v| !v.is_nan()).count() as f64,
-        }),
+        signal: s.channel(0).and_then(|f| SignalSummary::of(&f)),
+        channels: match s.n_channels() {
+            0 | 1 => Vec::new(),
+            k => (0..k).map(|c| s.channel(c).and_then(|f| SignalSummary::of(&f))).collect(),
+        },
         mask: s.mask().map(|m| MaskSummary {
             masked: m.iter().filter(|w| **w == 0.0).count(),
             partial: m.iter().filter(|w| **w > 0.0 && **w < 1.0).count(),
@@ -137,7 +153,7 @@ fn summary(path: &Path, s: &FShape) -> Info {
 fn info(
     path: &Path,
     signal_name: Option<String>,
-    signal: Option<&Path>,
+    signal: &[PathBuf],
     masking: &crate::inputs::Masking,
     json: bool,
 ) -> Result<()> {
@@ -151,9 +167,18 @@ fn info(
     println!("  {} mesh in R^{}: {} vertices, {} cells", i.cell_kind, i.dim, i.n_vertices, i.n_cells);
     println!("  bounding box {:?} .. {:?} (diagonal {:.6})", i.bbox_min, i.bbox_max, i.bbox_diagonal);
     println!("  total {}: {:.9}", if shape.kind().dim() == 1 { "length" } else { "area" }, i.total_volume);
-    match &i.signal {
-        Some(f) => println!("  signal: min {:.6}, max {:.6}, mean {:.6}", f.min, f.max, f.mean),
-        None => println!("  signal: none"),
+    match (&i.signal, i.channels.len()) {
+        (Some(f), 0) => println!("  signal: min {:.6}, max {:.6}, mean {:.6}", f.min, f.max, f.mean),
+        (_, 0) => println!("  signal: none"),
+        (_, k) => {
+            println!("  signal: {k} channels");
+            for (c, f) in i.channels.iter().enumerate() {
+                match f {
+                    Some(f) => println!("    {}: min {:.6}, max {:.6}, mean {:.6}", c + 1, f.min, f.max, f.mean),
+                    None => println!("    {}: no value", c + 1),
+                }
+            }
+        }
     }
     if let Some(m) = &i.mask {
         println!(

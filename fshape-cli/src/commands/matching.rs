@@ -67,7 +67,7 @@ pub struct MatchArgs<'a> {
     pub source: &'a Path,
     pub target: &'a Path,
     /// Per-vertex signal CSVs of the source and the target.
-    pub signals: (Option<&'a Path>, Option<&'a Path>),
+    pub signals: (&'a [std::path::PathBuf], &'a [std::path::PathBuf]),
     /// Their masks.
     pub masking: (crate::inputs::Masking<'a>, crate::inputs::Masking<'a>),
     pub config: &'a Path,
@@ -190,13 +190,23 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     outputs.push((a.out.join("p0.csv"), io::csv::vectors_text(names, p0).into_bytes()));
     files.push("p0.csv".into());
     let kind = model.kind();
+    // Several signal channels: a column (and a VTK field) per channel,
+    // pf, pf_2, ...
+    let channels = template.n_channels().max(1);
+    let pf_names: Vec<String> = (0..channels).map(|c| io::channel_name("pf", c)).collect();
     if kind != ModelKind::Lddmm {
         let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
-        outputs.push((a.out.join("pf.csv"), io::csv::vectors_text(&[name], pf).into_bytes()));
+        let names: Vec<String> = (0..channels).map(|c| io::channel_name(name, c)).collect();
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        outputs.push((a.out.join("pf.csv"), io::csv::vectors_text(&names, pf).into_bytes()));
         files.push("pf.csv".into());
     }
+    let pf_columns: Vec<Vec<f64>> =
+        (0..channels).map(|c| pf.iter().skip(c).step_by(channels).copied().collect()).collect();
+    let pf_fields: Vec<(&str, &[f64])> =
+        pf_names.iter().zip(&pf_columns).map(|(n, c)| (n.as_str(), c.as_slice())).collect();
     let mut vtk = Vec::new();
-    io::vtk::write_point_fields(&mut vtk, &template, "fshape match: initial momenta", &[("p0", p0)], &[("pf", pf)])?;
+    io::vtk::write_point_fields(&mut vtk, &template, "fshape match: initial momenta", &[("p0", p0)], &pf_fields)?;
     outputs.push((a.out.join("momenta.vtk"), vtk));
     files.push("momenta.vtk".into());
     // Renders of the geodesic at the chosen times and of the target, all
@@ -206,7 +216,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         .iter()
         .map(|&t| {
             let (x, f) = traj.at(t);
-            template.clone().with_points(x)?.with_signal(Some(f))
+            template.clone().with_points(x)?.with_signals(Some(f), channels)
         })
         .collect::<Result<_, _>>()?;
     // The target as matched (moved by [prealign] move = "target").
@@ -227,7 +237,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let mut matched_ply = Vec::new();
     io::write_to(
         &mut matched_ply,
-        &template.clone().with_points(x)?.with_signal(Some(f))?,
+        &template.clone().with_points(x)?.with_signals(Some(f), channels)?,
         io::Format::Ply,
         io::Encoding::Binary,
     )?;

@@ -116,7 +116,17 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     if p0.len() != n * dim {
         anyhow::bail!("{}: {} rows, but {} has {n} vertices", a.momentum.display(), p0.len() / dim, a.source.display());
     }
+    // Several signal channels: a column per channel (pf.csv of a match
+    // of several maps).
+    let k = shape.n_channels().max(1);
     let pf = match a.signal_momentum {
+        Some(p) if k > 1 => {
+            let v = io::csv::read_vectors(p, k)?;
+            if v.len() != n * k {
+                anyhow::bail!("{}: {} rows, but {} has {n} vertices", p.display(), v.len() / k, a.source.display());
+            }
+            v
+        }
         Some(p) => {
             let v = io::read_signal(p)?.values;
             if v.len() != n {
@@ -124,7 +134,7 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
             }
             v
         }
-        None => vec![0.0; n],
+        None => vec![0.0; n * k],
     };
     let kind = model.kind().name().to_string();
     let (norm, integrator, steps) = (model.norm().name(), model.integrator().name().to_string(), model.steps());

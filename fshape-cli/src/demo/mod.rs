@@ -97,7 +97,7 @@ fn run_match(
         masking: Default::default(),
         source,
         target,
-        signals: (None, None),
+        signals: (&[], &[]),
         config: &cfg,
         out: run,
         resume: false,
