@@ -2203,7 +2203,13 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
         let rms = |q: &str| summary[q]["channels"][c]["signal_rms"].as_f64().unwrap();
         assert!(rms("quality") < 0.5 * rms("quality_before"), "channel {c}: {summary}");
     }
-    assert!(std::fs::read_to_string(out.join("report.html")).unwrap().contains("first of its 2 signal channels"));
+    // The report: a scene per channel (the viewer's picker), each
+    // channel's error in the quality table.
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        page.contains("the geodesic, signal channel 1 of 2") && page.contains("the geodesic, signal channel 2 of 2")
+    );
+    assert!(page.contains("channel 2: signal error, rms"));
     // Its momenta shot again from its first state (both maps, the walls
     // masked) with the shoot.toml it wrote end where it ended.
     let file = |f: &str| s(&out.join(f));

@@ -49,6 +49,9 @@ pub enum ReportError {
     /// A surface too large to show could not be simplified for display.
     #[error("simplifying for display: {0}")]
     Simplify(#[from] fshape_mesh::SimplifyError),
+    /// A signal channel could not be taken apart for display.
+    #[error("taking a signal channel apart for display: {0}")]
+    Channel(#[from] fshape_mesh::ShapeError),
     /// A scene has no shape to show.
     #[error("{scene}: no frames to show")]
     NoFrames {
@@ -327,6 +330,15 @@ fn quality_table(before: &serde_json::Value, after: &serde_json::Value) -> Strin
             format!("{r:.3}"),
         ]
     }))
+    // Several signal channels: each one's error (the rows above are the
+    // first's), on its own range.
+    .chain(after["channels"].as_array().into_iter().flatten().enumerate().skip(1).map(|(c, q)| {
+        vec![
+            format!("channel {}: signal error, rms (of its range)", c + 1),
+            percent(&before["channels"][c]["signal_rms"]),
+            percent(&q["signal_rms"]),
+        ]
+    }))
     .collect();
     table("quality", &["", "before", "after"], &rows)
 }
@@ -407,9 +419,25 @@ pub fn registration_page(
     energy_svg: Option<&str>,
     view: (f64, f64),
 ) -> Result<Page> {
-    let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
-    let labels = states.iter().map(|(t, _)| format!("t = {t:.2}")).collect();
-    let scene = scene("the geodesic", &frames, labels, Some(("target", target)))?;
+    let labels: Vec<String> = states.iter().map(|(t, _)| format!("t = {t:.2}")).collect();
+    // Several signal channels: a scene per channel, chosen with the
+    // viewer's scene picker.
+    let k = states.first().map_or(0, |(_, s)| s.n_channels());
+    let scenes = if k > 1 {
+        let one = |s: &FShape, c: usize| s.clone().with_signal(s.channel(c));
+        (0..k)
+            .map(|c| {
+                let frames: Vec<FShape> =
+                    states.iter().map(|(_, s)| one(s, c)).collect::<std::result::Result<_, _>>()?;
+                let frames: Vec<&FShape> = frames.iter().collect();
+                let name = format!("the geodesic, signal channel {} of {k}", c + 1);
+                scene(&name, &frames, labels.clone(), Some(("target", &one(target, c)?)))
+            })
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
+        vec![scene("the geodesic", &frames, labels, Some(("target", target)))?]
+    };
     let text = |k: &str| summary[k].as_str().unwrap_or("").to_string();
     let mut sections = vec![
         format!("<h2>How close it came</h2>{}", quality_table(&summary["quality_before"], &summary["quality"])),
@@ -464,7 +492,7 @@ pub fn registration_page(
             ))
         ),
         view,
-        scenes: vec![scene],
+        scenes,
         sections,
     })
 }
