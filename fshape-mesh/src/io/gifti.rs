@@ -869,16 +869,40 @@ pub(crate) fn to_raw(mut g: Gifti, signal_name: &str) -> Result<RawMesh, ParseEr
 /// The one per-vertex array of a data file (`.shape.gii`, `.func.gii`) and
 /// its name (`Name` metadata, or `signal`).
 pub fn signal(g: &Gifti) -> Result<(String, Vec<f64>), ParseError> {
+    signal_named(g, None)
+}
+
+/// [`signal`], or with `selector` the per-vertex array of that `Name` or
+/// number from 1 among the per-vertex arrays (a file of several maps, as
+/// `maps.func.gii:myelin` or `maps.func.gii:2`). Several arrays without a
+/// selector are refused, naming them.
+pub fn signal_named(g: &Gifti, selector: Option<&str>) -> Result<(String, Vec<f64>), ParseError> {
     let at = Location::Line(1);
     let arrays: Vec<(usize, &DataArray)> = g.arrays.iter().enumerate().filter(|(_, a)| a.per_vertex(None)).collect();
+    let labels = || arrays.iter().map(|(k, a)| a.label(*k)).collect::<Vec<_>>();
+    let named =
+        |(_, a): &(usize, &DataArray)| (a.name().unwrap_or(super::DEFAULT_SIGNAL_NAME).to_string(), a.values.clone());
+    if let Some(sel) = selector {
+        let by_name = arrays.iter().find(|(_, a)| a.name() == Some(sel));
+        let by_number = || sel.parse::<usize>().ok().and_then(|k| k.checked_sub(1)).and_then(|k| arrays.get(k));
+        return by_name.or_else(by_number).map(named).ok_or_else(|| ParseError {
+            at,
+            kind: ParseErrorKind::UnknownName {
+                what: "per-vertex data array",
+                name: sel.to_string(),
+                available: labels(),
+            },
+        });
+    }
     match arrays[..] {
-        [(_, a)] => Ok((a.name().unwrap_or(super::DEFAULT_SIGNAL_NAME).to_string(), a.values.clone())),
+        [one] => Ok(named(&one)),
         [] => Err(ParseError { at, kind: ParseErrorKind::Missing { what: "a data array of one value per vertex" } }),
         _ => Err(ParseError {
             at,
-            kind: ParseErrorKind::Unsupported {
-                what: "signal file with several per-vertex arrays (fshape reads one; split the file)",
-                found: arrays.iter().map(|(k, a)| a.label(*k)).collect::<Vec<_>>().join(", "),
+            kind: ParseErrorKind::NotChosen {
+                what: "data array",
+                syntax: "FILE:NAME or FILE:NUMBER (from 1)",
+                available: labels(),
             },
         }),
     }

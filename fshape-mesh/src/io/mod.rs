@@ -679,7 +679,9 @@ pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> 
 /// named after the file with, when the file has several maps, the map's
 /// name or number: `maps.dscalar.nii:CORTEX_LEFT:thickness`
 /// ([`cifti::Cifti::surface`]); the vertices the structure leaves out (the
-/// medial wall) are missing values.
+/// medial wall) are missing values. A table of several maps (CSV) or a
+/// GIfTI data file of several arrays is read for the one named after the
+/// file, by name or number from 1: `maps.csv:myelin`, `maps.func.gii:2`.
 pub fn read_signal_for(
     path: &Path,
     n_vertices: Option<usize>,
@@ -705,7 +707,7 @@ pub fn read_signal_for(
             },
         }));
     }
-    if SignalFormat::detect(&input.prefix, path) == SignalFormat::Csv {
+    if SignalFormat::detect(&input.prefix, path) == SignalFormat::Csv && selector.is_none() {
         let mut reader = std::io::BufReader::new(std::io::Cursor::new(input.prefix).chain(input.rest));
         let column = csv::parse_signal_from(&mut reader, allow_missing, n_vertices).map_err(|e| match e {
             csv::StreamError::Io(source) => ReadError::Io { path: path.into(), source },
@@ -721,11 +723,21 @@ pub fn read_signal_for(
         let n = n.strip_suffix(".mgh").or_else(|| n.strip_suffix(".mgz")).unwrap_or(n);
         n.rsplit('.').next().unwrap_or(n).to_string()
     };
-    let column = match SignalFormat::detect(&data, path) {
-        SignalFormat::Csv => return csv::parse_signal(&data, false).map_err(parse),
+    let format = SignalFormat::detect(&data, path);
+    if let (Some(sel), SignalFormat::Curv | SignalFormat::Mgh) = (&selector, format) {
+        return Err(ReadError::Select {
+            path: path.into(),
+            source: ParseErrorKind::Unsupported { what: "selector after a file of one map", found: sel.clone() },
+        });
+    }
+    let column = match format {
+        SignalFormat::Csv => match &selector {
+            Some(sel) => csv::parse_table_column(&data, sel).map_err(parse)?,
+            None => return csv::parse_signal(&data, false).map_err(parse),
+        },
         SignalFormat::Gifti => {
-            let (name, values) =
-                gifti::signal(&gifti::parse_in(&data, path.parent()).map_err(parse)?).map_err(parse)?;
+            let g = gifti::parse_in(&data, path.parent()).map_err(parse)?;
+            let (name, values) = gifti::signal_named(&g, selector.as_deref()).map_err(parse)?;
             csv::SignalColumn { name, values }
         }
         SignalFormat::Curv => csv::SignalColumn { name: stem(), values: freesurfer::parse_curv(&data).map_err(parse)? },

@@ -365,3 +365,54 @@ fn a_masked_shape_round_trips_through_ply_vtk_and_gifti_with_its_mask() {
         }
     }
 }
+
+#[test]
+fn one_map_of_a_table_or_of_a_gifti_file_of_several_is_read_by_name_or_number() {
+    use fshape_mesh::io::gifti::{DataArray, WriteOptions, signal_array, write_arrays};
+    use fshape_mesh::io::read_signal_for;
+    let table = tmp("maps.csv");
+    std::fs::write(&table, "thickness, myelin\n2.5,1.5\n3,nan\n2.75,1.25\n").unwrap();
+    let at = |p: &Path, sel: &str| PathBuf::from(format!("{}:{sel}", p.display()));
+    for sel in ["myelin", "2"] {
+        let c = read_signal_for(&at(&table, sel), Some(3), true).unwrap();
+        assert_eq!((c.name.as_str(), c.values[0], c.values[2]), ("myelin", 1.5, 1.25));
+        assert!(c.values[1].is_nan());
+    }
+    assert_eq!(read_signal_for(&at(&table, "thickness"), Some(3), false).unwrap().values, [2.5, 3.0, 2.75]);
+    // The missing value needs --allow-missing, named by its vertex.
+    let e = read_signal_for(&at(&table, "myelin"), Some(3), false).unwrap_err().to_string();
+    assert!(e.contains("vertex 1"), "{e}");
+    // A name the table does not have lists those it has; a short row is
+    // named by its line; a table without a selector is not read as one
+    // column.
+    let e = read_signal_for(&at(&table, "curv"), Some(3), true).unwrap_err().to_string();
+    assert!(e.contains("no column named `curv`") && e.contains("thickness") && e.contains("myelin"), "{e}");
+    let e = read_signal_for(&at(&table, "3"), Some(3), true).unwrap_err().to_string();
+    assert!(e.contains("no column named `3`"), "{e}");
+    let short = tmp("short.csv");
+    std::fs::write(&short, "thickness,myelin\n2.5,1.5\n3\n").unwrap();
+    let e = read_signal_for(&at(&short, "myelin"), Some(2), true).unwrap_err().to_string();
+    assert!(e.contains("line 3") && e.contains("expected 2, found 1"), "{e}");
+    assert!(read_signal_for(&table, Some(3), true).is_err());
+    // A GIfTI data file of two maps: by name or number; without a
+    // selector, refused, naming both.
+    let gii = tmp("maps.func.gii");
+    let arrays: Vec<DataArray> =
+        vec![signal_array("thickness", &[2.5, 3.0, 2.75]), signal_array("myelin", &[1.5, 1.0, 1.25])];
+    let mut bytes = Vec::new();
+    write_arrays(&mut bytes, &arrays, WriteOptions::default()).unwrap();
+    std::fs::write(&gii, bytes).unwrap();
+    for sel in ["myelin", "2"] {
+        let c = read_signal_for(&at(&gii, sel), Some(3), false).unwrap();
+        assert_eq!((c.name.as_str(), c.values.as_slice()), ("myelin", &[1.5, 1.0, 1.25][..]));
+    }
+    let e = read_signal_for(&gii, Some(3), false).unwrap_err().to_string();
+    assert!(e.contains("FILE:NAME") && e.contains("thickness") && e.contains("myelin"), "{e}");
+    let e = read_signal_for(&at(&gii, "curv"), Some(3), false).unwrap_err().to_string();
+    assert!(e.contains("no per-vertex data array named `curv`"), "{e}");
+    // A file of one map takes no selector.
+    let curv = tmp("lh.thickness");
+    fshape_mesh::io::write_signal(&curv, "thickness", &[2.5, 3.0, 2.75], 1).unwrap();
+    let e = read_signal_for(&at(&curv, "2"), Some(3), false).unwrap_err().to_string();
+    assert!(e.contains("selector after a file of one map"), "{e}");
+}
