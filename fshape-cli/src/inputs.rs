@@ -77,7 +77,13 @@ pub fn load_masked(path: &Path, signal_name: Option<String>, signals: &[PathBuf]
     }
     let columns: Vec<Vec<f64>> = signals
         .iter()
-        .map(|file| Ok(io::read_signal_for(file, Some(n), m.allow_missing)?.values))
+        .map(|file| {
+            let values = io::read_signal_for(file, Some(n), m.allow_missing)?.values;
+            if values.len() != n {
+                bail!("{}: {} values, but {} has {n} vertices", file.display(), values.len(), path.display());
+            }
+            Ok(values)
+        })
         .collect::<Result<_>>()?;
     for column in &columns {
         if column.iter().any(|v| v.is_nan()) {

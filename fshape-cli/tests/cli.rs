@@ -2279,3 +2279,33 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+#[test]
+fn maps_of_another_length_than_the_mesh_are_refused_by_name() {
+    let dir = tmp("short_maps");
+    std::fs::create_dir_all(&dir).unwrap();
+    let sphere = fshape_mesh::generate::icosphere(1, 0.5);
+    let mesh = dir.join("sphere.ply");
+    fshape_mesh::io::write_mesh(&mesh, &sphere, fshape_mesh::io::Encoding::Binary).unwrap();
+    let n = sphere.n_vertices();
+    let column = |name: &str, count: usize| -> String {
+        let path = dir.join(name);
+        std::fs::write(
+            &path,
+            std::iter::once("v\n".to_string()).chain((0..count).map(|v| format!("{v}\n"))).collect::<String>(),
+        )
+        .unwrap();
+        path.display().to_string()
+    };
+    let (full, short) = (column("full.csv", n), column("short.csv", n - 2));
+    let m = mesh.display().to_string();
+    for order in [[&full, &short], [&short, &full]] {
+        let o = fshape(&["info", &m, "--signal", order[0], "--signal", order[1]]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("short.csv") && err.contains(&format!("{} values", n - 2)) && !err.contains("panicked"),
+            "{err}"
+        );
+    }
+}

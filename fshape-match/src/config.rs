@@ -688,7 +688,8 @@ impl Config {
     /// `normalize`, the weights relative to the data's [`Scales`], which
     /// are returned too.
     pub fn model_for(&self, template: &FShape, target: &FShape) -> Result<(Model, Option<Scales>), MatchError> {
-        let (w, k) = (self.model.channel_weights.len(), template.n_channels().max(1));
+        let k = template.n_channels().max(target.n_channels()).max(1);
+        let w = self.model.channel_weights.len();
         if w != 0 && w != k {
             return Err(bad("model.channel_weights", format!("{w} weights for shapes of {k} signal channels")));
         }

@@ -51,6 +51,12 @@ pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String 
     h.shape(source);
     h.shape(target);
     h.eat(config.to_toml().as_bytes());
+    // Masked inputs' signal scale skips their masked vertices since this
+    // tag: a checkpoint of a masked pair from before ran another
+    // objective, and is refused.
+    if source.mask().is_some() || target.mask().is_some() {
+        h.eat(b"masked deviation");
+    }
     h.hex()
 }
 
@@ -216,6 +222,16 @@ impl Runner<Pair> {
                 target.n_channels()
             )));
         }
+        // A source without a signal starts from f_0 = 0 in as many
+        // channels as the target has.
+        let zeros;
+        let source = match (source.signal(), target.n_channels()) {
+            (None, k) if k > 1 => {
+                zeros = source.clone().with_signals(Some(vec![0.0; source.n_vertices() * k]), k)?;
+                &zeros
+            }
+            _ => source,
+        };
         // With `[prealign]`, the registration runs on the aligned pair.
         let (source, target, alignment) = crate::prealign::prealigned(source, target, config)?;
         let (source, target) = (&source, &target);

@@ -17,8 +17,9 @@ pub struct Args {
     /// Initial momenta p_0: CSV, a header line, then p_x,p_y (or p_x,p_y,p_z) per vertex.
     #[arg(long)]
     pub momentum: PathBuf,
-    /// Signal momentum p^f (one-column CSV; default 0). For the
-    /// tangential model, the signal residual ζ.
+    /// Signal momentum p^f (CSV, a column per signal channel of the
+    /// template: pf, or pf, pf_2, ...; default 0). For the tangential
+    /// model, the signal residual ζ.
     #[arg(long)]
     pub signal_momentum: Option<PathBuf>,
     /// Model configuration (TOML; see fshape_match::Config).

@@ -204,6 +204,11 @@ pub fn atlas_fingerprint(template: &FShape, subjects: &[FShape], config: &Config
         h.shape(s);
     }
     h.eat(config.to_toml().as_bytes());
+    // As for a pair: masked inputs' signal scale skips masked vertices
+    // since this tag.
+    if std::iter::once(template).chain(subjects).any(|s| s.mask().is_some()) {
+        h.eat(b"masked deviation");
+    }
     h.hex()
 }
 

@@ -157,6 +157,13 @@ impl StageTemplates {
         given: bool,
     ) -> Result<StageTemplates, MatchError> {
         let (n, start, what) = (staged.stages().plan.stages.len(), &staged.stages().start, S::START);
+        if start.n_channels() > 1 && templates.iter().flatten().any(|t| t.signal().is_none()) {
+            return Err(MatchError::StageTemplates(format!(
+                "the {what} carries {} signal channels and a stage template none: give the stage templates \
+                 the {what}'s channels",
+                start.n_channels()
+            )));
+        }
         if let Some(t) =
             templates.iter().flatten().find(|t| t.signal().is_some() && t.n_channels() != start.n_channels())
         {

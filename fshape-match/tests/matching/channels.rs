@@ -270,3 +270,30 @@ fn sessions_take_several_channels_and_atlases_name_that_they_do_not_yet() {
     let e = session.with_stage_templates(vec![Some(three)]).err().expect("refused").to_string();
     assert!(e.contains("3 signal channels"), "{e}");
 }
+
+#[test]
+fn a_source_without_a_signal_starts_from_zero_in_each_of_the_targets_channels() {
+    let (_, target) = two_bumps(&icosphere(2, 1.0));
+    let bare = icosphere(2, 1.0);
+    let config = fshape_match::Config::parse(
+        "[model]\nchannel_weights = [1, 2]\n[deformation]\nwidths = [0.5]\n\
+         [attachment]\nkernel_geom = \"gaussian:0.3\"\nkernel_signal = \"gaussian:0.5,0.5\"\n\
+         [optimizer]\nmax_iterations = 3\n",
+    )
+    .unwrap();
+    let mut session = fshape_match::Session::new(&bare, &target, &config).unwrap();
+    assert_eq!(session.plan().model.channel_weights().len(), 2);
+    session.run(&mut ()).unwrap();
+    let r = session.result().unwrap();
+    assert_eq!(r.pf.len(), 2 * bare.n_vertices());
+    assert_eq!(r.trajectory.signal(0), vec![0.0; 2 * bare.n_vertices()].as_slice());
+    // A stage template without a signal cannot stand for a start of two.
+    let mut staged = config.clone();
+    staged.schedule = Some(fshape_match::ScheduleSection::new(
+        ["gaussian:0.6", "gaussian:0.3"].map(|k| fshape_match::PositionKernel::parse(k).unwrap()).to_vec(),
+    ));
+    let (template, _) = two_bumps(&icosphere(2, 1.0));
+    let session = fshape_match::Session::new(&template, &target, &staged).unwrap();
+    let e = session.with_stage_templates(vec![Some(icosphere(1, 1.0)), None]).err().expect("refused").to_string();
+    assert!(e.contains("carries 2 signal channels and a stage template none"), "{e}");
+}

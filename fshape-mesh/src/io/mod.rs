@@ -341,9 +341,10 @@ pub(crate) fn channel_columns<T>(base: &str, find: impl Fn(&str) -> Option<T>) -
     found
 }
 
-/// Columns of one value per vertex as rows of k values per vertex.
+/// Columns of one value per vertex as rows of k values per vertex, as
+/// many rows as the shortest column (check their lengths first).
 pub fn interleave(columns: &[Vec<f64>]) -> Vec<f64> {
-    let n = columns.first().map_or(0, Vec::len);
+    let n = columns.iter().map(Vec::len).min().unwrap_or(0);
     (0..n).flat_map(|v| columns.iter().map(move |c| c[v])).collect()
 }
 
