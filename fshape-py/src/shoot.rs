@@ -1,7 +1,7 @@
 //! Shooting a geodesic from momenta, and a geodesic as arrays.
 
 use numpy::ndarray::{Array2, Array3};
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1, PyArrayLike2};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -9,7 +9,8 @@ use crate::config::config_of;
 use crate::conversions::shape_of;
 use crate::err;
 
-/// The geodesic as arrays: points (T × n × d), signals (T × n) at `times`.
+/// The geodesic as arrays: points (T × n × d), signals (T × n, or T × n × k
+/// with k signal channels) at `times`.
 pub(crate) fn geodesic<'py>(
     py: Python<'py>,
     traj: &fshape_shoot::Trajectory,
@@ -43,8 +44,8 @@ pub(crate) fn node_times(steps: usize) -> Vec<f64> {
     (0..=steps).map(|k| k as f64 / steps as f64).collect()
 }
 
-/// Shoots the geodesic from `shape` with momenta `p0` (n × d) and `pf` (n;
-/// zeros if None) under the model of `config` (a dict, a TOML path or
+/// Shoots the geodesic from `shape` with momenta `p0` (n × d) and `pf` (n,
+/// or n × k for a shape of k maps; zeros if None) under the model of `config` (a dict, a TOML path or
 /// text; `normalize` must be false, as for `fshape shoot`). Returns the
 /// states at every time step.
 #[pyfunction]
@@ -54,7 +55,7 @@ pub(crate) fn shoot<'py>(
     shape: &Bound<'py, PyAny>,
     p0: PyArrayLike2<'py, f64, AllowTypeChange>,
     config: &Bound<'py, PyAny>,
-    pf: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
+    pf: Option<numpy::PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let s = shape_of(shape)?;
     let config = config_of(config)?;
@@ -64,24 +65,28 @@ pub(crate) fn shoot<'py>(
              none: set normalize = false, or shoot with the weights a registration used (its result's config)",
         ));
     }
-    if s.n_channels() > 1 {
-        return Err(err(format!("the shape carries {} maps per vertex; shoot takes one so far", s.n_channels())));
-    }
-    let (n, dim) = (s.n_vertices(), s.dim());
+    let (n, dim, k) = (s.n_vertices(), s.dim(), s.n_channels().max(1));
     let p0a = p0.as_array();
     if p0a.shape() != [n, dim] {
         return Err(err(format!("p0: shape {:?}, but the shape has {n} vertices in {dim}-D", p0a.shape())));
     }
     let p0: Vec<f64> = p0a.iter().copied().collect();
+    // n values, or n × k for a shape of k signal channels (row by row).
     let pf: Vec<f64> = match pf {
         Some(a) => {
-            let v: Vec<f64> = a.as_array().iter().copied().collect();
-            if v.len() != n {
-                return Err(err(format!("pf: {} values, but the shape has {n} vertices", v.len())));
+            let a = a.as_array();
+            let fits = match a.shape() {
+                [m] => k == 1 && *m == n,
+                [m, c] => *m == n && *c == k,
+                _ => false,
+            };
+            if !fits {
+                let want = if k == 1 { format!("({n},)") } else { format!("({n}, {k})") };
+                return Err(err(format!("pf: shape {:?}, but the shape wants {want}", a.shape())));
             }
-            v
+            a.iter().copied().collect()
         }
-        None => vec![0.0; n],
+        None => vec![0.0; n * k],
     };
     let model = config.model().map_err(err)?;
     let steps = model.steps();

@@ -180,10 +180,6 @@ def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
     assert fshape.signal_norm(two, "l2") == pytest.approx(both, rel=1e-12)
     with pytest.raises(fshape.FShapeError, match="channels"):
         fshape.attachment(two, src, "gaussian:0.2", "binet", "gaussian:0.5")
-    # What does not carry several maps yet says so.
-    config = {"model": {"normalize": False}, "deformation": {"widths": [0.3]}, "integrator": {"steps": 4}}
-    with pytest.raises(fshape.FShapeError, match="2 maps per vertex"):
-        fshape.shoot(two, np.zeros((12, 3)), config)
     # A registration of two maps: each channel's error falls, the results
     # are n × k.
     two_tgt = tgt.with_signal(np.column_stack([tgt.signal, tgt.points[:, 0] + 0.2]))
@@ -193,6 +189,11 @@ def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
     assert r["geodesic"]["signals"].shape[1:] == (12, 2)
     for c in range(2):
         assert r["quality"]["channels"][c]["signal_rms"] < r["initial_quality"]["channels"][c]["signal_rms"]
+    # Its momenta shot again with the weights it used end where it ended.
+    shot = fshape.shoot(two, r["p0"], r["config"], pf=r["pf"])
+    assert np.allclose(shot["signals"][-1], r["geodesic"]["signals"][-1], rtol=1e-9, atol=1e-12)
+    with pytest.raises(fshape.FShapeError, match=r"pf: shape \[12\]"):
+        fshape.shoot(two, r["p0"], r["config"], pf=np.zeros(12))
 
 
 def test_signal_norms_of_a_constant_signal_are_the_area():
@@ -515,8 +516,12 @@ def test_every_gifti_file_of_nibabel_s_tests_reads_as_nibabel_reads_it():
             assert np.array_equal(values, arrays[0].data.astype(np.float64).ravel()), f
             seen["signal"] += 1
         else:
-            with pytest.raises(fshape.FShapeError, match="several per-vertex arrays"):
+            with pytest.raises(fshape.FShapeError, match="name the data array after the file"):
                 fshape.read_signal(f)
+            # Each is read by its number from 1 after the file.
+            for i in (0, len(arrays) - 1) if all(a.data.ndim == 1 for a in arrays) else ():
+                _, values = fshape.read_signal(f"{f}:{i + 1}")
+                assert np.array_equal(values, arrays[i].data.astype(np.float64).ravel()), (f, i)
             seen["several"] += 1
     # The folder as nibabel 5.4 ships it: external, bz2 and gz surfaces,
     # GIFTI_ENDIAN_LITTLE, labels, shapes and a time series.

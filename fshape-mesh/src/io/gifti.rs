@@ -879,7 +879,16 @@ pub fn signal(g: &Gifti) -> Result<(String, Vec<f64>), ParseError> {
 pub fn signal_named(g: &Gifti, selector: Option<&str>) -> Result<(String, Vec<f64>), ParseError> {
     let at = Location::Line(1);
     let arrays: Vec<(usize, &DataArray)> = g.arrays.iter().enumerate().filter(|(_, a)| a.per_vertex(None)).collect();
-    let labels = || arrays.iter().map(|(k, a)| a.label(*k)).collect::<Vec<_>>();
+    // Listed as they are chosen: by name, else by number from 1.
+    let labels = || {
+        arrays
+            .iter()
+            .enumerate()
+            .map(|(i, (_, a))| {
+                a.name().map_or_else(|| format!("{} ({})", i + 1, intent_name(a.intent)), str::to_string)
+            })
+            .collect::<Vec<_>>()
+    };
     let named =
         |(_, a): &(usize, &DataArray)| (a.name().unwrap_or(super::DEFAULT_SIGNAL_NAME).to_string(), a.values.clone());
     if let Some(sel) = selector {
