@@ -286,7 +286,7 @@ def quality(shape: FShape, target: FShape) -> Quality:
 def shoot(
     shape: FShape, p0: npt.ArrayLike, config: ConfigLike, pf: Optional[npt.ArrayLike] = None
 ) -> Geodesic:
-    """The geodesic from shape with momenta p0 (n x d) and pf (n) under the
+    """The geodesic from shape with momenta p0 (n x d) and pf (n, or n x k for k maps) under the
     config's model (normalize must be false), at every time step."""
 
 def match(
