@@ -2255,6 +2255,18 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
         "--json",
     ]));
     assert_eq!(q["channels"], summary["quality_before"]["channels"]);
+    // A batch row of the same pair, its maps separated by `;`: the same
+    // matched shape, to the byte.
+    std::fs::write(
+        dir.join("pairs.csv"),
+        "source,target,source_signal,target_signal,name\n\
+         source.ply,target.ply,source1.csv;source2.csv,target1.csv; target2.csv,pair\n",
+    )
+    .unwrap();
+    let batch = dir.join("batch");
+    let o = fshape(&["batch", &s(&dir.join("pairs.csv")), "--config", &config, "--out", &s(&batch), "--allow-missing"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(batch.join("pair/matched.ply")).unwrap(), std::fs::read(out.join("matched.ply")).unwrap());
     // Two maps against one: refused, with the counts.
     let o = fshape(&[
         "match",

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use fshape_mesh::FShape;
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{PyReadonlyArray1, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -36,16 +36,23 @@ pub(crate) fn report(
 ) -> PyResult<()> {
     let source = shape_of(source)?;
     let target = shape_of(target)?;
-    if let Some(k) = [&source, &target].iter().map(|s| s.n_channels()).find(|&k| k > 1) {
-        return Err(err(format!("report: a shape carries {k} maps per vertex; reports show one so far")));
-    }
     let geodesic = result
         .get_item("geodesic")?
         .ok_or_else(|| err("report: the result has no `geodesic` (pass what fshape.match returns)"))?;
     let times: PyReadonlyArray1<'_, f64> = geodesic.get_item("times")?.extract()?;
     let points: PyReadonlyArray3<'_, f64> = geodesic.get_item("points")?.extract()?;
-    let signals: PyReadonlyArray2<'_, f64> = geodesic.get_item("signals")?.extract()?;
+    // T × n, or T × n × k with k signal channels.
+    let signals: PyReadonlyArrayDyn<'_, f64> = geodesic.get_item("signals")?.extract()?;
     let (t, n, d) = (points.shape()[0], points.shape()[1], points.shape()[2]);
+    let k = match signals.shape() {
+        [ts, ns] if *ts == t && *ns == n => 1,
+        [ts, ns, k] if *ts == t && *ns == n && *k > 0 => *k,
+        other => {
+            return Err(err(format!(
+                "report: the geodesic's signals have shape {other:?} for {t} times of {n} vertices"
+            )));
+        }
+    };
     if n != source.n_vertices() || d != source.dim() {
         return Err(err(format!(
             "report: the geodesic has {n} vertices in R^{d}, the source {} in R^{}",
@@ -56,13 +63,13 @@ pub(crate) fn report(
     let (times, points, signals) =
         (times.as_slice().map_err(err)?, points.as_slice().map_err(err)?, signals.as_slice().map_err(err)?);
     let states: Vec<(f64, FShape)> = (0..t)
-        .map(|k| {
+        .map(|i| {
             let s = source
                 .clone()
-                .with_points(points[k * n * d..(k + 1) * n * d].to_vec())
-                .and_then(|s| s.with_signal(Some(signals[k * n..(k + 1) * n].to_vec())))
+                .with_points(points[i * n * d..(i + 1) * n * d].to_vec())
+                .and_then(|s| s.with_signals(Some(signals[i * n * k..(i + 1) * n * k].to_vec()), k))
                 .map_err(err)?;
-            Ok((times[k], s))
+            Ok((times[i], s))
         })
         .collect::<PyResult<_>>()?;
     let energies = value(result, "energies")?;

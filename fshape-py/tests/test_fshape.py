@@ -153,7 +153,7 @@ def test_the_attachment_gradient_matches_central_differences():
     assert abs((up - down) / (2 * h) - gf[3]) < 1e-6 * max(1.0, abs(gf[3]))
 
 
-def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
+def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each(tmp_path):
     src, tgt = sphere_pair()
     x = src.points[:, 0]
     two = src.with_signal(np.column_stack([src.signal, x]))
@@ -194,6 +194,10 @@ def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each():
     assert np.allclose(shot["signals"][-1], r["geodesic"]["signals"][-1], rtol=1e-9, atol=1e-12)
     with pytest.raises(fshape.FShapeError, match=r"pf: shape \[12\]"):
         fshape.shoot(two, r["p0"], r["config"], pf=np.zeros(12))
+    # Its report: a scene per map, each map's error.
+    fshape.report(tmp_path / "report.html", two, two_tgt, r)
+    page = (tmp_path / "report.html").read_text()
+    assert "signal channel 2 of 2" in page and "channel 2: signal error" in page
 
 
 def test_signal_norms_of_a_constant_signal_are_the_area():

@@ -26,7 +26,8 @@ pub struct Args {
     /// The pairs: a header naming the columns (source, target, and
     /// optionally source_signal, target_signal, source_mask, target_mask,
     /// name), then one pair per line; paths relative to the table, `#`
-    /// comments.
+    /// comments. Several maps per side: their files separated by `;`
+    /// (one channel each, in the same order on both sides).
     pub pairs: PathBuf,
     /// The configuration of every registration (as for `fshape match`).
     #[arg(long)]
@@ -112,8 +113,9 @@ struct Row {
     name: String,
     source: PathBuf,
     target: PathBuf,
-    source_signal: Option<PathBuf>,
-    target_signal: Option<PathBuf>,
+    /// One file per signal channel (none: the mesh's own signal).
+    source_signal: Vec<PathBuf>,
+    target_signal: Vec<PathBuf>,
     source_mask: Option<PathBuf>,
     target_mask: Option<PathBuf>,
     /// Why the row cannot run, if it cannot (the others still do).
@@ -152,14 +154,23 @@ fn read_pairs(path: &Path) -> Result<Vec<Row>> {
     for (index, io::table::Record { line, fields }) in lines.enumerate() {
         let field = |k: Option<usize>| k.and_then(|k| fields.get(k)).filter(|f| !f.is_empty());
         let name = field(col("name")).map_or_else(|| format!("row_{:03}", index + 1), |s| s.to_string());
+        // Several maps: `a.csv;b.csv`, a channel each.
+        let maps = |f: Option<&String>| -> Vec<PathBuf> {
+            f.into_iter()
+                .flat_map(|f| f.split(';'))
+                .map(str::trim)
+                .filter(|f| !f.is_empty())
+                .map(|f| base.join(f))
+                .collect()
+        };
         let mut row = Row {
             index,
             line,
             name: name.clone(),
             source: field(Some(source)).map_or_else(PathBuf::new, |f| base.join(f)),
             target: field(Some(target)).map_or_else(PathBuf::new, |f| base.join(f)),
-            source_signal: field(col("source_signal")).map(|s| base.join(s)),
-            target_signal: field(col("target_signal")).map(|s| base.join(s)),
+            source_signal: maps(field(col("source_signal"))),
+            target_signal: maps(field(col("target_signal"))),
             source_mask: field(col("source_mask")).map(|s| base.join(s)),
             target_mask: field(col("target_mask")).map(|s| base.join(s)),
             invalid: None,
@@ -313,7 +324,7 @@ fn run_row(a: &BatchArgs<'_>, row: &Row) -> Result<()> {
         ),
         source: &row.source,
         target: &row.target,
-        signals: (row.source_signal.as_slice(), row.target_signal.as_slice()),
+        signals: (&row.source_signal, &row.target_signal),
         config: a.config,
         out: &dir,
         resume,
