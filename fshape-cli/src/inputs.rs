@@ -96,7 +96,7 @@ pub fn load_masked(path: &Path, signal_name: Option<String>, signals: &[PathBuf]
         }
     }
     let k = columns.len();
-    let rows = if k == 1 { columns.into_iter().next().unwrap_or_default() } else { io::interleave(&columns) };
+    let rows = io::interleave(&columns);
     let names: Vec<String> = signals.iter().map(|f| f.display().to_string()).collect();
     shape
         .with_signals_and_mask(Some(rows), k, mask)

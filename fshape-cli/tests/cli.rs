@@ -2165,8 +2165,8 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
     let out = dir.join("run");
     let (source, target, config) = (s(&dir.join("source.ply")), s(&dir.join("target.ply")), s(&config));
     let f: Vec<String> = files.iter().map(|p| s(p)).collect();
-    let o = fshape(&[
-        "match",
+    // The pair with both maps on each side, as each command takes it.
+    let pair: Vec<&str> = vec![
         &source,
         &target,
         "--signal",
@@ -2178,11 +2178,8 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
         "--target-signal",
         &f[3],
         "--allow-missing",
-        "--config",
-        &config,
-        "--out",
-        &s(&out),
-    ]);
+    ];
+    let o = fshape(&[&["match"], &pair[..], &["--config", &config, "--out", &s(&out)]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // The outputs carry both channels: states and matched shape as signal
     // and signal_2, the signal momentum as pf and pf_2.
@@ -2239,21 +2236,7 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
     let v = json(&fshape(&["info", &target, "--signal", &f[2], "--signal", &f[3], "--allow-missing", "--json"]));
     assert_eq!(v["channels"].as_array().map(Vec::len), Some(2), "{v}");
     assert!((v["channels"][1]["max"].as_f64().unwrap() - 40.0).abs() < 1e-9, "{v}");
-    let q = json(&fshape(&[
-        "quality",
-        &source,
-        &target,
-        "--signal",
-        &f[0],
-        "--signal",
-        &f[1],
-        "--target-signal",
-        &f[2],
-        "--target-signal",
-        &f[3],
-        "--allow-missing",
-        "--json",
-    ]));
+    let q = json(&fshape(&[&["quality"], &pair[..], &["--json"]].concat()));
     assert_eq!(q["channels"], summary["quality_before"]["channels"]);
     // A batch row of the same pair, its maps separated by `;`: the same
     // matched shape, to the byte.

@@ -569,8 +569,11 @@ pub fn quality(shape: &FShape, target: &FShape) -> Result<Quality, MatchError> {
     let sides = Sides { diagonal, xs, ys, dx, dy, wx, wy };
     let k = shape.n_channels().max(target.n_channels()).max(1);
     let (first, shape_beyond_1pct, shape_past_boundary) = signal_quality(shape, target, 0, &sides);
-    let channels =
-        if k > 1 { (0..k).map(|c| signal_quality(shape, target, c, &sides).0).collect() } else { Vec::new() };
+    let channels = if k > 1 {
+        std::iter::once(first).chain((1..k).map(|c| signal_quality(shape, target, c, &sides).0)).collect()
+    } else {
+        Vec::new()
+    };
     let near = |c: &Closest| c.distance <= 0.01 * diagonal;
     let within = sides.dy.iter().zip(&sides.ys.weights).filter(|(c, _)| near(c)).fold(0.0, |a, (_, w)| a + w);
     Ok(Quality {

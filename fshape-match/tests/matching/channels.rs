@@ -18,6 +18,11 @@ fn bump(p: &[f64], c: [f64; 3]) -> f64 {
     (-d2 / (2.0 * 0.25 * 0.25)).exp()
 }
 
+/// The largest of `err` (one per vertex of `sphere`) over the bump at `at`.
+fn largest_near(sphere: &FShape, err: &[f64], at: [f64; 3]) -> f64 {
+    sphere.points().chunks_exact(3).zip(err).filter(|(p, _)| bump(p, at) > 0.5).fold(0.0_f64, |m, (_, e)| m.max(*e))
+}
+
 /// Channel `c` of `s`'s signal.
 fn channel(s: &FShape, c: usize) -> Vec<f64> {
     s.channel(c).expect("two channels")
@@ -61,14 +66,7 @@ fn two_channels_changed_in_two_places_are_each_recovered_where_they_changed() {
         let before = start.iter().zip(&want).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
         let largest = err.iter().fold(0.0_f64, |m, e| m.max(*e));
         let mean = err.iter().sum::<f64>() / n as f64;
-        let near = |c: [f64; 3]| -> f64 {
-            sphere
-                .points()
-                .chunks_exact(3)
-                .zip(&err)
-                .filter(|(p, _)| bump(p, c) > 0.5)
-                .fold(0.0_f64, |m, (_, e)| m.max(*e))
-        };
+        let near = |at: [f64; 3]| largest_near(&sphere, &err, at);
         report += &format!(
             "channel {}: largest error {largest:.4} (from {before:.4}), mean {mean:.5}, at its bump {:.4}, at the other's {:.4}\n",
             c + 1,
@@ -129,14 +127,7 @@ fn a_session_in_two_stages_recovers_each_channel_and_reports_each() {
     for (c, (own, other)) in [(NORTH, EAST), (EAST, NORTH)].into_iter().enumerate() {
         let (got, want) = (channel(&end, c), channel(&target, c));
         let err: Vec<f64> = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).collect();
-        let near = |at: [f64; 3]| -> f64 {
-            sphere
-                .points()
-                .chunks_exact(3)
-                .zip(&err)
-                .filter(|(p, _)| bump(p, at) > 0.5)
-                .fold(0.0_f64, |m, (_, e)| m.max(*e))
-        };
+        let near = |at: [f64; 3]| largest_near(&sphere, &err, at);
         let (rms0, rms1) = (before.channels[c].signal_rms.unwrap(), after.channels[c].signal_rms.unwrap());
         report += &format!(
             "channel {}: signal rms {rms0:.4} -> {rms1:.5}; largest error {:.4}, at its bump {:.4}, at the other's {:.4}\n",

@@ -114,9 +114,9 @@ pub fn parse_signal_from(
     Ok(SignalColumn { name, values })
 }
 
-/// One column of a table of several maps: a header line naming the
-/// columns, then one row per vertex of as many comma-separated values
-/// (`nan` for a missing one); the column chosen by its name or its number
+/// One column of a table of several maps ([`super::table`]'s rules:
+/// quotes, tabs, `#` comments): a header line naming the columns, then one
+/// row per vertex of as many values (`nan` for a missing one); the column chosen by its name or its number
 /// from 1 (`maps.csv:myelin`, `maps.csv:2`). Errors name the line.
 ///
 /// ```
@@ -128,44 +128,39 @@ pub fn parse_signal_from(
 /// # Ok::<(), fshape_mesh::io::ParseError>(())
 /// ```
 pub fn parse_table_column(data: &[u8], selector: &str) -> Result<SignalColumn, ParseError> {
-    let mut cur = Cursor::new(data);
-    let header = cur
-        .text_line("a header line")?
-        .ok_or_else(|| cur.error(ParseErrorKind::Missing { what: "the header line (column names)" }))?;
-    let names: Vec<String> = header.trim_start_matches('\u{feff}').split(',').map(|n| n.trim().to_string()).collect();
+    let mut rows = super::table::parse_table(data)?.into_iter();
+    let names = rows
+        .next()
+        .ok_or(ParseError {
+            at: Location::Line(1),
+            kind: ParseErrorKind::Missing { what: "the header line (column names)" },
+        })?
+        .fields;
     let by_number = || selector.parse::<usize>().ok().filter(|k| (1..=names.len()).contains(k)).map(|k| k - 1);
     let column = names.iter().position(|n| n == selector).or_else(by_number).ok_or_else(|| ParseError {
         at: Location::Line(1),
         kind: ParseErrorKind::UnknownName { what: "column", name: selector.to_string(), available: names.clone() },
     })?;
-    let mut values = Vec::new();
-    loop {
-        let at = cur.at();
-        let Some(line) = cur.text_line("a row of values")? else {
-            break;
-        };
-        let t = line.trim();
-        if t.is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = t.split(',').map(str::trim).collect();
-        if fields.len() != names.len() {
-            return Err(ParseError {
+    let values = rows
+        .map(|row| {
+            let at = Location::Line(row.line);
+            if row.fields.len() != names.len() {
+                return Err(ParseError {
+                    at,
+                    kind: ParseErrorKind::CountMismatch {
+                        what: "values in a row (one per column of the header)",
+                        expected: names.len() as u64,
+                        found: row.fields.len() as u64,
+                    },
+                });
+            }
+            let f = row.fields[column].as_bytes();
+            parse_f64(f).filter(|v| !v.is_infinite()).ok_or(ParseError {
                 at,
-                kind: ParseErrorKind::CountMismatch {
-                    what: "values in a row (one per column of the header)",
-                    expected: names.len() as u64,
-                    found: fields.len() as u64,
-                },
-            });
-        }
-        let f = fields[column];
-        let v = parse_f64(f.as_bytes()).filter(|v| !v.is_infinite());
-        values.push(v.ok_or_else(|| ParseError {
-            at,
-            kind: ParseErrorKind::BadToken { expected: "a number or `nan`", found: lossy(f.as_bytes()) },
-        })?);
-    }
+                kind: ParseErrorKind::BadToken { expected: "a number or `nan`", found: lossy(f) },
+            })
+        })
+        .collect::<Result<_, _>>()?;
     Ok(SignalColumn { name: names[column].clone(), values })
 }
 
