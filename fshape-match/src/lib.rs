@@ -40,6 +40,7 @@ pub mod optimize;
 pub mod prealign;
 pub mod precondition;
 pub mod quality;
+pub mod record;
 pub mod resolution;
 pub mod runner;
 pub mod session;

@@ -67,6 +67,16 @@ pub enum Moving {
     Target,
 }
 
+impl Moving {
+    /// Its name in the configuration (`source`, `target`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Moving::Source => "source",
+            Moving::Target => "target",
+        }
+    }
+}
+
 /// `[prealign]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

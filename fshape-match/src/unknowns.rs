@@ -36,13 +36,17 @@ use crate::precondition::{MomentumMetric, NormMatrix};
 #[serde(rename_all = "lowercase")]
 pub enum Metric {
     /// L²(x_0) with the lumped mass of the template (the paper's, for p^f).
+    /// (The capitalised names are how summaries before 2026-12 wrote them.)
+    #[serde(alias = "L2")]
     L2,
     /// The Euclidean metric of the vertex values.
+    #[serde(alias = "Euclidean")]
     Euclidean,
     /// The metric of the geodesic's energy ([`crate::precondition`]), as
     /// L-BFGS's initial Hessian: ⟨δp, K(x_0) δp⟩ on p_0 (the V-norm of the
     /// velocity), ⟨δp^f, D_s(x_0)⁻¹ δp^f⟩ on p^f (the signal norm of the
     /// signal velocity; metamorphosis only).
+    #[serde(alias = "Energy")]
     Energy,
 }
 

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use fshape_match::record::{self, MatchRecord};
 use fshape_mesh::FShape;
 use numpy::{PyReadonlyArray1, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -72,27 +73,58 @@ pub(crate) fn report(
             Ok((times[i], s))
         })
         .collect::<PyResult<_>>()?;
-    let energies = value(result, "energies")?;
     let config = match result.get_item("config")? {
         Some(c) if !c.is_none() => Some(config_of(&c)?),
         _ => None,
     };
-    let summary = serde_json::json!({
-        "source": "source",
-        "target": "target",
-        "model": config.as_ref().map(|c| c.model.kind.name()),
-        "norm": config.as_ref().map(|c| serde_json::to_value(c.model.norm).unwrap_or_default()),
-        "quality_before": value(result, "initial_quality")?,
-        "quality": value(result, "quality")?,
-        "final_value": energies["value"],
-        "final_energy": energies["energy"],
-        "final_attachment": energies["attachment"],
-        "iterations": value(result, "iterations")?,
-        "evaluations": value(result, "evaluations")?,
-        "seconds": value(result, "seconds")?,
-        "stages": value(result, "stages")?,
-        "prealign": value(result, "alignment")?,
-    });
+    // The record `fshape match` would write, from what the dict holds: the
+    // parts the dict does not carry (the files, H along the geodesic, the
+    // scales) are left empty.
+    let typed = |key: &str| -> PyResult<serde_json::Value> { value(result, key) };
+    fn from<T: serde::de::DeserializeOwned>(key: &str, v: serde_json::Value) -> PyResult<T> {
+        serde_path_to_error::deserialize(v).map_err(|e| err(format!("report: result[{key:?}].{}: {}", e.path(), e.inner())))
+    }
+    let energies = typed("energies")?;
+    let number = |key: &str| energies[key].as_f64().unwrap_or(f64::NAN);
+    let (model, norm, gamma, steps, metrics) = match &config {
+        Some(c) => (
+            c.model.kind.name().to_string(),
+            serde_json::to_value(c.model.norm).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default(),
+            [c.model.gamma_v, c.model.gamma_f, c.model.gamma_w],
+            c.integrator.steps,
+            c.optimizer().map(|(_, m)| m).unwrap_or_default(),
+        ),
+        None => (String::new(), String::new(), [f64::NAN; 3], 0, fshape_match::Metrics::default()),
+    };
+    let summary = MatchRecord {
+        kind: record::Kind::Match,
+        format: record::FORMAT,
+        source: "source".into(),
+        target: "target".into(),
+        config: String::new(),
+        model,
+        norm,
+        gamma_v: gamma[0],
+        gamma_f: gamma[1],
+        gamma_w: gamma[2],
+        scales: None,
+        effective_weights: gamma,
+        steps,
+        metrics,
+        stages: from("stages", typed("stages")?)?,
+        final_value: number("value"),
+        final_energy: number("energy"),
+        final_attachment: number("attachment"),
+        geodesic_distance: number("energy").max(0.0).sqrt(),
+        hamiltonian: Vec::new(),
+        quality: from("quality", typed("quality")?)?,
+        quality_before: from("initial_quality", typed("initial_quality")?)?,
+        prealign: from("alignment", typed("alignment")?)?,
+        iterations: from("iterations", typed("iterations")?)?,
+        evaluations: from("evaluations", typed("evaluations")?)?,
+        seconds: from("seconds", typed("seconds")?)?,
+        files: Vec::new(),
+    };
     let text = config.map(|c| c.to_toml());
     py.detach(|| -> Result<(), fshape_report::ReportError> {
         let page = fshape_report::registration_page(&states, &target, &summary, text.as_deref(), None, view)?;

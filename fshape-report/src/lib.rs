@@ -18,6 +18,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use base64::Engine;
+use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, Record, RecordError, RunRecord};
+use fshape_match::{Quality, StageRecord};
 use fshape_mesh::io::{self, ReadOptions};
 use fshape_mesh::{CellKind, FShape};
 use serde::Serialize;
@@ -46,6 +48,9 @@ pub enum ReportError {
         /// The folder.
         path: PathBuf,
     },
+    /// A run record (summary.json, index.json) could not be read.
+    #[error(transparent)]
+    Record(#[from] RecordError),
     /// A surface too large to show could not be simplified for display.
     #[error("simplifying for display: {0}")]
     Simplify(#[from] fshape_mesh::SimplifyError),
@@ -297,71 +302,65 @@ pub fn table(class: &str, header: &[&str], rows: &[Vec<String>]) -> String {
     s
 }
 
-fn read_json(path: &Path) -> Result<serde_json::Value> {
-    let text = std::fs::read(path).map_err(|e| file_error(path, e))?;
-    serde_json::from_slice(&text).map_err(|e| file_error(path, format!("not JSON: {e}")))
-}
-
 fn read(path: &Path) -> Result<FShape> {
     Ok(io::read_mesh(path, &ReadOptions::default())?)
 }
 
-fn percent(v: &serde_json::Value) -> String {
-    v.as_f64().map_or("–".into(), |x| format!("{:.3} %", 100.0 * x))
+fn percent(v: Option<f64>) -> String {
+    v.map_or("–".into(), |x| format!("{:.3} %", 100.0 * x))
 }
 
-/// The match quality before and after, as a table.
-fn quality_table(before: &serde_json::Value, after: &serde_json::Value) -> String {
-    let rows: Vec<Vec<String>> = [
-        ("mean distance (of the target's diagonal)", "mean_distance"),
-        ("95th percentile distance", "p95_distance"),
-        ("largest distance", "max_distance"),
-        ("share of the target within 1 %", "target_within_1pct"),
-        ("signal error, rms (of the target's range)", "signal_rms"),
-        ("signal error, 99th percentile", "signal_p99"),
-    ]
-    .iter()
-    .filter(|(_, k)| !after[*k].is_null())
-    .map(|(name, k)| vec![escape(name), percent(&before[*k]), percent(&after[*k])])
-    .chain(after["signal_roughness"].as_f64().map(|r| {
-        vec![
-            "signal roughness (its Dirichlet seminorm over the target's)".into(),
-            before["signal_roughness"].as_f64().map_or("–".into(), |b| format!("{b:.3}")),
-            format!("{r:.3}"),
-        ]
-    }))
-    // Several signal channels: each one's error (the rows above are the
-    // first's), on its own range.
-    .chain(after["channels"].as_array().into_iter().flatten().enumerate().skip(1).map(|(c, q)| {
-        vec![
-            format!("channel {}: signal error, rms (of its range)", c + 1),
-            percent(&before["channels"][c]["signal_rms"]),
-            percent(&q["signal_rms"]),
-        ]
-    }))
-    .collect();
+/// The match quality before and after, as a table (empty for a record
+/// from before quality was measured).
+fn quality_table(before: Option<&Quality>, after: Option<&Quality>) -> String {
+    let Some(after) = after else { return String::new() };
+    type Figure = fn(&Quality) -> Option<f64>;
+    let figures: [(&str, Figure); 6] = [
+        ("mean distance (of the target's diagonal)", |q| Some(q.mean_distance)),
+        ("95th percentile distance", |q| Some(q.p95_distance)),
+        ("largest distance", |q| Some(q.max_distance)),
+        ("share of the target within 1 %", |q| Some(q.target_within_1pct)),
+        ("signal error, rms (of the target's range)", |q| q.signal_rms),
+        ("signal error, 99th percentile", |q| q.signal_p99),
+    ];
+    let rows: Vec<Vec<String>> = figures
+        .iter()
+        .filter(|(_, f)| f(after).is_some())
+        .map(|(name, f)| vec![escape(name), percent(before.and_then(f)), percent(f(after))])
+        .chain(after.signal_roughness.map(|r| {
+            vec![
+                "signal roughness (its Dirichlet seminorm over the target's)".into(),
+                before.and_then(|b| b.signal_roughness).map_or("–".into(), |b| format!("{b:.3}")),
+                format!("{r:.3}"),
+            ]
+        }))
+        // Several signal channels: each one's error (the rows above are the
+        // first's), on its own range.
+        .chain(after.channels.iter().enumerate().skip(1).map(|(c, q)| {
+            vec![
+                format!("channel {}: signal error, rms (of its range)", c + 1),
+                percent(before.and_then(|b| b.channels.get(c)).and_then(|b| b.signal_rms)),
+                percent(q.signal_rms),
+            ]
+        }))
+        .collect();
     table("quality", &["", "before", "after"], &rows)
 }
 
 /// The stages, one row each.
-fn stages_table(stages: &serde_json::Value) -> String {
+fn stages_table(stages: &[StageRecord]) -> String {
     let rows: Vec<Vec<String>> = stages
-        .as_array()
-        .map(Vec::as_slice)
-        .unwrap_or_default()
         .iter()
         .enumerate()
         .map(|(k, s)| {
-            let its = s["iterations"].as_array().map_or(0, Vec::len);
-            let last = s["iterations"].as_array().and_then(|v| v.last()).unwrap_or(&s["initial"]);
-            let j = |v: &serde_json::Value| v["value"].as_f64().map_or("–".into(), |x| format!("{x:.4e}"));
+            let last = s.iterations.last().unwrap_or(&s.initial);
             vec![
                 format!("{}", k + 1),
-                escape(s["kernel_geom"].as_str().unwrap_or("")),
-                its.to_string(),
-                j(&s["initial"]),
-                j(last),
-                escape(s["reason"].as_str().unwrap_or("")),
+                escape(&s.kernel_geom),
+                s.iterations.len().to_string(),
+                format!("{:.4e}", s.initial.value),
+                format!("{:.4e}", last.value),
+                escape(&s.reason),
             ]
         })
         .collect();
@@ -393,7 +392,7 @@ fn collection(dir: &Path) -> Result<Vec<(f64, String)>> {
 
 /// The report of an `fshape match` folder.
 pub fn match_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
-    let summary = read_json(&dir.join("summary.json"))?;
+    let summary = MatchRecord::read(&dir.join("summary.json"))?;
     let states: Vec<(f64, FShape)> = collection(dir)?
         .into_iter()
         .map(|(t, file)| read(&dir.join(file.replace(".vtk", ".ply"))).map(|s| (t, s)))
@@ -405,16 +404,13 @@ pub fn match_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
 }
 
 /// The report of a registration from what it produced: the geodesic's
-/// states (time, shape), the target as matched, its summary (the keys of
-/// `fshape match`'s summary.json: `source`, `target`, `model`, `norm`,
-/// `quality_before`, `quality`, `final_value`, `final_energy`,
-/// `final_attachment`, `iterations`, `evaluations`, `seconds`, `stages`,
-/// `prealign`, `config`), the configuration's text and the energy plot
-/// (SVG), when there are.
+/// states (time, shape), the target as matched, its record (what
+/// `fshape match` writes as summary.json), the configuration's text and
+/// the energy plot (SVG), when there are.
 pub fn registration_page(
     states: &[(f64, FShape)],
     target: &FShape,
-    summary: &serde_json::Value,
+    summary: &MatchRecord,
     config: Option<&str>,
     energy_svg: Option<&str>,
     view: (f64, f64),
@@ -438,31 +434,31 @@ pub fn registration_page(
         let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
         vec![scene("the geodesic", &frames, labels, Some(("target", target)))?]
     };
-    let text = |k: &str| summary[k].as_str().unwrap_or("").to_string();
+    let (before, after) = (summary.quality_before.as_ref(), summary.quality.as_ref());
     let mut sections = vec![
-        format!("<h2>How close it came</h2>{}", quality_table(&summary["quality_before"], &summary["quality"])),
+        format!("<h2>How close it came</h2>{}", quality_table(before, after)),
         format!(
             "<h2>The run</h2><p>{} model, {} signal norm; J = {:.4e} (energy {:.4e}, data term {:.4e}) after {} iterations and {} evaluations in {:.1} s.</p>{}",
-            escape(&text("model")),
-            escape(&text("norm")),
-            summary["final_value"].as_f64().unwrap_or(f64::NAN),
-            summary["final_energy"].as_f64().unwrap_or(f64::NAN),
-            summary["final_attachment"].as_f64().unwrap_or(f64::NAN),
-            summary["iterations"],
-            summary["evaluations"],
-            summary["seconds"].as_f64().unwrap_or(f64::NAN),
-            stages_table(&summary["stages"])
+            escape(&summary.model),
+            escape(&summary.norm),
+            summary.final_value,
+            summary.final_energy,
+            summary.final_attachment,
+            summary.iterations,
+            summary.evaluations,
+            summary.seconds,
+            stages_table(&summary.stages)
         ),
     ];
-    if let Some(a) = summary.get("prealign").filter(|a| !a.is_null()) {
+    if let Some(a) = &summary.prealign {
         sections.push(format!(
             "<h2>Pre-alignment</h2><p>{} ({} moved): rotation {:.2}°, scale {:.4}, data term {:.4e} → {:.4e}.</p>",
-            escape(a["kind"].as_str().unwrap_or("")),
-            escape(a["moving"].as_str().unwrap_or("")),
-            a["rotation_degrees"].as_f64().unwrap_or(f64::NAN),
-            a["scale"].as_f64().unwrap_or(f64::NAN),
-            a["attachment_before"].as_f64().unwrap_or(f64::NAN),
-            a["attachment_after"].as_f64().unwrap_or(f64::NAN),
+            a.kind.name(),
+            a.moving.name(),
+            a.rotation_degrees,
+            a.scale,
+            a.attachment_before,
+            a.attachment_after,
         ));
     }
     if let Some(svg) = energy_svg {
@@ -471,24 +467,24 @@ pub fn registration_page(
     if let Some(config) = config {
         sections.push(format!(
             "<h2>Configuration</h2><p>As run, with the weights the model used{}.</p><pre>{}</pre>",
-            if text("config").is_empty() {
+            if summary.config.is_empty() {
                 String::new()
             } else {
-                format!(" (the file given was <code>{}</code>)", escape(&text("config")))
+                format!(" (the file given was <code>{}</code>)", escape(&summary.config))
             },
             escape(config)
         ));
     }
     Ok(Page {
-        title: format!("{} → {}", text("source"), text("target")),
+        title: format!("{} → {}", summary.source, summary.target),
         subtitle: format!(
             "fshape match: mean distance {} → {} of the diagonal{}",
-            percent(&summary["quality_before"]["mean_distance"]),
-            percent(&summary["quality"]["mean_distance"]),
-            summary["quality"]["signal_rms"].as_f64().map_or(String::new(), |_| format!(
+            percent(before.map(|q| q.mean_distance)),
+            percent(after.map(|q| q.mean_distance)),
+            after.and_then(|q| q.signal_rms).map_or(String::new(), |e| format!(
                 ", signal error {} → {} of its range",
-                percent(&summary["quality_before"]["signal_rms"]),
-                percent(&summary["quality"]["signal_rms"])
+                percent(before.and_then(|q| q.signal_rms)),
+                percent(Some(e))
             ))
         ),
         view,
@@ -499,7 +495,7 @@ pub fn registration_page(
 
 /// The report of an `fshape atlas` folder.
 pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
-    let summary = read_json(&dir.join("summary.json"))?;
+    let summary = AtlasRecord::read(&dir.join("summary.json"))?;
     let template = read(&dir.join("template.ply"))?;
     let start = read(&dir.join("template_start.ply"))?;
     let mut scenes = vec![scene(
@@ -508,10 +504,10 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
         vec!["the initial template".into(), "the estimated template".into()],
         None,
     )?];
-    let subjects = summary["subjects"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let subjects = &summary.subjects;
     let mut rows = Vec::new();
     for (i, s) in subjects.iter().enumerate() {
-        let folder = s["directory"].as_str().unwrap_or_default();
+        let folder = &s.directory;
         if i < ATLAS_SUBJECTS {
             let matched = read(&dir.join(folder).join("matched.ply"))?;
             let subject = read(&dir.join(folder).join("subject.ply"))?;
@@ -522,17 +518,17 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
                 Some(("subject", &subject)),
             )?);
         }
-        let q = &s["quality"];
+        let q = &s.quality;
         rows.push(vec![
             i.to_string(),
-            escape(s["file"].as_str().unwrap_or("")),
-            percent(&q["mean_distance"]),
-            percent(&q["target_within_1pct"]),
-            percent(&q["signal_rms"]),
-            percent(&s["attachment_fall"]),
+            escape(&s.file),
+            percent(Some(q.mean_distance)),
+            percent(Some(q.target_within_1pct)),
+            percent(q.signal_rms),
+            percent(s.attachment_fall),
         ]);
     }
-    let modes = summary["modes"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let modes = &summary.modes;
     let mut mode_rows = Vec::new();
     for (k, m) in modes.iter().enumerate() {
         let (minus, plus) = (
@@ -545,11 +541,7 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
             vec!["−2 SD".into(), "the template".into(), "+2 SD".into()],
             None,
         )?);
-        mode_rows.push(vec![
-            (k + 1).to_string(),
-            format!("{:.4e}", m["sd"].as_f64().unwrap_or(f64::NAN)),
-            percent(&m["share"]),
-        ]);
+        mode_rows.push(vec![(k + 1).to_string(), format!("{:.4e}", m.sd), percent(Some(m.share))]);
     }
     let mut sections = vec![format!(
         "<h2>The subjects</h2><p>How close the template shot by each subject's momenta came to it. Click a header to sort.{}</p>{}",
@@ -575,8 +567,8 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
         title: format!("Atlas of {} subjects", subjects.len()),
         subtitle: format!(
             "fshape atlas: {} model; the subjects matched from the template to {} of the diagonal on average",
-            summary["model"].as_str().unwrap_or(""),
-            percent(&summary["mean_distance"])
+            escape(&summary.model),
+            percent(Some(summary.mean_distance))
         ),
         view,
         scenes,
@@ -587,11 +579,11 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
 /// The report of an `fshape batch` folder: its index, sortable, each row
 /// with a thumbnail linking to its own report.
 pub fn batch_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
-    let index = read_json(&dir.join("index.json"))?;
-    let rows = index["rows"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let index = BatchIndex::read(&dir.join("index.json"))?;
+    let rows = &index.rows;
     let mut cells = Vec::new();
     for r in rows {
-        let name = r["name"].as_str().unwrap_or_default();
+        let name = &r.name;
         let row_dir = dir.join(name);
         // The geodesic's last picture, as a thumbnail.
         let last = (0..1000).map(|k| row_dir.join(format!("render_{k:03}.png"))).take_while(|p| p.exists()).last();
@@ -608,29 +600,24 @@ pub fn batch_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
         } else {
             escape(name)
         };
-        let num = |k: &str| r[k].as_f64().map_or(String::new(), |v| format!("{v:.4e}"));
         cells.push(vec![
             thumb,
             link,
-            escape(r["status"].as_str().unwrap_or("")),
-            percent(&r["mean_distance"]),
-            percent(&r["target_within_1pct"]),
-            percent(&r["signal_rms"]),
-            num("value"),
-            r["iterations"].as_u64().map_or(String::new(), |i| i.to_string()),
-            r["seconds"].as_f64().map_or(String::new(), |s| format!("{s:.1}")),
-            escape(r["error"].as_str().unwrap_or("")),
+            r.status.name().to_string(),
+            percent(r.mean_distance),
+            percent(r.target_within_1pct),
+            percent(r.signal_rms),
+            r.value.map_or(String::new(), |v| format!("{v:.4e}")),
+            r.iterations.map_or(String::new(), |i| i.to_string()),
+            r.seconds.map_or(String::new(), |s| format!("{s:.1}")),
+            escape(r.error.as_deref().unwrap_or("")),
         ]);
     }
-    let count = |k: &str| index[k].as_u64().unwrap_or(0);
     Ok(Page {
         title: format!("Batch of {} pairs", rows.len()),
         subtitle: format!(
             "fshape batch: {} done, {} failed, {} incomplete, {} pending",
-            count("done"),
-            count("failed"),
-            count("incomplete"),
-            count("pending")
+            index.done, index.failed, index.incomplete, index.pending
         ),
         view,
         scenes: Vec::new(),
@@ -696,8 +683,16 @@ pub fn write_report(dir: &Path, view: (f64, f64)) -> Result<PathBuf> {
         if !dir.join("summary.json").exists() {
             return Err(ReportError::NotAnOutput { path: dir.to_path_buf() });
         }
-        let summary = read_json(&dir.join("summary.json"))?;
-        if summary.get("subjects").is_some() { atlas_page(dir, view)? } else { match_page(dir, view)? }
+        match Record::read(&dir.join("summary.json"))? {
+            Record::Atlas(_) => atlas_page(dir, view)?,
+            Record::Match(_) => match_page(dir, view)?,
+            other => {
+                return Err(ReportError::File {
+                    path: dir.join("summary.json"),
+                    message: format!("the record of an fshape {} run, which has no report", other.kind().name()),
+                });
+            }
+        }
     };
     let path = dir.join("report.html");
     io::write_atomic(&path, html(&page).as_bytes(), false)?;

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use fshape_match::record::{self, AtlasRecord, ModeRecord, RunRecord, SubjectRecord};
 use fshape_match::{Atlas, Config, MatchError, Outcome};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
-use serde::Serialize;
 
 use crate::render::{self, SIZE, View};
 
@@ -98,70 +98,6 @@ pub struct AtlasArgs<'a> {
     pub stage_templates: &'a [PathBuf],
     /// How the run reports its progress.
     pub verbosity: crate::args::Verbosity,
-}
-
-#[derive(Serialize)]
-struct SubjectSummary {
-    file: String,
-    /// J_i and its parts at the result.
-    value: f64,
-    energy: f64,
-    attachment: f64,
-    /// A at the start (the initial template against the subject) and the
-    /// share of it the atlas removed, 1 − attachment/attachment_start
-    /// (null for a subject that is the initial template, A = 0 at the start).
-    attachment_start: f64,
-    attachment_fall: Option<f64>,
-    /// How close the template shot by the subject's momenta came to it,
-    /// and how close the estimated template itself is.
-    quality: fshape_match::Quality,
-    template_quality: fshape_match::Quality,
-    /// The pre-alignment that moved the subject onto the initial template
-    /// (`[prealign]`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    prealign: Option<fshape_match::Alignment>,
-    directory: String,
-}
-
-#[derive(Serialize)]
-struct ModeSummary {
-    /// Standard deviation, in √(2 × energy).
-    sd: f64,
-    /// Share of the total variance.
-    share: f64,
-}
-
-#[derive(Serialize)]
-struct Summary<'a> {
-    template_start: String,
-    config: String,
-    model: &'static str,
-    norm: &'static str,
-    gamma_v: f64,
-    gamma_f: f64,
-    gamma_w: f64,
-    scales: Option<fshape_match::Scales>,
-    effective_weights: [f64; 3],
-    /// Per stage, J and its parts per iteration: means over the subjects.
-    stages: &'a [fshape_match::StageRecord],
-    final_value: f64,
-    final_energy: f64,
-    final_attachment: f64,
-    subjects: Vec<SubjectSummary>,
-    /// Over the subjects: the mean of each one's mean distance and signal
-    /// error after matching.
-    mean_distance: f64,
-    mean_signal_rms: Option<f64>,
-    /// The principal modes of the initial momenta (energy metric): their
-    /// standard deviations and shares of the variance.
-    modes: Vec<ModeSummary>,
-    /// The smallest share of a subject's data term the atlas removed
-    /// (subjects that start at A = 0 left out).
-    min_attachment_fall: f64,
-    iterations: usize,
-    evaluations: usize,
-    seconds: f64,
-    files: Vec<String>,
 }
 
 /// A subject's files: its mesh, its signal and its mask.
@@ -336,7 +272,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
             )
             .collect();
         table.push_str(&(row.join(",") + "\n"));
-        subject_summaries.push(SubjectSummary {
+        subject_summaries.push(SubjectRecord {
             file: path.display().to_string(),
             value: s.energies.value,
             energy: s.energies.energy,
@@ -394,7 +330,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
             io::write_to(&mut bytes, shape, io::Format::Ply, Encoding::Binary)?;
             push(format!("mode_{}_{c}.ply", k + 1), bytes);
         }
-        mode_summaries.push(ModeSummary { sd: mode.sd, share: mode.share });
+        mode_summaries.push(ModeRecord { sd: mode.sd, share: mode.share });
         mode_rows.push([row[0].clone(), row[1].clone(), row[2].clone()]);
     }
     if !mode_rows.is_empty() {
@@ -414,19 +350,21 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         .iter()
         .filter(|s| s.initial_attachment > 0.0)
         .map(|s| 1.0 - s.energies.attachment / s.initial_attachment)
-        .fold(f64::INFINITY, f64::min);
+        .reduce(f64::min);
     let e = result.energies;
-    let summary = Summary {
+    let summary = AtlasRecord {
+        kind: record::Kind::Atlas,
+        format: record::FORMAT,
         template_start: template_path.display().to_string(),
         config: a.config.display().to_string(),
-        model: kind.name(),
-        norm: model.norm().name(),
+        model: kind.name().into(),
+        norm: model.norm().name().into(),
         gamma_v: config.model.gamma_v,
         gamma_f: config.model.gamma_f,
         gamma_w: config.model.gamma_w,
         scales: atlas.plan().scales.clone(),
         effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
-        stages: &result.stages,
+        stages: result.stages.clone(),
         final_value: e.value,
         final_energy: e.energy,
         final_attachment: e.attachment,
@@ -440,7 +378,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         seconds: result.seconds + after.elapsed().as_secs_f64(),
         files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
     };
-    outputs.push((a.out.join("summary.json"), serde_json::to_vec_pretty(&summary)?));
+    outputs.push((a.out.join("summary.json"), summary.to_json()));
     for (path, bytes) in &outputs {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
@@ -460,11 +398,11 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         report.display()
     );
     let signal = mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
+    let fall = min_attachment_fall
+        .map_or(String::new(), |f| format!("; every subject's data term fell by at least {:.2}%", 100.0 * f));
     println!(
-        "  subjects matched from the template: mean distance {:.3}% of the diagonal (mean over subjects){signal}; \
-         every subject's data term fell by at least {:.2}%",
+        "  subjects matched from the template: mean distance {:.3}% of the diagonal (mean over subjects){signal}{fall}",
         100.0 * mean_distance,
-        100.0 * min_attachment_fall
     );
     Ok(())
 }

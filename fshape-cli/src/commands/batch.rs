@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, Result, bail};
+use fshape_match::record::{self, BatchIndex, BatchRow, MatchRecord, RunRecord, Status};
 use fshape_mesh::io;
-use serde::Serialize;
 
 /// `fshape batch`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -190,35 +190,15 @@ fn read_pairs(path: &Path) -> Result<Vec<Row>> {
 }
 
 /// A row's state, from its directory.
-#[derive(Serialize)]
-struct Entry {
-    row: usize,
-    line: usize,
-    name: String,
-    source: String,
-    target: String,
-    /// done | failed | incomplete (a checkpoint, no result) | pending
-    status: &'static str,
-    value: Option<f64>,
-    attachment: Option<f64>,
-    mean_distance: Option<f64>,
-    p95_distance: Option<f64>,
-    target_within_1pct: Option<f64>,
-    signal_rms: Option<f64>,
-    iterations: Option<u64>,
-    seconds: Option<f64>,
-    error: Option<String>,
-}
-
-fn entry(out: &Path, pairs: &Path, row: &Row) -> Entry {
+fn entry(out: &Path, pairs: &Path, row: &Row) -> BatchRow {
     let dir = out.join(&row.name);
-    let mut e = Entry {
+    let mut e = BatchRow {
         row: row.index + 1,
         line: row.line,
         name: row.name.clone(),
         source: row.source.display().to_string(),
         target: row.target.display().to_string(),
-        status: "pending",
+        status: Status::Pending,
         value: None,
         attachment: None,
         mean_distance: None,
@@ -230,40 +210,46 @@ fn entry(out: &Path, pairs: &Path, row: &Row) -> Entry {
         error: None,
     };
     if let Some(why) = &row.invalid {
-        e.status = "failed";
+        e.status = Status::Failed;
         e.error = Some(format!("{}:{}: {why}", pairs.display(), row.line));
         return e;
     }
-    if let Some(s) = done(&dir) {
-        let q = &s["quality"];
-        e.status = "done";
-        e.value = s["final_value"].as_f64();
-        e.attachment = s["final_attachment"].as_f64();
-        e.mean_distance = q["mean_distance"].as_f64();
-        e.p95_distance = q["p95_distance"].as_f64();
-        e.target_within_1pct = q["target_within_1pct"].as_f64();
-        e.signal_rms = q["signal_rms"].as_f64();
-        e.iterations = s["iterations"].as_u64();
-        e.seconds = s["seconds"].as_f64();
+    let summary = dir.join("summary.json");
+    if summary.exists() {
+        match MatchRecord::read(&summary) {
+            Ok(s) => {
+                e.status = Status::Done;
+                e.value = Some(s.final_value);
+                e.attachment = Some(s.final_attachment);
+                if let Some(q) = &s.quality {
+                    e.mean_distance = Some(q.mean_distance);
+                    e.p95_distance = Some(q.p95_distance);
+                    e.target_within_1pct = Some(q.target_within_1pct);
+                    e.signal_rms = q.signal_rms;
+                }
+                e.iterations = Some(s.iterations as u64);
+                e.seconds = Some(s.seconds);
+            }
+            // A summary this fshape cannot read (damaged, or another
+            // version's): said, not taken for a row to run again.
+            Err(why) => {
+                e.status = Status::Failed;
+                e.error = Some(why.to_string());
+            }
+        }
     } else if let Ok(why) = std::fs::read_to_string(dir.join("error.txt")) {
-        e.status = "failed";
+        e.status = Status::Failed;
         e.error = Some(why.trim().to_string());
     } else if dir.join("checkpoint.bin").exists() {
-        e.status = "incomplete";
+        e.status = Status::Incomplete;
     }
     e
 }
 
-/// The row's summary, if it finished.
-fn done(dir: &Path) -> Option<serde_json::Value> {
-    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
-    serde_json::from_str(&text).ok()
-}
-
 /// Writes index.csv, index.json and report.html of every row; returns
 /// the entries.
-fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
-    let entries: Vec<Entry> = rows.iter().map(|r| entry(a.out, a.pairs, r)).collect();
+fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<BatchRow>> {
+    let entries: Vec<BatchRow> = rows.iter().map(|r| entry(a.out, a.pairs, r)).collect();
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:e}"));
     let header = "row,line,name,source,target,status,value,attachment,mean_distance,p95_distance,target_within_1pct,\
                   signal_rms,iterations,seconds,error";
@@ -275,7 +261,7 @@ fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
             e.name.clone(),
             e.source.clone(),
             e.target.clone(),
-            e.status.to_string(),
+            e.status.name().to_string(),
             opt(e.value),
             opt(e.attachment),
             opt(e.mean_distance),
@@ -290,21 +276,23 @@ fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<Entry>> {
     // Through the csv crate, with cells a spreadsheet would run as formulas
     // (`=…`, `+…`, `@…`) shown as text: names and errors come from users' files.
     let csv = io::table::table_text(&table, true);
-    let count = |s: &str| entries.iter().filter(|e| e.status == s).count();
-    let json = serde_json::json!({
-        "pairs": a.pairs.display().to_string(),
-        "config": a.config.display().to_string(),
-        "rows": entries,
-        "done": count("done"),
-        "failed": count("failed"),
-        "incomplete": count("incomplete"),
-        "pending": count("pending"),
-    });
+    let count = |s: Status| entries.iter().filter(|e| e.status == s).count();
+    let index = BatchIndex {
+        kind: record::Kind::Batch,
+        format: record::FORMAT,
+        pairs: a.pairs.display().to_string(),
+        config: a.config.display().to_string(),
+        done: count(Status::Done),
+        failed: count(Status::Failed),
+        incomplete: count(Status::Incomplete),
+        pending: count(Status::Pending),
+        rows: entries,
+    };
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     io::write_atomic(&a.out.join("index.csv"), csv.as_bytes(), false)?;
-    io::write_atomic(&a.out.join("index.json"), &serde_json::to_vec_pretty(&json)?, false)?;
+    io::write_atomic(&a.out.join("index.json"), &index.to_json(), false)?;
     fshape_report::write_report(a.out, a.view)?;
-    Ok(entries)
+    Ok(index.rows)
 }
 
 /// Registers one row (resuming its checkpoint if it has one); a failure is
@@ -391,7 +379,7 @@ pub fn run_with(a: &BatchArgs<'_>) -> Result<()> {
             crate::processes::barrier(&universe);
             if rank == 0 {
                 let entries = write_index(a, &rows)?;
-                report(a, &entries, None::<fn(&Entry) -> bool>);
+                report(a, &entries, None::<fn(&BatchRow) -> bool>);
             }
             return failed;
         }
@@ -399,7 +387,7 @@ pub fn run_with(a: &BatchArgs<'_>) -> Result<()> {
     let rows = read_pairs(a.pairs)?;
     if a.index_only {
         let entries = write_index(a, &rows)?;
-        report(a, &entries, None::<fn(&Entry) -> bool>);
+        report(a, &entries, None::<fn(&BatchRow) -> bool>);
         return Ok(());
     }
     let failed = run_rows(a, &rows);
@@ -409,14 +397,19 @@ pub fn run_with(a: &BatchArgs<'_>) -> Result<()> {
     failed
 }
 
+/// Whether the row in `dir` finished: its summary reads (a damaged one is
+/// run again, and written whole).
+fn done(dir: &Path) -> bool {
+    MatchRecord::read(&dir.join("summary.json")).is_ok()
+}
+
 /// Registers this shard's rows that have not finished; an error when any
 /// of its rows failed.
 fn run_rows(a: &BatchArgs<'_>, rows: &[Row]) -> Result<()> {
     fshape_match::Config::read(a.config)?;
     let (shard, shards) = a.shard.unwrap_or((0, 1));
     let mine: Vec<&Row> = rows.iter().filter(|r| r.index % shards == shard).collect();
-    let todo: Vec<&Row> =
-        mine.iter().copied().filter(|r| r.invalid.is_none() && done(&a.out.join(&r.name)).is_none()).collect();
+    let todo: Vec<&Row> = mine.iter().copied().filter(|r| r.invalid.is_none() && !done(&a.out.join(&r.name))).collect();
     eprintln!(
         "batch: {} rows in {}, {} in this shard ({}/{shards}), {} to run, {} at a time",
         rows.len(),
@@ -453,27 +446,27 @@ fn run_rows(a: &BatchArgs<'_>, rows: &[Row]) -> Result<()> {
             }
         });
     }
-    let failed = mine.iter().filter(|r| entry(a.out, a.pairs, r).status == "failed").count();
+    let failed = mine.iter().filter(|r| entry(a.out, a.pairs, r).status == Status::Failed).count();
     if failed > 0 {
         bail!("{failed} of this shard's {} rows failed; see {}", mine.len(), a.out.join("index.csv").display());
     }
     Ok(())
 }
 
-fn shard_filter(shard: usize, shards: usize) -> impl Fn(&Entry) -> bool {
+fn shard_filter(shard: usize, shards: usize) -> impl Fn(&BatchRow) -> bool {
     move |e| (e.row - 1) % shards == shard
 }
 
 /// Prints the counts (of the rows `in_shard` selects, all without one).
-fn report(a: &BatchArgs<'_>, entries: &[Entry], in_shard: Option<impl Fn(&Entry) -> bool>) {
-    let selected: Vec<&Entry> = entries.iter().filter(|e| in_shard.as_ref().is_none_or(|f| f(e))).collect();
-    let count = |s: &str| selected.iter().filter(|e| e.status == s).count();
+fn report(a: &BatchArgs<'_>, entries: &[BatchRow], in_shard: Option<impl Fn(&BatchRow) -> bool>) {
+    let selected: Vec<&BatchRow> = entries.iter().filter(|e| in_shard.as_ref().is_none_or(|f| f(e))).collect();
+    let count = |s: Status| selected.iter().filter(|e| e.status == s).count();
     println!(
         "batch: {} done, {} failed, {} incomplete, {} pending of {} rows; index in {} and report.html",
-        count("done"),
-        count("failed"),
-        count("incomplete"),
-        count("pending"),
+        count(Status::Done),
+        count(Status::Failed),
+        count(Status::Incomplete),
+        count(Status::Pending),
         selected.len(),
         a.out.join("index.csv").display()
     );

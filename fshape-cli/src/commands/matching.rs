@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use fshape_match::{Config, MatchError, Metrics, Outcome, Session, StageRecord};
+use fshape_match::record::{self, MatchRecord, RunRecord};
+use fshape_match::{Config, MatchError, Outcome, Session};
 use fshape_mesh::FShape;
 use fshape_mesh::io;
 use fshape_shoot::{ModelKind, ShootError};
 use fshape_varifold::VarifoldError;
-use serde::Serialize;
 
 use crate::plots::energy_plot;
 use crate::progress::Progress;
@@ -85,46 +85,6 @@ pub struct MatchArgs<'a> {
     pub verbosity: crate::args::Verbosity,
     /// What starts each progress line (a batch row's name), if anything.
     pub label: Option<&'a str>,
-}
-
-#[derive(Serialize)]
-struct Summary<'a> {
-    source: String,
-    target: String,
-    config: String,
-    model: &'static str,
-    norm: &'static str,
-    gamma_v: f64,
-    gamma_f: f64,
-    gamma_w: f64,
-    /// The scales the weights were normalised by (`null`: as written), and
-    /// the weights the model used.
-    scales: Option<fshape_match::Scales>,
-    effective_weights: [f64; 3],
-    steps: usize,
-    metrics: Metrics,
-    stages: &'a [StageRecord],
-    /// J's parts at the result.
-    final_value: f64,
-    final_energy: f64,
-    final_attachment: f64,
-    /// √H_0: the geodesic distance (metamorphosis; the path energy's root
-    /// otherwise).
-    geodesic_distance: f64,
-    hamiltonian: Vec<f64>,
-    /// How close the matched shape is to the target (fractions of the
-    /// target's diagonal and signal range), and the template was.
-    quality: fshape_match::Quality,
-    quality_before: fshape_match::Quality,
-    /// The pre-alignment the registration ran after (`[prealign]`): T as
-    /// a homogeneous matrix from the source's frame to the target's, and
-    /// the attachment before and after.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    prealign: Option<&'a fshape_match::Alignment>,
-    iterations: usize,
-    evaluations: usize,
-    seconds: f64,
-    files: Vec<String>,
 }
 
 /// The library says "the target shape has no signal"; the user knows it by
@@ -252,12 +212,14 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     outputs.push((a.out.join("energy.png"), png));
     files.extend(["energy.svg".into(), "energy.png".into()]);
     let e = result.energies;
-    let summary = Summary {
+    let summary = MatchRecord {
+        kind: record::Kind::Match,
+        format: record::FORMAT,
         source: a.source.display().to_string(),
         target: a.target.display().to_string(),
         config: a.config.display().to_string(),
-        model: kind.name(),
-        norm: model.norm().name(),
+        model: kind.name().into(),
+        norm: model.norm().name().into(),
         gamma_v: config.model.gamma_v,
         gamma_f: config.model.gamma_f,
         gamma_w: config.model.gamma_w,
@@ -265,21 +227,21 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
         steps: model.steps(),
         metrics,
-        stages: &result.stages,
+        stages: result.stages.clone(),
         final_value: e.value,
         final_energy: e.energy,
         final_attachment: e.attachment,
         geodesic_distance: e.energy.max(0.0).sqrt(),
         hamiltonian: traj.hamiltonian.clone(),
-        quality: result.quality.clone(),
-        quality_before: result.initial_quality.clone(),
-        prealign: result.alignment.as_ref(),
+        quality: Some(result.quality.clone()),
+        quality_before: Some(result.initial_quality.clone()),
+        prealign: result.alignment.clone(),
         iterations: result.iterations,
         evaluations: result.evaluations,
         seconds: result.seconds + after.elapsed().as_secs_f64(),
         files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
     };
-    outputs.push((a.out.join("summary.json"), serde_json::to_vec_pretty(&summary)?));
+    outputs.push((a.out.join("summary.json"), summary.to_json()));
     for (path, bytes) in &outputs {
         io::write_atomic(path, bytes, false)?;
     }

@@ -3,8 +3,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use fshape_match::record::{self, FinalState, RunRecord, ShootRecord, ShootTiming};
 use fshape_mesh::io;
-use serde::Serialize;
 
 use crate::inputs::load;
 use crate::outputs::trajectory_files;
@@ -55,43 +55,6 @@ struct ShootArgs<'a> {
     out: &'a Path,
     times: &'a [f64],
     signal_name: Option<String>,
-}
-
-#[derive(Serialize)]
-struct ShootSummary {
-    source: String,
-    config: String,
-    model: String,
-    norm: &'static str,
-    integrator: String,
-    steps: usize,
-    /// H(z_k) at every step k = 0..N.
-    hamiltonian: Vec<f64>,
-    /// Relative drift max_k |H_k − H_0| / |H_0| (0 when H_0 = 0).
-    hamiltonian_drift: f64,
-    times: Vec<f64>,
-    files: Vec<String>,
-    final_state: FinalState,
-    seconds: Timing,
-}
-
-#[derive(Serialize)]
-struct FinalState {
-    /// Largest vertex displacement |x_1 − x_0|.
-    max_displacement: f64,
-    /// Root-mean-square displacement.
-    rms_displacement: f64,
-    /// ‖f_1 − f_0‖∞.
-    max_signal_change: f64,
-    /// Largest momentum norm |p_1|.
-    max_momentum: f64,
-}
-
-#[derive(Serialize)]
-struct Timing {
-    total: f64,
-    kernels: f64,
-    fem: f64,
 }
 
 fn shoot(a: &ShootArgs<'_>) -> Result<()> {
@@ -154,11 +117,13 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
         .collect();
     let norm_rows =
         |v: &[f64]| v.chunks_exact(dim).map(|r| r.iter().map(|u| u * u).sum::<f64>().sqrt()).fold(0.0, f64::max);
-    let summary = ShootSummary {
+    let summary = ShootRecord {
+        kind: record::Kind::Shoot,
+        format: record::FORMAT,
         source: a.source.display().to_string(),
         config: a.config.display().to_string(),
         model: kind,
-        norm,
+        norm: norm.into(),
         integrator,
         steps,
         hamiltonian_drift: drift,
@@ -176,9 +141,13 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
                 .fold(0.0, f64::max),
             max_momentum: norm_rows(traj.momenta(steps)),
         },
-        seconds: Timing { total: start.elapsed().as_secs_f64(), kernels: traj.timings.kernels, fem: traj.timings.fem },
+        seconds: ShootTiming {
+            total: start.elapsed().as_secs_f64(),
+            kernels: traj.timings.kernels,
+            fem: traj.timings.fem,
+        },
     };
-    outputs.push((a.out.join("summary.json"), serde_json::to_string_pretty(&summary)?.into_bytes()));
+    outputs.push((a.out.join("summary.json"), summary.to_json()));
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     for (path, bytes) in &outputs {
         io::write_atomic(path, bytes, false)?;

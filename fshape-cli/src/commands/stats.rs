@@ -11,6 +11,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use fshape_match::record::{self, AtlasRecord, RunRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding, ReadOptions};
 use fshape_stats::{Covariates, Inference, MapKind, MapTest, MeshGraph, StatKind, Tail, TfceParams};
@@ -95,25 +96,19 @@ struct AtlasFolder {
 /// The atlas folder's template, subjects and principal scores.
 fn read_atlas(dir: &Path) -> Result<AtlasFolder> {
     let summary_path = dir.join("summary.json");
-    let text = std::fs::read(&summary_path)
-        .with_context(|| format!("{}: not an `fshape atlas` output folder (no summary.json)", dir.display()))?;
-    let summary: serde_json::Value =
-        serde_json::from_slice(&text).with_context(|| format!("{}: not JSON", summary_path.display()))?;
-    let Some(entries) = summary["subjects"].as_array() else {
-        bail!("{}: no `subjects` list (is this an `fshape atlas` summary?)", summary_path.display());
-    };
+    if !summary_path.exists() {
+        bail!("{}: not an `fshape atlas` output folder (no summary.json)", dir.display());
+    }
+    let entries = AtlasRecord::read(&summary_path)?.subjects;
     let template = io::read_mesh(&dir.join("template.ply"), &ReadOptions::default())?;
     let dim = template.dim();
     let mut subjects = Vec::with_capacity(entries.len());
     for (i, entry) in entries.iter().enumerate() {
-        let folder = entry["directory"].as_str().map_or_else(|| format!("subject_{i:03}"), str::to_string);
-        let mut names = vec![i.to_string(), folder.clone()];
-        if let Some(file) = entry["file"].as_str() {
-            names.push(file.to_string());
-            if let Some(base) = Path::new(file).file_name().and_then(|n| n.to_str()) {
-                names.push(base.to_string());
-                names.push(base.split('.').next().unwrap_or(base).to_string());
-            }
+        let folder = entry.directory.clone();
+        let mut names = vec![i.to_string(), folder.clone(), entry.file.clone()];
+        if let Some(base) = Path::new(&entry.file).file_name().and_then(|n| n.to_str()) {
+            names.push(base.to_string());
+            names.push(base.split('.').next().unwrap_or(base).to_string());
         }
         names.dedup();
         let sub = dir.join(&folder);
@@ -199,6 +194,11 @@ struct ScoresSummary {
 
 #[derive(Serialize)]
 struct Summary<'a> {
+    /// [`record::Kind::Stats`] and [`record::FORMAT`], as every run record
+    /// starts (nothing reads this one back: it holds fshape-stats' results,
+    /// which fshape-match's records do not know).
+    kind: record::Kind,
+    format: u32,
     atlas: String,
     covariates: String,
     subjects: usize,
@@ -377,6 +377,8 @@ pub fn run(a: Args) -> Result<()> {
         ));
     }
     let summary = Summary {
+        kind: record::Kind::Stats,
+        format: record::FORMAT,
         atlas: a.atlas.display().to_string(),
         covariates: a.covariates.display().to_string(),
         subjects: n,

@@ -87,11 +87,8 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
     let diag = truth.bounding_box().diagonal();
     let bias =
         bias.chunks_exact(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).sum::<f64>() / n as f64 / diag;
-    let summary: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(run.join("summary.json"))
-            .with_context(|| format!("reading {}", run.join("summary.json").display()))?,
-    )?;
-    let residual = summary["mean_distance"].as_f64().unwrap_or(f64::NAN);
+    use fshape_match::record::{AtlasRecord, RunRecord};
+    let residual = AtlasRecord::read(&run.join("summary.json"))?.mean_distance;
     let report = serde_json::json!({
         "truth_distance_start": before.mean_distance,
         "truth_distance": got.mean_distance,

@@ -78,7 +78,8 @@ pub struct StageSetup {
 pub struct StageRecord {
     /// The stage's position kernel as written.
     pub kernel_geom: String,
-    /// What it ran on.
+    /// What it ran on (empty in records from before it was kept).
+    #[serde(default)]
     pub setup: StageSetup,
     /// Why it stopped.
     pub stop: Stop,
