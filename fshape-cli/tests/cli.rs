@@ -912,6 +912,13 @@ fn atlas_writes_a_template_every_subjects_momenta_and_resumes_bit_for_bit() {
     assert_eq!((v["vertices"].as_u64(), v["missing"].as_u64()), (Some(162), Some(0)), "{v}");
     let o = fshape(&["transfer", &whole.display().to_string(), &height, &onto]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("give one subject's folder"), "{o:?}");
+    // The page written from memory is the one `fshape report` builds from
+    // the files.
+    let page = std::fs::read_to_string(whole.join("report.html")).unwrap();
+    assert!(page.contains("mode 2 (±2 standard deviations)") && page.contains("subject 2: the template shot onto it"));
+    std::fs::remove_file(whole.join("report.html")).unwrap();
+    assert!(fshape(&["report", &whole.display().to_string()]).status.success());
+    assert_eq!(std::fs::read_to_string(whole.join("report.html")).unwrap(), page);
     // Stopped after 2 iterations and resumed: the same template, bit for bit.
     run(&parts, &["--stop-after", "2"]);
     assert!(!parts.join("template.ply").exists());
@@ -1172,6 +1179,28 @@ fn batch_gives_every_row_the_same_result_in_every_mode_and_a_bad_row_fails_alone
     assert_eq!(third, std::fs::read(dir.join("seq/third/p0.csv")).unwrap());
     let o = batch(&out("seq"), &[], &[]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("1 to run"), "{}", String::from_utf8_lossy(&o.stderr));
+    // A damaged summary: the index says so, naming it, and the row runs
+    // again (to the same result).
+    let first = dir.join("seq/first");
+    std::fs::write(first.join("summary.json"), "{\"source\": ").unwrap();
+    assert!(batch(&out("seq"), &["--index-only"], &[]).status.success());
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("seq/index.json")).unwrap()).unwrap();
+    let row = &index["rows"][0];
+    assert_eq!(row["status"], "failed", "{row}");
+    let why = row["error"].as_str().unwrap();
+    assert!(why.contains("summary.json: not JSON"), "{why}");
+    let o = batch(&out("seq"), &[], &[]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("2 to run"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(first.join("p0.csv")).unwrap(), std::fs::read(dir.join("jobs/first/p0.csv")).unwrap());
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("seq/index.json")).unwrap()).unwrap();
+    assert_eq!(index["rows"][0]["status"], "done");
+    // The page written from the index in memory is the one `fshape report`
+    // builds from the files.
+    let page = std::fs::read_to_string(dir.join("seq/report.html")).unwrap();
+    assert!(fshape(&["report", &out("seq")]).status.success());
+    assert_eq!(std::fs::read_to_string(dir.join("seq/report.html")).unwrap(), page);
 }
 
 #[test]

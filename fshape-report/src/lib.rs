@@ -367,10 +367,6 @@ fn stages_table(stages: &[StageRecord]) -> String {
     table("stages", &["stage", "k_p", "iterations", "J at start", "J at end", "why it ended"], &rows)
 }
 
-fn figure(dir: &Path, name: &str) -> String {
-    std::fs::read_to_string(dir.join(name)).map_or(String::new(), |svg| format!("<div class=\"figure\">{svg}</div>"))
-}
-
 /// The (time, state file) pairs of a ParaView collection, in order.
 fn collection(dir: &Path) -> Result<Vec<(f64, String)>> {
     let path = dir.join("trajectory.pvd");
@@ -498,24 +494,68 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
     let summary = AtlasRecord::read(&dir.join("summary.json"))?;
     let template = read(&dir.join("template.ply"))?;
     let start = read(&dir.join("template_start.ply"))?;
+    let subjects = summary
+        .subjects
+        .iter()
+        .take(ATLAS_SUBJECTS)
+        .map(|s| {
+            Ok((read(&dir.join(&s.directory).join("matched.ply"))?, read(&dir.join(&s.directory).join("subject.ply"))?))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let modes = (1..=summary.modes.len())
+        .map(|k| {
+            Ok((read(&dir.join(format!("mode_{k}_minus2sd.ply")))?, read(&dir.join(format!("mode_{k}_plus2sd.ply")))?))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let energy = std::fs::read_to_string(dir.join("energy.svg")).ok();
+    let shapes = AtlasShapes {
+        template: &template,
+        start: &start,
+        subjects: subjects.iter().map(|(m, s)| (m, s)).collect(),
+        modes: modes.iter().map(|(m, p)| (m, p)).collect(),
+    };
+    atlas_page_of(&summary, &shapes, energy.as_deref(), view)
+}
+
+/// The shapes an atlas's report shows.
+pub struct AtlasShapes<'a> {
+    /// The estimated template.
+    pub template: &'a FShape,
+    /// The initial template.
+    pub start: &'a FShape,
+    /// Per subject (the first [`ATLAS_SUBJECTS`] are shown; more may be
+    /// given): the template shot onto it and the subject as the atlas saw
+    /// it.
+    pub subjects: Vec<(&'a FShape, &'a FShape)>,
+    /// Per mode of the record: the template shot to −2 and +2 standard
+    /// deviations.
+    pub modes: Vec<(&'a FShape, &'a FShape)>,
+}
+
+/// The report of an atlas from its record, its shapes and the energy plot
+/// (SVG), when there is one.
+pub fn atlas_page_of(
+    summary: &AtlasRecord,
+    shapes: &AtlasShapes<'_>,
+    energy_svg: Option<&str>,
+    view: (f64, f64),
+) -> Result<Page> {
+    let (template, start) = (shapes.template, shapes.start);
     let mut scenes = vec![scene(
         "the template",
-        &[&start, &template],
+        &[start, template],
         vec!["the initial template".into(), "the estimated template".into()],
         None,
     )?];
     let subjects = &summary.subjects;
     let mut rows = Vec::new();
     for (i, s) in subjects.iter().enumerate() {
-        let folder = &s.directory;
-        if i < ATLAS_SUBJECTS {
-            let matched = read(&dir.join(folder).join("matched.ply"))?;
-            let subject = read(&dir.join(folder).join("subject.ply"))?;
+        if let Some(&(matched, subject)) = shapes.subjects.get(i).filter(|_| i < ATLAS_SUBJECTS) {
             scenes.push(scene(
                 &format!("subject {i}: the template shot onto it"),
-                &[&template, &matched],
+                &[template, matched],
                 vec!["the template".into(), "shot onto the subject".into()],
-                Some(("subject", &subject)),
+                Some(("subject", subject)),
             )?);
         }
         let q = &s.quality;
@@ -530,14 +570,10 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
     }
     let modes = &summary.modes;
     let mut mode_rows = Vec::new();
-    for (k, m) in modes.iter().enumerate() {
-        let (minus, plus) = (
-            read(&dir.join(format!("mode_{}_minus2sd.ply", k + 1)))?,
-            read(&dir.join(format!("mode_{}_plus2sd.ply", k + 1)))?,
-        );
+    for (k, (m, &(minus, plus))) in modes.iter().zip(&shapes.modes).enumerate() {
         scenes.push(scene(
             &format!("mode {} (±2 standard deviations)", k + 1),
-            &[&minus, &template, &plus],
+            &[minus, template, plus],
             vec!["−2 SD".into(), "the template".into(), "+2 SD".into()],
             None,
         )?);
@@ -562,7 +598,10 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
             table("modes", &["mode", "SD", "share of the variance"], &mode_rows)
         ));
     }
-    sections.push(format!("<h2>The mean objective by iteration</h2>{}", figure(dir, "energy.svg")));
+    sections.push(format!(
+        "<h2>The mean objective by iteration</h2>{}",
+        energy_svg.map_or(String::new(), |svg| format!("<div class=\"figure\">{svg}</div>"))
+    ));
     Ok(Page {
         title: format!("Atlas of {} subjects", subjects.len()),
         subtitle: format!(
@@ -579,7 +618,12 @@ pub fn atlas_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
 /// The report of an `fshape batch` folder: its index, sortable, each row
 /// with a thumbnail linking to its own report.
 pub fn batch_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
-    let index = BatchIndex::read(&dir.join("index.json"))?;
+    batch_page_of(dir, &BatchIndex::read(&dir.join("index.json"))?, view)
+}
+
+/// The report of a batch from its index; `dir` holds the rows' folders
+/// (their thumbnails and reports).
+pub fn batch_page_of(dir: &Path, index: &BatchIndex, view: (f64, f64)) -> Result<Page> {
     let rows = &index.rows;
     let mut cells = Vec::new();
     for r in rows {

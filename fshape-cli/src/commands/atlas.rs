@@ -339,7 +339,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         push("modes.png".into(), render::png_sized(&rgb, width, height)?);
     }
     let (svg, png) = crate::plots::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
-    push("energy.svg".into(), svg.into_bytes());
+    push("energy.svg".into(), svg.clone().into_bytes());
     push("energy.png".into(), png);
     let n = result.subjects.len() as f64;
     let mean_distance = result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n;
@@ -379,13 +379,23 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
     };
     outputs.push((a.out.join("summary.json"), summary.to_json()));
+    // The page a colleague opens, from what is in memory (`fshape report`
+    // builds the same page from the files).
+    let shapes = fshape_report::AtlasShapes {
+        template: &result.template,
+        start: atlas.initial_template(),
+        subjects: matched.iter().zip(&subjects).collect(),
+        modes: mode_rows.iter().map(|[minus, _, plus]| (minus, plus)).collect(),
+    };
+    let page = fshape_report::atlas_page_of(&summary, &shapes, Some(&svg), a.view)?;
+    let report = a.out.join("report.html");
+    outputs.push((report.clone(), fshape_report::html(&page).into_bytes()));
     for (path, bytes) in &outputs {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
         }
         io::write_atomic(path, bytes, false)?;
     }
-    let report = fshape_report::write_report(a.out, a.view)?;
     println!(
         "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files and {}",
         result.subjects.len(),
@@ -394,7 +404,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         e.attachment,
         result.iterations,
         result.stages.len(),
-        outputs.len(),
+        outputs.len() - 1,
         report.display()
     );
     let signal = mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));

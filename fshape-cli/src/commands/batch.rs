@@ -291,7 +291,8 @@ fn write_index(a: &BatchArgs<'_>, rows: &[Row]) -> Result<Vec<BatchRow>> {
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     io::write_atomic(&a.out.join("index.csv"), csv.as_bytes(), false)?;
     io::write_atomic(&a.out.join("index.json"), &index.to_json(), false)?;
-    fshape_report::write_report(a.out, a.view)?;
+    let page = fshape_report::batch_page_of(a.out, &index, a.view)?;
+    io::write_atomic(&a.out.join("report.html"), fshape_report::html(&page).as_bytes(), false)?;
     Ok(index.rows)
 }
 

@@ -145,7 +145,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         a.config.display(),
         config.resolved(session.plan().scales.as_ref()).to_toml()
     );
-    outputs.push((a.out.join("shoot.toml"), shoot.into_bytes()));
+    outputs.push((a.out.join("shoot.toml"), shoot.clone().into_bytes()));
     files.push("shoot.toml".into());
     outputs.push((a.out.join("p0.csv"), io::csv::vectors_text(names, p0).into_bytes()));
     files.push("p0.csv".into());
@@ -208,7 +208,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     outputs.push((a.out.join("target.ply"), target_ply));
     files.push("target.ply".into());
     let (svg, png) = energy_plot(&result.stages, model.gamma_w(), "matching: objective by iteration")?;
-    outputs.push((a.out.join("energy.svg"), svg.into_bytes()));
+    outputs.push((a.out.join("energy.svg"), svg.clone().into_bytes()));
     outputs.push((a.out.join("energy.png"), png));
     files.extend(["energy.svg".into(), "energy.png".into()]);
     let e = result.energies;
@@ -242,11 +242,16 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
     };
     outputs.push((a.out.join("summary.json"), summary.to_json()));
+    // The page a colleague opens, from what is in memory: the states the
+    // files hold, the record, the configuration and the plot (`fshape
+    // report` builds the same page from the files).
+    let states: Vec<(f64, FShape)> = a.times.iter().copied().zip(frames).collect();
+    let page = fshape_report::registration_page(&states, &target, &summary, Some(&shoot), Some(&svg), a.view)?;
+    let report = a.out.join("report.html");
+    outputs.push((report.clone(), fshape_report::html(&page).into_bytes()));
     for (path, bytes) in &outputs {
         io::write_atomic(path, bytes, false)?;
     }
-    // The page a colleague opens, from the files just written.
-    let report = fshape_report::write_report(a.out, a.view)?;
     println!(
         "{} -> {}: J {:.4e} after {} iterations in {} stage(s), {:.0} s",
         a.source.display(),
@@ -269,7 +274,11 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     for line in brief(&result.initial_quality, &result.quality) {
         println!("  {line}");
     }
-    println!("  report        {} ({} files beside it; every figure in summary.json)", report.display(), outputs.len());
+    println!(
+        "  report        {} ({} files beside it; every figure in summary.json)",
+        report.display(),
+        outputs.len() - 1
+    );
     Ok(())
 }
 
