@@ -80,11 +80,11 @@ pub(crate) fn report(
     // The record `fshape match` would write, from what the dict holds: the
     // parts the dict does not carry (the files, H along the geodesic, the
     // scales) are left empty.
-    let typed = |key: &str| -> PyResult<serde_json::Value> { value(result, key) };
     fn from<T: serde::de::DeserializeOwned>(key: &str, v: serde_json::Value) -> PyResult<T> {
-        serde_path_to_error::deserialize(v).map_err(|e| err(format!("report: result[{key:?}].{}: {}", e.path(), e.inner())))
+        serde_path_to_error::deserialize(v)
+            .map_err(|e| err(format!("report: result[{key:?}].{}: {}", e.path(), e.inner())))
     }
-    let energies = typed("energies")?;
+    let energies = value(result, "energies")?;
     let number = |key: &str| energies[key].as_f64().unwrap_or(f64::NAN);
     let (model, norm, gamma, steps, metrics) = match &config {
         Some(c) => (
@@ -111,18 +111,18 @@ pub(crate) fn report(
         effective_weights: gamma,
         steps,
         metrics,
-        stages: from("stages", typed("stages")?)?,
+        stages: from("stages", value(result, "stages")?)?,
         final_value: number("value"),
         final_energy: number("energy"),
         final_attachment: number("attachment"),
         geodesic_distance: number("energy").max(0.0).sqrt(),
         hamiltonian: Vec::new(),
-        quality: from("quality", typed("quality")?)?,
-        quality_before: from("initial_quality", typed("initial_quality")?)?,
-        prealign: from("alignment", typed("alignment")?)?,
-        iterations: from("iterations", typed("iterations")?)?,
-        evaluations: from("evaluations", typed("evaluations")?)?,
-        seconds: from("seconds", typed("seconds")?)?,
+        quality: from("quality", value(result, "quality")?)?,
+        quality_before: from("initial_quality", value(result, "initial_quality")?)?,
+        prealign: from("alignment", value(result, "alignment")?)?,
+        iterations: from("iterations", value(result, "iterations")?)?,
+        evaluations: from("evaluations", value(result, "evaluations")?)?,
+        seconds: from("seconds", value(result, "seconds")?)?,
         files: Vec::new(),
     };
     let text = config.map(|c| c.to_toml());
