@@ -55,6 +55,12 @@ impl Progress {
         self
     }
 
+    /// The model's γ_W, known once the session is set up (the iteration
+    /// lines show γ_W·A).
+    pub(crate) fn set_gamma_w(&mut self, gamma_w: f64) {
+        self.gamma_w = gamma_w;
+    }
+
     /// Each line starts with `[label] `.
     pub(crate) fn labelled(mut self, label: Option<&str>) -> Progress {
         self.label = label.map(|l| format!("[{l}] ")).unwrap_or_default();
@@ -112,6 +118,15 @@ impl Observer for Progress {
         }
         self.budget = self.budget.map(|b| b.saturating_sub(1));
         if self.budget == Some(0) { Control::Stop } else { Control::Continue }
+    }
+
+    fn setup(&mut self, step: &str) {
+        // Before any bar: a line on a terminal too, so that a long
+        // pre-alignment is not silence.
+        if !self.hidden {
+            self.stage = "setup".into();
+            self.line(format_args!("{step}"));
+        }
     }
 
     fn stage_finished(&mut self, _stage: usize, record: &StageRecord) {

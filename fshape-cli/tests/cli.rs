@@ -1108,6 +1108,29 @@ fn batch_inputs(tag: &str) -> (PathBuf, String) {
 }
 
 #[test]
+fn pre_alignment_and_setup_report_on_the_runs_clock_before_the_stages() {
+    let (dir, config) = batch_inputs("setup_lines");
+    let with_prealign = dir.join("prealign.toml");
+    std::fs::write(&with_prealign, std::fs::read_to_string(&config).unwrap() + "\n[prealign]\nkind = \"rigid\"\n")
+        .unwrap();
+    let path = |name: &str| dir.join(name).display().to_string();
+    let args = ["match", &path("sphere.ply"), &path("ellipsoid0.ply"), "--config", &path("prealign.toml")];
+    let o = fshape(&[&args[..], &["--out", &path("run"), "--stop-after", "1"]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    let lines: Vec<&str> = err.lines().collect();
+    let at = |what: &str| lines.iter().position(|l| l.contains(what)).unwrap_or_else(|| panic!("no `{what}` in {err}"));
+    let (begins, ends, stage) =
+        (at("setup pre-alignment (rigid) begins"), at("setup pre-alignment: rotation"), at("stage 1/1"));
+    assert!(begins < ends && ends < stage, "{err}");
+    // On the run's clock: "[    0.1 s] setup ...", as the stages' lines.
+    for k in [begins, ends, stage] {
+        let clock = lines[k].trim_start_matches('[').split(" s]").next().unwrap().trim();
+        assert!(clock.parse::<f64>().is_ok_and(|t| t >= 0.0), "{}", lines[k]);
+    }
+}
+
+#[test]
 fn batch_gives_every_row_the_same_result_in_every_mode_and_a_bad_row_fails_alone() {
     let (dir, config) = batch_inputs("batch");
     let pairs = dir.join("pairs.csv").display().to_string();

@@ -144,6 +144,20 @@ pub struct Alignment {
 }
 
 impl Alignment {
+    /// In a few words: the rotation, the scale and the data term before
+    /// and after.
+    pub fn describe(&self) -> String {
+        format!(
+            "rotation {:.1} deg, scale {:.3}, data term {:.3e} -> {:.3e} (start {} of {})",
+            self.rotation_degrees,
+            self.scale,
+            self.attachment_before,
+            self.attachment_after,
+            self.start + 1,
+            self.starts
+        )
+    }
+
     /// The linear part M and the translation b of T(x) = M x + b.
     pub fn linear_and_offset(&self) -> (Vec<f64>, Vec<f64>) {
         let d = self.matrix.len() - 1;
@@ -610,12 +624,15 @@ pub fn prealigned(
     source: &FShape,
     target: &FShape,
     config: &crate::Config,
+    observer: &mut dyn crate::Observer,
 ) -> Result<(FShape, FShape, Option<Alignment>), MatchError> {
     let Some(section) = config.prealign.as_ref().filter(|s| s.kind != AlignKind::None) else {
         return Ok((source.clone(), target.clone(), None));
     };
     let plan = config.plan(source, target)?;
+    observer.setup(&format!("pre-alignment ({}) begins", section.kind.name()));
     let alignment = prealign(source, target, &plan.stages[0].kernel, section)?;
+    observer.setup(&format!("pre-alignment: {}", alignment.describe()));
     Ok(match section.moving {
         Moving::Source => (alignment.apply(source)?, target.clone(), Some(alignment)),
         Moving::Target => (source.clone(), alignment.apply_inverse(target)?, Some(alignment)),

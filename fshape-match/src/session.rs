@@ -7,7 +7,7 @@ use fshape_mesh::FShape;
 use fshape_shoot::{Energies, Problem, ShootError, Trajectory};
 
 use crate::optimize::{Evaluation, Settings, State, Step, Stop};
-use crate::runner::{Fnv, Runner, StageRecord, StageSetup, Staged, Stages};
+use crate::runner::{Fnv, Observer, Runner, StageRecord, StageSetup, Staged, Stages};
 use crate::unknowns::{Metrics, Unknowns};
 use crate::{Config, MatchError};
 
@@ -206,6 +206,18 @@ impl Runner<Pair> {
     /// Checks the configuration and the shapes, builds the problem (signal
     /// norm analysis, once) and starts an empty checkpoint.
     pub fn new(source: &FShape, target: &FShape, config: &Config) -> Result<Session, MatchError> {
+        Self::new_observed(source, target, config, &mut ())
+    }
+
+    /// [`new`](Self::new), telling `observer` what the setup does
+    /// ([`Observer::setup`]: the pre-alignment, the stages' simplified
+    /// shapes) as it goes.
+    pub fn new_observed(
+        source: &FShape,
+        target: &FShape,
+        config: &Config,
+        observer: &mut dyn Observer,
+    ) -> Result<Session, MatchError> {
         if source.dim() != target.dim() || source.kind() != target.kind() {
             return Err(MatchError::Kinds(format!(
                 "the source is a {} mesh in R^{}, the target a {} mesh in R^{}",
@@ -233,11 +245,14 @@ impl Runner<Pair> {
             _ => source,
         };
         // With `[prealign]`, the registration runs on the aligned pair.
-        let (source, target, alignment) = crate::prealign::prealigned(source, target, config)?;
+        let (source, target, alignment) = crate::prealign::prealigned(source, target, config, observer)?;
         let (source, target) = (&source, &target);
         let plan = config.plan(source, target)?;
         let counts: Vec<Option<usize>> = plan.stages.iter().map(|s| s.vertices).collect();
         let auto = counts.iter().any(Option::is_some);
+        if auto {
+            observer.setup(&format!("simplifying the source for {} stage(s)", counts.iter().flatten().count()));
+        }
         let templates = crate::resolution::simplified_stages(source, &counts, "source")?;
         let targets = if plan.stages.iter().any(|s| s.coarse_target) {
             let counts: Vec<Option<usize>> =
@@ -246,6 +261,7 @@ impl Runner<Pair> {
         } else {
             Vec::new()
         };
+        observer.setup("setting up the first stage's problem");
         // The problem on the first stage's template: a source that stage
         // templates replace at once is not set up.
         let problem = Problem::new(templates.first().and_then(Option::as_ref).unwrap_or(source), plan.model.clone())?;

@@ -175,7 +175,13 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => (paths[0].mesh.clone(), subjects[0].clone()),
     };
     let template = fshape_match::atlas::initial_template(template, &subjects)?;
-    let atlas = match Atlas::new(&template, &subjects, &config) {
+    // The run's clock starts here: the subjects' pre-alignments report on
+    // it too (on process 0 only).
+    let mut progress = crate::progress::Progress::new(f64::NAN, a.stop_after, a.verbosity);
+    if rank > 0 {
+        progress = progress.hidden();
+    }
+    let atlas = match Atlas::new_observed(&template, &subjects, &config, &mut progress) {
         Err(e @ MatchError::Kinds(_)) => bail!("{}: {e}", template_path.display()),
         other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
     };
@@ -194,13 +200,13 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => atlas,
     };
     let model = atlas.plan().model.clone();
-    let mut progress = crate::progress::Progress::new(model.gamma_w(), a.stop_after, a.verbosity);
+    progress.set_gamma_w(model.gamma_w());
     if rank > 0 {
         // Every process runs the same iterations (so --stop-after stops
-        // them all at once); process 0 writes.
+        // them all at once, counted by its hidden progress); process 0
+        // writes.
         let mut atlas = atlas;
-        let mut quiet = crate::progress::Progress::new(model.gamma_w(), a.stop_after, a.verbosity).hidden();
-        atlas.run(&mut quiet)?;
+        atlas.run(&mut progress)?;
         return Ok(());
     }
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;

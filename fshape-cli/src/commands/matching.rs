@@ -106,7 +106,10 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let config = Config::read(a.config)?;
     let source = crate::inputs::load_masked(a.source, a.signal_name.clone(), a.signals.0, &a.masking.0)?;
     let target = crate::inputs::load_masked(a.target, a.signal_name.clone(), a.signals.1, &a.masking.1)?;
-    let session = match Session::new(&source, &target, &config) {
+    // The run's clock starts here: the setup (pre-alignment, simplified
+    // stages) reports on it too.
+    let mut progress = Progress::new(f64::NAN, a.stop_after, a.verbosity).labelled(a.label);
+    let session = match Session::new_observed(&source, &target, &config, &mut progress) {
         Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
         other => other.with_context(|| format!("setting up {} -> {}", a.source.display(), a.target.display()))?,
     };
@@ -124,7 +127,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let mut session = session.with_checkpoint_file(&checkpoint_path);
     let model = session.plan().model.clone();
     let metrics = session.plan().metrics;
-    let mut progress = Progress::new(model.gamma_w(), a.stop_after, a.verbosity).labelled(a.label);
+    progress.set_gamma_w(model.gamma_w());
     if session.run(&mut progress).map_err(|e| name_the_target(e, a.target))? == Outcome::Interrupted {
         progress.abandon("stopped by --stop-after; continue with --resume");
         eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());

@@ -332,6 +332,17 @@ impl Runner<Population> {
     /// scales (length L, signal S) are the initial template's against the
     /// first subject's, as [`Config::plan`] takes them for one match.
     pub fn new(template: &FShape, subjects: &[FShape], config: &Config) -> Result<Atlas, MatchError> {
+        Self::new_observed(template, subjects, config, &mut ())
+    }
+
+    /// [`new`](Self::new), telling `observer` what the setup does
+    /// ([`crate::Observer::setup`]: each subject's pre-alignment) as it goes.
+    pub fn new_observed(
+        template: &FShape,
+        subjects: &[FShape],
+        config: &Config,
+        observer: &mut dyn crate::Observer,
+    ) -> Result<Atlas, MatchError> {
         crate::session::one_channel(std::iter::once(template).chain(subjects))?;
         let first = subjects.first().ok_or(MatchError::NoSubjects)?;
         for (i, s) in subjects.iter().enumerate() {
@@ -353,8 +364,15 @@ impl Runner<Population> {
                 let kernel = config.plan(template, first)?.stages[0].kernel.clone();
                 let mut moved = Vec::with_capacity(subjects.len());
                 let mut alignments = Vec::with_capacity(subjects.len());
-                for s in subjects {
+                for (i, s) in subjects.iter().enumerate() {
+                    observer.setup(&format!(
+                        "pre-alignment ({}) of subject {} of {} begins",
+                        section.kind.name(),
+                        i + 1,
+                        subjects.len()
+                    ));
                     let a = crate::prealign::prealign(s, template, &kernel, section)?;
+                    observer.setup(&format!("pre-alignment of subject {}: {}", i + 1, a.describe()));
                     moved.push(a.apply(s)?);
                     alignments.push(Some(a));
                 }

@@ -55,6 +55,12 @@ pub trait Observer {
     fn stage_finished(&mut self, stage: usize, record: &StageRecord) {
         let _ = (stage, record);
     }
+    /// A step of the setup before the stages began or ended (pre-alignment,
+    /// the stages' simplified shapes), said in a few words: what a silent
+    /// half minute on a large pair was spent on.
+    fn setup(&mut self, step: &str) {
+        let _ = step;
+    }
 }
 
 impl Observer for () {}
