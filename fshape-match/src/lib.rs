@@ -36,6 +36,7 @@ use std::path::{Path, PathBuf};
 pub mod atlas;
 mod config;
 pub mod demo;
+pub mod linalg;
 pub mod optimize;
 pub mod prealign;
 pub mod precondition;

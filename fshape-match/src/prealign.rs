@@ -419,7 +419,7 @@ impl<'a> Fit<'a> {
 
 /// The area-weighted centroid and principal axes (columns of a proper
 /// rotation, largest spread first) of a shape's cells.
-fn moments(shape: &FShape) -> (Vec<f64>, Vec<f64>) {
+fn moments(shape: &FShape) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
     let d = shape.dim();
     let (centres, weights) = (shape.cell_centres(), shape.cell_volumes());
     let total: f64 = weights.iter().sum::<f64>().max(f64::MIN_POSITIVE);
@@ -437,13 +437,13 @@ fn moments(shape: &FShape) -> (Vec<f64>, Vec<f64>) {
             }
         }
     }
-    let (_, mut axes) = crate::atlas::symmetric_eigen(&cov, d);
+    let (_, mut axes) = crate::linalg::symmetric_eigen(&cov, d)?;
     if determinant(&axes, d) < 0.0 {
         for i in 0..d {
             axes[i * d + d - 1] = -axes[i * d + d - 1];
         }
     }
-    (c, axes)
+    Ok((c, axes))
 }
 
 /// The proper rotations of the cube (24) or of the square (4), as
@@ -502,8 +502,8 @@ pub fn prealign(
         return Err(MatchError::Config { key: "prealign.max_iterations".into(), message: "must be at least 1".into() });
     }
     let d = source.dim();
-    let (cs, axes_s) = moments(source);
-    let (ct, axes_t) = moments(target);
+    let (cs, axes_s) = moments(source)?;
+    let (ct, axes_t) = moments(target)?;
     let length = source.bounding_box().diagonal().max(f64::MIN_POSITIVE);
     let scale0 = match section.kind {
         AlignKind::Rigid => 1.0,
@@ -600,7 +600,7 @@ pub fn prealign(
 /// unknowns of [`Fit::len`], value and gradient by [`Fit::value_grad`].
 pub fn fit_for_tests<'a>(source: &'a FShape, attachment: &'a Attachment, kind: AlignKind, affine: bool) -> Fit<'a> {
     let d = source.dim();
-    let (centre, _) = moments(source);
+    let (centre, _) = moments(source).expect("a test shape has finite moments");
     let identity: Vec<f64> = (0..d * d).map(|k| if k % (d + 1) == 0 { 1.0 } else { 0.0 }).collect();
     // A start away from the identity, so that no term vanishes by symmetry.
     let w: Vec<f64> = if d == 2 { vec![0.3] } else { vec![0.3, -0.2, 0.5] };

@@ -62,7 +62,7 @@ use fshape_shoot::{Energies, ModelKind, Problem, Trajectory};
 pub use cluster::{Cluster, Local};
 use levels::Level;
 pub use objective::AtlasObjective;
-pub use pca::{Mode, Modes, symmetric_eigen};
+pub use pca::{Mode, Modes};
 
 use crate::runner::{Fnv, Runner, StageSetup, Staged, Stages};
 use crate::{Config, MatchError, StageRecord};

@@ -1,6 +1,6 @@
 //! Principal component analysis of an atlas's initial momenta (tangent
-//! PCA), with a small symmetric eigen-solver for the population's Gram
-//! matrix.
+//! PCA): the population's Gram matrix diagonalised by faer
+//! ([`crate::linalg::symmetric_eigen`]).
 
 use fshape_fem::SignalNorm;
 use fshape_mesh::FShape;
@@ -8,68 +8,6 @@ use fshape_shoot::{ModelKind, Problem, ShootError};
 
 use super::{AtlasResult, Population};
 use crate::{MatchError, Runner};
-
-/// The eigenvalues (in decreasing order) and unit eigenvectors (the columns
-/// of a row-major n × n matrix, in the same order) of the symmetric n × n
-/// matrix `a` (row-major), by cyclic Jacobi rotations: a small, serial,
-/// deterministic solver for the Gram matrices of a population (n = the
-/// number of subjects).
-pub fn symmetric_eigen(a: &[f64], n: usize) -> (Vec<f64>, Vec<f64>) {
-    assert_eq!(a.len(), n * n, "an n × n matrix");
-    let mut a = a.to_vec();
-    let mut v = vec![0.0; n * n];
-    for i in 0..n {
-        v[i * n + i] = 1.0;
-    }
-    let scale: f64 = a.iter().map(|x| x * x).sum();
-    for _sweep in 0..100 {
-        let off: f64 = (0..n)
-            .flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q)))
-            .map(|(p, q)| a[p * n + q].powi(2))
-            .sum();
-        if off <= 1e-30 * scale || off == 0.0 {
-            break;
-        }
-        for p in 0..n {
-            for q in p + 1..n {
-                let apq = a[p * n + q];
-                if apq == 0.0 {
-                    continue;
-                }
-                // The rotation that zeroes a_pq (Numerical Recipes, 11.1).
-                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let (akp, akq) = (a[k * n + p], a[k * n + q]);
-                    a[k * n + p] = c * akp - s * akq;
-                    a[k * n + q] = s * akp + c * akq;
-                }
-                for k in 0..n {
-                    let (apk, aqk) = (a[p * n + k], a[q * n + k]);
-                    a[p * n + k] = c * apk - s * aqk;
-                    a[q * n + k] = s * apk + c * aqk;
-                }
-                for k in 0..n {
-                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
-                    v[k * n + p] = c * vkp - s * vkq;
-                    v[k * n + q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&i, &j| a[j * n + j].total_cmp(&a[i * n + i]).then(i.cmp(&j)));
-    let values = order.iter().map(|&i| a[i * n + i]).collect();
-    let mut vectors = vec![0.0; n * n];
-    for (col, &i) in order.iter().enumerate() {
-        for k in 0..n {
-            vectors[k * n + col] = v[k * n + i];
-        }
-    }
-    (values, vectors)
-}
 
 /// One principal mode of the population's initial momenta.
 #[derive(Clone, Debug)]
@@ -147,7 +85,7 @@ impl Runner<Population> {
         let row_mean: Vec<f64> = (0..n).map(|i| sym[i * n..(i + 1) * n].iter().sum::<f64>() / n as f64).collect();
         let all_mean = row_mean.iter().sum::<f64>() / n as f64;
         let centred: Vec<f64> = (0..n * n).map(|k| sym[k] - row_mean[k / n] - row_mean[k % n] + all_mean).collect();
-        let (values, vectors) = symmetric_eigen(&centred, n);
+        let (values, vectors) = crate::linalg::symmetric_eigen(&centred, n)?;
         let total: f64 = values.iter().filter(|v| **v > 0.0).sum();
         let mean_p0: Vec<f64> = (0..pn).map(|k| subjects.iter().map(|s| s.p0[k]).sum::<f64>() / n as f64).collect();
         let mean_pf: Vec<f64> = (0..p).map(|k| subjects.iter().map(|s| s.pf[k]).sum::<f64>() / n as f64).collect();
