@@ -33,8 +33,8 @@
 
 use pulp::{Simd, WithSimd};
 
-use crate::profile::{GaussTerms, quintic_taper, quintic_taper_derivatives};
-use crate::{BlockPairs, Taper};
+use crate::BlockPairs;
+use crate::taper::{GaussTerms, Taper, quintic_taper, quintic_taper_derivatives};
 
 /// Lanes per block: 16 f64 lanes: two AVX-512 registers per lane array. The shooting's fused
 /// sums keep a dozen such arrays live; at 32 lanes they were 1.3× slower
@@ -527,6 +527,23 @@ fn run<const D: usize, const BD: usize, const MODE: u8>(
     for (row, &i) in rows.chunks_exact(w_out).zip(pairs.target_order()) {
         out1[i * split..(i + 1) * split].copy_from_slice(&row[..split]);
         out2[i * w2..(i + 1) * w2].copy_from_slice(&row[split..]);
+    }
+}
+
+// The taper's lanes live here, beside the lane count they take.
+impl Taper {
+    /// The taper s(u) and its derivative s'(u) for the lanes of `u` (s = 1
+    /// below u_in, 0 beyond u_out).
+    #[inline(always)]
+    pub fn lanes(&self, u: &[f64; L]) -> ([f64; L], [f64; L]) {
+        let inv = 1.0 / (self.u_out - self.u_in);
+        let (mut s, mut ds) = ([0.0; L], [0.0; L]);
+        for l in 0..L {
+            let x = ((u[l] - self.u_in) * inv).clamp(0.0, 1.0);
+            s[l] = quintic_taper!(x);
+            ds[l] = quintic_taper_derivatives(x).0 * inv;
+        }
+        (s, ds)
     }
 }
 

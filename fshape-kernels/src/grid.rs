@@ -87,7 +87,7 @@
 use rayon::prelude::*;
 
 use crate::KernelError;
-use crate::profile::GaussTerms;
+use crate::taper::GaussTerms;
 
 /// The B-spline orders the grid path takes: even, so that a point's nodes
 /// sit symmetrically about it, and at least 4, so that the field of a
@@ -359,58 +359,6 @@ pub(crate) fn ratio_for(tol: f64, p: usize, dim: usize) -> f64 {
     }
     // The cut taps add at most ~1e-15 of the central tap: a small margin.
     hi * 1.001
-}
-
-/// The cost model behind [`crate::Kernel::for_points`]: seconds for one
-/// fused self sum (K p and ∂_x(pᵀKp)/2, three weight components) over
-/// `points`, with `kernel`'s path. The constants were measured on the
-/// project's 2-core machine (AVX-512) with `cargo run --release -p
-/// fshape-kernels --example grid_timing` on the 152 893 points of
-/// pycortex's S1 cortex; only their ratios matter for the choice:
-///
-/// - exact: 0.77 ns a pair (each pair once, the symmetric path);
-/// - truncated: 0.87 ns a pair within the support radius, counted at 64
-///   sample targets;
-/// - grid: 0.21 µs + 0.64 ns·p^d a point (spreading and interpolating),
-///   plus 0.155 ns per filter tap and node along each axis, per channel
-///   and Gaussian term (the convolution).
-pub fn predicted_seconds(kernel: &crate::Kernel, points: &[f64], dim: usize) -> f64 {
-    const EXACT_PAIR: f64 = 0.77e-9;
-    const TRUNCATED_PAIR: f64 = 0.87e-9;
-    const GRID_POINT: f64 = 0.21e-6;
-    const GRID_NODE: f64 = 0.64e-9;
-    const GRID_TAP: f64 = 0.155e-9;
-    let n = (points.len() / dim) as f64;
-    if let Some(grid) = kernel.grid() {
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for p in points.chunks_exact(dim) {
-            for a in 0..dim {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        let p = grid.order() as f64;
-        let along: Vec<f64> = (0..dim).map(|a| (hi[a] - lo[a]) / grid.spacing() + p).collect();
-        let nodes: f64 = along.iter().product();
-        let reach = 2.0 * grid.taps() as f64;
-        let taps: f64 = along.iter().map(|&l| l.min(reach)).sum();
-        let terms = grid.n_terms() as f64;
-        return n * (GRID_POINT + GRID_NODE * p.powi(dim as i32)) + nodes * taps * 3.0 * terms * GRID_TAP;
-    }
-    let Some(r) = kernel.support_radius() else { return 0.5 * n * n * 2.0 * EXACT_PAIR };
-    // The share of pairs within the radius, at 64 targets spread over the points.
-    let m = points.len() / dim;
-    let samples = m.min(64);
-    let within: usize = (0..samples)
-        .map(|k| {
-            let xi = &points[k * m / samples * dim..][..dim];
-            points
-                .chunks_exact(dim)
-                .filter(|y| y.iter().zip(xi).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() < r * r)
-                .count()
-        })
-        .sum();
-    n * (within as f64 / samples as f64) * TRUNCATED_PAIR
 }
 
 /// One point's B-spline stencil along one axis: the first node's index and

@@ -45,12 +45,14 @@ mod profile;
 pub mod simd;
 mod sums;
 mod symmetric;
+mod taper;
 
 pub use blocks::{BlockPairs, RunSearch, SourceRun};
 pub use grid::{GRID_ORDERS, Grid, GridBound};
 pub use mixed::Precision;
-pub use profile::{Kernel, Profile, SumPath, TAPER_WIDTH, Taper};
+pub use profile::{Kernel, Profile, SumPath, TAPER_WIDTH, predicted_seconds};
 pub use sums::{KernelSums, Pair, SpatialIndex, SumWorkspace};
+pub use taper::Taper;
 
 /// Lane-wise building blocks for vectorised kernels in other crates: a
 /// block of [`L`](lanes::L) targets is held as `[f64; L]` arrays, and plain loops over

@@ -36,7 +36,7 @@
 
 use pulp::{Simd, WithSimd};
 
-use crate::profile::{GaussTerms, quintic_taper};
+use crate::taper::{GaussTerms, quintic_taper};
 use crate::{BlockPairs, SourceRun, Taper};
 
 /// Targets per block, as f32 lanes: 32 (two AVX-512 registers) measured
@@ -110,8 +110,8 @@ fn exp_lanes_f32(x: [f32; L]) -> [f32; L] {
 /// The kernel's terms and taper in f32.
 #[derive(Clone, Copy)]
 struct Terms32 {
-    a: [f32; crate::profile::MAX_TERMS],
-    w: [f32; crate::profile::MAX_TERMS],
+    a: [f32; crate::taper::MAX_TERMS],
+    w: [f32; crate::taper::MAX_TERMS],
     n: usize,
     /// (u_in, 1/(u_out − u_in)).
     taper: Option<(f32, f32)>,

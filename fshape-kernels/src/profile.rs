@@ -4,6 +4,7 @@
 use crate::KernelError;
 use crate::fast::{L, exp_lanes};
 use crate::grid::{GRID_ORDERS, Grid};
+use crate::taper::{GaussTerms, MAX_POWER, MAX_TERMS, Taper, quintic_taper, quintic_taper_derivatives};
 
 /// A kernel profile as the user states it. Widths follow the project's one
 /// convention: "a Gaussian of width σ" is exp(−u / (2σ²)). fshapesTk and
@@ -35,73 +36,6 @@ enum Term {
     Gauss { a: f64, w: f64 },
     /// 1 / (1 + c u), c = 1/σ².
     Cauchy { c: f64 },
-}
-
-/// s(x) = 1 − (6x⁵ − 15x⁴ + 10x³) of the quintic taper, x = (u − u_in) /
-/// (u_out − u_in) ∈ [0, 1]: the one formula every evaluation path uses,
-/// written once for f64 and f32 (the literals take the type of `x`).
-macro_rules! quintic_taper {
-    ($x:expr) => {{
-        let x = $x;
-        1.0 - x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
-    }};
-}
-pub(crate) use quintic_taper;
-
-/// ds/dx and d²s/dx² of [`quintic_taper!`] (multiply by 1/(u_out − u_in)
-/// once or twice for the derivatives in u).
-#[inline(always)]
-pub(crate) fn quintic_taper_derivatives(x: f64) -> (f64, f64) {
-    (-30.0 * x * x * (1.0 - x) * (1.0 - x), -60.0 * x * (1.0 - x) * (1.0 - 2.0 * x))
-}
-
-/// The C² taper of a truncated kernel: the profile is multiplied by
-/// s(u) = 1 − S((u − u_in)/(u_out − u_in)), with S the quintic smoothstep
-/// 6t⁵ − 15t⁴ + 10t³ (zero first and second derivatives at both ends), so
-/// the truncated kernel is a C² function of u and exactly 0 beyond u_out.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Taper {
-    /// Squared radius where the taper starts: k(u_in) = τ·k(0).
-    pub u_in: f64,
-    /// Squared radius where the kernel reaches 0.
-    pub u_out: f64,
-}
-
-/// The most Gaussian terms the vectorised exact paths take.
-pub(crate) const MAX_TERMS: usize = 4;
-
-/// The terms of a sum of Gaussians, Σ_t w_t exp(−a_t u).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct GaussTerms {
-    pub(crate) a: [f64; MAX_TERMS],
-    pub(crate) w: [f64; MAX_TERMS],
-    pub(crate) n: usize,
-    /// When every a_t is an integer multiple m_t ≤ [`MAX_POWER`] of the
-    /// smallest one (widths σ, σ/2, σ/√3, ...: the usual multi-scale
-    /// kernels), `Some(m)`: then exp(−a_t u) = exp(−a_min u)^{m_t}, one
-    /// exponential per pair instead of one per term.
-    pub(crate) powers: Option<[u32; MAX_TERMS]>,
-    /// Per term, 1e-300^{1/m_t}: below it the power is set to 0.
-    pub(crate) floors: [f64; MAX_TERMS],
-}
-
-/// The largest integer ratio of widths² computed by powering.
-pub(crate) const MAX_POWER: u32 = 16;
-
-impl Taper {
-    /// The taper s(u) and its derivative s'(u) for the lanes of `u` (s = 1
-    /// below u_in, 0 beyond u_out).
-    #[inline(always)]
-    pub fn lanes(&self, u: &[f64; L]) -> ([f64; L], [f64; L]) {
-        let inv = 1.0 / (self.u_out - self.u_in);
-        let (mut s, mut ds) = ([0.0; L], [0.0; L]);
-        for l in 0..L {
-            let x = ((u[l] - self.u_in) * inv).clamp(0.0, 1.0);
-            s[l] = quintic_taper!(x);
-            ds[l] = quintic_taper_derivatives(x).0 * inv;
-        }
-        (s, ds)
-    }
 }
 
 /// How a kernel's sums are evaluated ([`Kernel::path`]); its `Display`
@@ -274,7 +208,7 @@ impl Kernel {
     /// within the kernel's tolerance ([`Kernel::tolerance`]): exact,
     /// truncated ([`Kernel::truncated`]), or on a grid of order 4, 6 or 8
     /// at the spacing the tolerance allows ([`Kernel::grid_spacing`]),
-    /// whichever [`predicted_seconds`](crate::grid::predicted_seconds) finds
+    /// whichever [`predicted_seconds`] finds
     /// cheapest. A kernel without a tolerance is returned as it is: exact
     /// means exact. The choice depends only on the points and the kernel,
     /// so the same template always gets the same path; keep it while the
@@ -287,15 +221,15 @@ impl Kernel {
             return Ok(truncated);
         }
         let exact = Kernel { tolerance: Some(tol), ..self.untapered() };
-        let mut best = (crate::grid::predicted_seconds(&exact, points, dim), exact);
-        let trunc_cost = crate::grid::predicted_seconds(&truncated, points, dim);
+        let mut best = (predicted_seconds(&exact, points, dim), exact);
+        let trunc_cost = predicted_seconds(&truncated, points, dim);
         if trunc_cost < best.0 {
             best = (trunc_cost, truncated);
         }
         for order in GRID_ORDERS {
             let spacing = self.grid_spacing(tol, order, dim)?;
             let grid = Kernel { tolerance: Some(tol), ..self.on_grid(spacing, order, dim)? };
-            let cost = crate::grid::predicted_seconds(&grid, points, dim);
+            let cost = predicted_seconds(&grid, points, dim);
             if cost < best.0 {
                 best = (cost, grid);
             }
@@ -504,4 +438,57 @@ impl Kernel {
             _ => None,
         }
     }
+}
+
+/// The cost model behind [`Kernel::for_points`] (here, beside the choice
+/// it serves, so that the grid need not know the kernel): seconds for one
+/// fused self sum (K p and ∂_x(pᵀKp)/2, three weight components) over
+/// `points`, with `kernel`'s path. The constants were measured on the
+/// project's 2-core machine (AVX-512) with `cargo run --release -p
+/// fshape-kernels --example grid_timing` on the 152 893 points of
+/// pycortex's S1 cortex; only their ratios matter for the choice:
+///
+/// - exact: 0.77 ns a pair (each pair once, the symmetric path);
+/// - truncated: 0.87 ns a pair within the support radius, counted at 64
+///   sample targets;
+/// - grid: 0.21 µs + 0.64 ns·p^d a point (spreading and interpolating),
+///   plus 0.155 ns per filter tap and node along each axis, per channel
+///   and Gaussian term (the convolution).
+pub fn predicted_seconds(kernel: &Kernel, points: &[f64], dim: usize) -> f64 {
+    const EXACT_PAIR: f64 = 0.77e-9;
+    const TRUNCATED_PAIR: f64 = 0.87e-9;
+    const GRID_POINT: f64 = 0.21e-6;
+    const GRID_NODE: f64 = 0.64e-9;
+    const GRID_TAP: f64 = 0.155e-9;
+    let n = (points.len() / dim) as f64;
+    if let Some(grid) = kernel.grid() {
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in points.chunks_exact(dim) {
+            for a in 0..dim {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        let p = grid.order() as f64;
+        let along: Vec<f64> = (0..dim).map(|a| (hi[a] - lo[a]) / grid.spacing() + p).collect();
+        let nodes: f64 = along.iter().product();
+        let reach = 2.0 * grid.taps() as f64;
+        let taps: f64 = along.iter().map(|&l| l.min(reach)).sum();
+        let terms = grid.n_terms() as f64;
+        return n * (GRID_POINT + GRID_NODE * p.powi(dim as i32)) + nodes * taps * 3.0 * terms * GRID_TAP;
+    }
+    let Some(r) = kernel.support_radius() else { return 0.5 * n * n * 2.0 * EXACT_PAIR };
+    // The share of pairs within the radius, at 64 targets spread over the points.
+    let m = points.len() / dim;
+    let samples = m.min(64);
+    let within: usize = (0..samples)
+        .map(|k| {
+            let xi = &points[k * m / samples * dim..][..dim];
+            points
+                .chunks_exact(dim)
+                .filter(|y| y.iter().zip(xi).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() < r * r)
+                .count()
+        })
+        .sum();
+    n * (within as f64 / samples as f64) * TRUNCATED_PAIR
 }

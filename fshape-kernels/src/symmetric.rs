@@ -33,7 +33,7 @@ use pulp::{Simd, WithSimd};
 use rayon::prelude::*;
 
 use crate::fast::{FastWorkspace, L, gauss_lanes, sq_dist_lanes};
-use crate::profile::GaussTerms;
+use crate::taper::GaussTerms;
 
 /// The most chunks the blocks are cut into (fewer for fewer blocks). A
 /// constant, so that the results do not depend on the number of threads;
