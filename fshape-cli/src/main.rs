@@ -9,7 +9,6 @@ use clap::{Parser, Subcommand};
 
 mod args;
 mod commands;
-mod demo;
 mod inputs;
 mod outputs;
 mod plots;

@@ -7,9 +7,9 @@ use fshape_mesh::io::{self, Encoding, ReadOptions};
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1};
 use pyo3::prelude::*;
 
-use crate::conversions::shape_of;
 use crate::err;
 use crate::shape::PyFShape;
+use crate::shape::shape_of;
 
 /// Reads a mesh: PLY, OBJ, VTK legacy, GIfTI (.gii) or a FreeSurfer
 /// surface (lh.pial…), optionally gzipped. The signal is the per-vertex

@@ -6,8 +6,9 @@ use numpy::{IntoPyArray, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::conversions::{rows, shape_of, to_py};
+use crate::conversions::{rows, to_py};
 use crate::err;
+use crate::shape::shape_of;
 
 /// The squared signal norm fᵀ D_s(x) f of the shape's signal (summed over
 /// its maps when it has several): `norm` is "l2-lumped", "l2" or "h1" (P1

@@ -9,10 +9,11 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use crate::config::config_of;
-use crate::conversions::{rows, shape_of, to_py};
+use crate::conversions::{rows, to_py};
 use crate::err;
 use crate::progress::Progress;
 use crate::shape::PyFShape;
+use crate::shape::shape_of;
 use crate::shoot::{geodesic, node_times};
 
 pub(crate) fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<Option<Vec<Option<FShape>>>> {

@@ -9,8 +9,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::config::config_of;
-use crate::conversions::shape_of;
 use crate::err;
+use crate::shape::shape_of;
 
 fn value(result: &Bound<'_, PyDict>, key: &str) -> PyResult<serde_json::Value> {
     match result.get_item(key)? {

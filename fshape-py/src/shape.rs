@@ -200,3 +200,8 @@ fn channels(signal: Option<PyArrayLikeDyn<'_, f64, AllowTypeChange>>) -> PyResul
     // Row-major order: vertex by vertex, whatever the array's strides.
     Ok((Some(a.iter().copied().collect()), k))
 }
+
+/// The Rust shape inside a Python `fshape.FShape`.
+pub(crate) fn shape_of(s: &Bound<'_, PyAny>) -> PyResult<FShape> {
+    Ok(s.cast::<PyFShape>().map_err(|_| err("expected an fshape.FShape"))?.get().inner.clone())
+}

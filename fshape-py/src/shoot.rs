@@ -6,8 +6,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::config::config_of;
-use crate::conversions::shape_of;
 use crate::err;
+use crate::shape::shape_of;
 
 /// The geodesic as arrays: points (T × n × d), signals (T × n, or T × n × k
 /// with k signal channels) at `times`.

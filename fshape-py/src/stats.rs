@@ -6,8 +6,9 @@ use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
-use crate::conversions::{shape_of, to_py};
+use crate::conversions::to_py;
 use crate::err;
+use crate::shape::shape_of;
 
 /// The covariates as a table's text: a path's contents, or a mapping
 /// {column: values, one per subject in the atlas's order} written with

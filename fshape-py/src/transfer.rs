@@ -6,8 +6,8 @@ use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::conversions::shape_of;
 use crate::err;
+use crate::shape::shape_of;
 
 /// Every vertex of `onto` at its closest point on `source` (the surface the
 /// values come from), computed once: `map` and `labels` then carry any

@@ -1,11 +1,12 @@
 //! `fshape demo`: the paper's experiments on the repository's data (the
-//! experiments themselves are in `crate::demo`).
+//! experiments themselves are in `experiments`, one module each).
 
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 
-use crate::demo;
+mod experiments;
+use experiments as demo;
 
 /// The experiments `fshape demo` runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
