@@ -515,7 +515,16 @@ impl RunRecord for BatchIndex {
 /// The file's JSON and its kind (from `kind`, or from its keys), its
 /// format checked.
 fn read_value(path: &Path) -> Result<(Kind, serde_json::Value), RecordError> {
-    let bytes = std::fs::read(path).map_err(|source| RecordError::Read { path: path.to_path_buf(), source })?;
+    // A regular file only, read no further than its length: a FIFO or a
+    // device named as summary.json neither blocks nor fills the memory.
+    let read_err = |source| RecordError::Read { path: path.to_path_buf(), source };
+    let file = std::fs::File::open(path).map_err(read_err)?;
+    let meta = file.metadata().map_err(read_err)?;
+    if !meta.is_file() {
+        return Err(RecordError::Json { path: path.to_path_buf(), message: "not a regular file".into() });
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0).min(1 << 26));
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, meta.len()), &mut bytes).map_err(read_err)?;
     let value: serde_json::Value = serde_json::from_slice(&bytes)
         .map_err(|e| RecordError::Json { path: path.to_path_buf(), message: e.to_string() })?;
     let Some(object) = value.as_object() else {
@@ -606,6 +615,11 @@ mod tests {
         assert!(wrong.contains("`stages[0].initial.value`") && wrong.contains("wrong.json"), "{wrong}");
         let none = Record::read(&write("none.json", &serde_json::json!({"a": 1}))).unwrap_err().to_string();
         assert!(none.contains("not an fshape run record"), "{none}");
+        #[cfg(unix)]
+        {
+            let device = Record::read(Path::new("/dev/zero")).unwrap_err().to_string();
+            assert!(device.contains("not a regular file"), "{device}");
+        }
         std::fs::write(dir.join("bad.json"), b"{\"source\": ").unwrap();
         let bad = Record::read(&dir.join("bad.json")).unwrap_err().to_string();
         assert!(bad.contains("bad.json: not JSON"), "{bad}");
