@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The atlas over MPI (fshape-cli's `mpi` feature), checked end to end:
 #   1. installs Open MPI and libclang if missing (scripts/mpi-deps.sh);
-#   2. builds `fshape` with --features mpi (release);
+#   2. builds `fshape` with --features mpi (the dev profile, which optimises
+#      every numeric crate: it reuses the test build's artifacts, where a
+#      release build of the whole tree took about 7 minutes of CI);
 #   3. makes a small population (the atlas-spheres demo's: an ellipsoid
 #      shot by seeded random momenta) and runs the atlas on one process,
 #      then under mpirun on 1, 2 and 3 processes: the template, every
@@ -20,8 +22,8 @@ work="${1:-$root/target/mpi-test}"
 "$here/mpi-deps.sh"
 
 echo "== building fshape with --features mpi"
-(cd "$root" && cargo build --release --quiet -p fshape-cli --features mpi)
-fshape="$root/target/release/fshape"
+(cd "$root" && cargo build --quiet -p fshape-cli --features mpi)
+fshape="$root/target/debug/fshape"
 # Open MPI refuses root and more processes than cores unless told.
 mpi=(mpirun --allow-run-as-root --oversubscribe --bind-to none)
 

@@ -7,14 +7,19 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=$(bash scripts/python-venv.sh)
 export PYO3_PYTHON="$venv/bin/python"
-# Share one target directory between runs (pip builds in a temporary copy otherwise).
-export CARGO_TARGET_DIR="$PWD/target/py"
+# Build in the workspace's target directory and its dev profile (which
+# optimises every numeric crate, fshape-py/Cargo.toml repeats it): pip and
+# clippy then reuse what `cargo test --workspace` built, where a release
+# build of the whole tree in a directory of its own took about 15 minutes
+# of CI. A user's `pip install ./fshape-py` builds the release profile.
+export CARGO_TARGET_DIR="$PWD/target"
+export MATURIN_PEP517_ARGS="--profile dev"
 echo "== fshape-py: rustfmt and clippy"
 cargo fmt --manifest-path fshape-py/Cargo.toml --check
-cargo clippy --manifest-path fshape-py/Cargo.toml --release -- -D warnings
+cargo clippy --manifest-path fshape-py/Cargo.toml -- -D warnings
 echo "== fshape-py: pip install ./fshape-py"
 "$venv/bin/pip" install --quiet --force-reinstall --no-deps ./fshape-py
-cargo build --quiet -p fshape-cli --target-dir target
+cargo build --quiet -p fshape-cli
 export FSHAPE_BIN="${FSHAPE_BIN:-$PWD/target/debug/fshape}"
 echo "== fshape-py: pytest"
 "$venv/bin/python" -m pytest -q fshape-py/tests

@@ -523,7 +523,7 @@ pub struct AtlasShapes<'a> {
     pub template: &'a FShape,
     /// The initial template.
     pub start: &'a FShape,
-    /// Per subject (the first [`ATLAS_SUBJECTS`] are shown; more may be
+    /// Per subject (the first 32 are shown; more may be
     /// given): the template shot onto it and the subject as the atlas saw
     /// it.
     pub subjects: Vec<(&'a FShape, &'a FShape)>,
