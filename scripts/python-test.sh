@@ -9,9 +9,11 @@ venv=$(bash scripts/python-venv.sh)
 export PYO3_PYTHON="$venv/bin/python"
 # Build in the workspace's target directory and its dev profile (which
 # optimises every numeric crate, fshape-py/Cargo.toml repeats it): pip and
-# clippy then reuse what `cargo test --workspace` built, where a release
-# build of the whole tree in a directory of its own took about 15 minutes
-# of CI. A user's `pip install ./fshape-py` builds the release profile.
+# clippy then reuse the third-party crates `cargo test --workspace` built
+# (the fshape crates are built again: without fshape-mesh's test-support
+# feature they are other artifacts), where a release build of the whole
+# tree in a directory of its own took about 15 minutes of CI. A user's
+# `pip install ./fshape-py` builds the release profile.
 export CARGO_TARGET_DIR="$PWD/target"
 export MATURIN_PEP517_ARGS="--profile dev"
 echo "== fshape-py: rustfmt and clippy"
@@ -19,7 +21,10 @@ cargo fmt --manifest-path fshape-py/Cargo.toml --check
 cargo clippy --manifest-path fshape-py/Cargo.toml -- -D warnings
 echo "== fshape-py: pip install ./fshape-py"
 "$venv/bin/pip" install --quiet --force-reinstall --no-deps ./fshape-py
-cargo build --quiet -p fshape-cli
+# The binary `cargo test --workspace` builds (nothing to do after it):
+# `cargo build -p fshape-cli` alone unifies other features (fshape-mesh
+# without test-support) and would rebuild every crate.
+cargo test --workspace --no-run --quiet
 export FSHAPE_BIN="${FSHAPE_BIN:-$PWD/target/debug/fshape}"
 echo "== fshape-py: pytest"
 "$venv/bin/python" -m pytest -q fshape-py/tests

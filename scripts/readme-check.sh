@@ -9,7 +9,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$PWD
 if [ -z "${FSHAPE_BIN:-}" ]; then
-    cargo build --quiet -p fshape-cli
+    # The binary `cargo test --workspace` builds (nothing to do after it):
+    # `cargo build -p fshape-cli` alone unifies other features (fshape-mesh
+    # without test-support) and would rebuild every crate.
+    cargo test --workspace --no-run --quiet
     FSHAPE_BIN="$repo/target/debug/fshape"
 fi
 work=$(mktemp -d)

@@ -20,7 +20,10 @@ if [ ! -d "$check/node_modules/playwright-core" ]; then
 fi
 cp scripts/report-check.mjs "$check/"
 if [ -z "${FSHAPE_BIN:-}" ]; then
-    cargo build --quiet -p fshape-cli
+    # The binary `cargo test --workspace` builds (nothing to do after it):
+    # `cargo build -p fshape-cli` alone unifies other features (fshape-mesh
+    # without test-support) and would rebuild every crate.
+    cargo test --workspace --no-run --quiet
     FSHAPE_BIN="$PWD/target/debug/fshape"
 fi
 work=$(mktemp -d)
