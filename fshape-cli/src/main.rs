@@ -10,12 +10,9 @@ use clap::{Parser, Subcommand};
 mod args;
 mod commands;
 mod inputs;
-mod outputs;
-mod plots;
 #[cfg(feature = "mpi")]
 mod processes;
 mod progress;
-mod render;
 
 #[derive(Parser)]
 #[command(name = "fshape", version, about = "Functional shapes: meshes carrying a signal, and their metamorphoses")]

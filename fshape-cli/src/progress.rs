@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use fshape_match::{Control, Iteration, Observer, StageRecord, StageSpec};
+use fshape_match::{Control, Iteration, Observer, Plan, StageRecord, StageSpec};
 
 /// The progress bar on a terminal, a line per stage and iteration
 /// elsewhere (or with `--verbose`), and `--stop-after`.
@@ -80,6 +80,10 @@ impl Progress {
 }
 
 impl Observer for Progress {
+    fn planned(&mut self, plan: &Plan) {
+        self.gamma_w = plan.model.gamma_w();
+    }
+
     fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
         self.stage = format!("stage {}/{stages} ({})", stage + 1, spec.label);
         if self.lines {

@@ -1128,6 +1128,10 @@ fn pre_alignment_and_setup_report_on_the_runs_clock_before_the_stages() {
         let clock = lines[k].trim_start_matches('[').split(" s]").next().unwrap().trim();
         assert!(clock.parse::<f64>().is_ok_and(|t| t >= 0.0), "{}", lines[k]);
     }
+    // The iteration lines weigh the attachment by the model's γ_W, which
+    // the setup makes known.
+    let iteration = lines[at("iteration 1:")];
+    assert!(iteration.contains("γ_W·A ") && !iteration.contains("NaN"), "{iteration}");
 }
 
 #[test]

@@ -622,6 +622,13 @@ fn positive(key: &str, v: f64) -> Result<f64, MatchError> {
 }
 
 impl Config {
+    /// The number of stages `[schedule]` asks for (1 without one), read
+    /// before the plan is checked: what a caller counts stage templates
+    /// against.
+    pub fn stage_count(&self) -> usize {
+        self.schedule.as_ref().map_or(1, |s| s.kernel_geom.len())
+    }
+
     /// A configuration with the deformation kernel's widths and every
     /// other section at its default (no attachment, no schedule).
     pub fn new(widths: Vec<f64>) -> Config {

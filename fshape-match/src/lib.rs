@@ -13,6 +13,8 @@
 //! - [`Session`]: runs the stages with a checkpoint after every iteration,
 //!   resumes from one (validated against the problem first) to the same
 //!   bits as an uninterrupted run, and reports to an [`Observer`].
+//! - [`ops`]: the operations the program, its demos and the Python
+//!   package share (a registration: request in, [`ops::Registration`] out).
 //! - [`demo`]: the paper's experimental settings built from shipped data.
 //!
 //! ```
@@ -37,6 +39,7 @@ pub mod atlas;
 mod config;
 pub mod demo;
 pub mod linalg;
+pub mod ops;
 pub mod optimize;
 pub mod prealign;
 pub mod precondition;

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fshape_match::ops::{self, Checkpointing, MatchRequest};
 use fshape_match::{MatchError, Outcome, Runner, Staged};
 use fshape_mesh::FShape;
 use numpy::PyArray1;
@@ -85,25 +86,17 @@ pub(crate) fn match_shapes<'py>(
         return Err(err(format!("times: {t} is outside [0, 1]")));
     }
     let mut observer = Progress::new(progress);
-    let run = py.detach(|| -> Result<_, MatchError> {
-        let mut session = prepared(fshape_match::Session::new(&x, &y, &config)?, templates, checkpoint.as_deref())?;
-        let outcome = session.run(&mut observer)?;
-        // A callback that returned True ends the run with its result so
-        // far; one that raised (or Ctrl-C) gets no result.
-        let result = match outcome {
-            Outcome::Finished => Some(session.result()?),
-            Outcome::Interrupted if observer.error.is_none() => session.result_so_far()?,
-            Outcome::Interrupted => None,
-        };
-        let used = config.resolved(session.plan().scales.as_ref());
-        let template = session.problem().template().clone();
-        Ok((result, used, template, session.target().clone()))
-    });
-    let (result, used, template, matched_target) = run.map_err(err)?;
+    let checkpointing = checkpoint.map_or(Checkpointing::None, Checkpointing::Continue);
+    // A callback that returned True ends the run with its result so far;
+    // one that raised (or Ctrl-C) re-raises, whatever the run returned.
+    let request = MatchRequest { source: &x, target: &y, config: &config, result_when_stopped: true };
+    let run = py.detach(|| ops::register(&request, templates, &checkpointing, &mut observer));
     observer.raised()?;
-    let Some(r) = result else {
+    let reg = run.map_err(err)?;
+    let Some(r) = reg.result else {
         return Err(err("stopped by the progress callback before the first iteration: there is no result yet"));
     };
+    let (template, matched_target, used) = (reg.template, reg.target, reg.resolved);
     let d = PyDict::new(py);
     d.set_item("stopped", !r.finished)?;
     let dim = template.dim();

@@ -13,9 +13,17 @@
 //! registration's page from memory (the Python package's `report`). Surfaces above [`DISPLAY_VERTICES`]
 //! are simplified for display (fshape-mesh's simplifier) and the page
 //! says so.
+//!
+//! Beside the page, the pictures a run leaves ([`render`]: PNG renders of
+//! meshes coloured by their signal; [`plot`]: the energy curve) and the
+//! folder a registration writes ([`outputs`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+pub mod outputs;
+pub mod plot;
+pub mod render;
 
 use base64::Engine;
 use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, Record, RecordError, RunRecord};
@@ -54,9 +62,19 @@ pub enum ReportError {
     /// A surface too large to show could not be simplified for display.
     #[error("simplifying for display: {0}")]
     Simplify(#[from] fshape_mesh::SimplifyError),
-    /// A signal channel could not be taken apart for display.
-    #[error("taking a signal channel apart for display: {0}")]
-    Channel(#[from] fshape_mesh::ShapeError),
+    /// A shape could not be rebuilt for display or output (a state of the
+    /// geodesic, a signal channel taken apart).
+    #[error("building a shape to show or write: {0}")]
+    Shape(#[from] fshape_mesh::ShapeError),
+    /// A file's bytes could not be encoded in memory.
+    #[error("encoding an output: {0}")]
+    Encode(#[from] std::io::Error),
+    /// A picture could not be encoded as PNG.
+    #[error("encoding a PNG picture: {0}")]
+    Png(#[from] png::EncodingError),
+    /// A plot could not be drawn.
+    #[error("plot: {0}")]
+    Plot(String),
     /// A scene has no shape to show.
     #[error("{scene}: no frames to show")]
     NoFrames {
@@ -711,12 +729,7 @@ fn thumbnail(path: &Path) -> Option<Vec<u8>> {
             }
         }
     }
-    let mut out = Vec::new();
-    let mut encoder = png::Encoder::new(&mut out, w as u32, h as u32);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder.write_header().ok()?.write_image_data(&rgb).ok()?;
-    Some(out)
+    render::png_sized(&rgb, w as u32, h as u32).ok()
 }
 
 /// Which kind of run a folder holds.

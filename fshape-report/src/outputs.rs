@@ -1,10 +1,20 @@
-//! What several commands write: a geodesic's states as files.
+//! The folder a registration leaves ([`write_registration`]): the
+//! geodesic's states, the momenta, renders, the matched and target
+//! surfaces, the energy plot, summary.json and report.html, written
+//! atomically once everything is computed; and a geodesic's states as files
+//! ([`trajectory_files`], which `fshape shoot` writes too).
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use fshape_match::ops::{Labels, Registration};
+use fshape_match::record::{MatchRecord, RunRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
+use fshape_shoot::ModelKind;
+
+use crate::ReportError;
+
+type Result<T> = std::result::Result<T, ReportError>;
 
 /// A file to write: its path and contents.
 pub type Output = (PathBuf, Vec<u8>);
@@ -38,4 +48,133 @@ pub fn trajectory_files(
     outputs.push((out.join("trajectory.pvd"), pvd.into_bytes()));
     files.push("trajectory.pvd".into());
     Ok((outputs, files))
+}
+
+/// Where and how a registration's folder is written.
+#[derive(Clone, Copy, Debug)]
+pub struct Folder<'a> {
+    /// The folder (it must exist).
+    pub out: &'a Path,
+    /// What the record calls the inputs.
+    pub labels: Labels<'a>,
+    /// The times of the geodesic written as states and renders.
+    pub times: &'a [f64],
+    /// Azimuth and elevation of the renders and the page's camera, degrees.
+    pub view: (f64, f64),
+}
+
+/// What [`write_registration`] wrote.
+#[derive(Clone, Debug)]
+pub struct Written {
+    /// summary.json's contents.
+    pub record: MatchRecord,
+    /// The page.
+    pub report: PathBuf,
+    /// The number of files written, the page included.
+    pub files: usize,
+}
+
+/// Writes the folder of a registration with a result (`None` without one):
+/// the states at `folder.times` (VTK, PLY, a ParaView collection),
+/// shoot.toml (the configuration with the weights used), p0.csv, pf.csv
+/// (not for LDDMM), momenta.vtk, a render per state and of the target with
+/// one camera and colour range, matched.ply and target.ply (what `fshape
+/// transfer` carries values through), the energy plot, summary.json and
+/// report.html. Everything is computed before the first file is written,
+/// and each file is written atomically.
+pub fn write_registration(reg: &Registration, folder: &Folder<'_>) -> Result<Option<Written>> {
+    let Some(result) = &reg.result else { return Ok(None) };
+    let Folder { out, labels, times, view } = *folder;
+    let (p0, pf, traj) = (&result.p0, &result.pf, &result.trajectory);
+    let template = &reg.template;
+    let (mut outputs, mut files) = trajectory_files(template, traj, times, out)?;
+    let dim = template.dim();
+    let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
+    // The configuration with the weights the model used, for `fshape shoot`.
+    let shoot = format!(
+        "# {} with the weights fshape match used (normalize = false): shoot p0.csv and pf.csv with it.\n\n{}",
+        labels.config,
+        reg.resolved.to_toml()
+    );
+    outputs.push((out.join("shoot.toml"), shoot.clone().into_bytes()));
+    files.push("shoot.toml".into());
+    outputs.push((out.join("p0.csv"), io::csv::vectors_text(names, p0).into_bytes()));
+    files.push("p0.csv".into());
+    let kind = reg.plan.model.kind();
+    // Several signal channels: a column (and a VTK field) per channel,
+    // pf, pf_2, ...
+    let channels = template.n_channels().max(1);
+    let pf_names: Vec<String> = (0..channels).map(|c| io::channel_name("pf", c)).collect();
+    if kind != ModelKind::Lddmm {
+        let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
+        let names: Vec<String> = (0..channels).map(|c| io::channel_name(name, c)).collect();
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        outputs.push((out.join("pf.csv"), io::csv::vectors_text(&names, pf).into_bytes()));
+        files.push("pf.csv".into());
+    }
+    let pf_columns: Vec<Vec<f64>> =
+        (0..channels).map(|c| pf.iter().skip(c).step_by(channels).copied().collect()).collect();
+    let pf_fields: Vec<(&str, &[f64])> =
+        pf_names.iter().zip(&pf_columns).map(|(n, c)| (n.as_str(), c.as_slice())).collect();
+    let mut vtk = Vec::new();
+    io::vtk::write_point_fields(&mut vtk, template, "fshape match: initial momenta", &[("p0", p0)], &pf_fields)?;
+    outputs.push((out.join("momenta.vtk"), vtk));
+    files.push("momenta.vtk".into());
+    // Renders of the geodesic at the chosen times and of the target, all
+    // with one camera, framing and colour range.
+    let frames: Vec<FShape> = times
+        .iter()
+        .map(|&t| {
+            let (x, f) = traj.at(t);
+            template.clone().with_points(x)?.with_signals(Some(f), channels)
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    // The target as matched (moved by [prealign] move = "target").
+    let target = &reg.target;
+    let mut all: Vec<&FShape> = frames.iter().collect();
+    all.push(target);
+    let camera = crate::render::View::fit(&all, view.0, view.1).with_range_of(&[&frames[0], target]);
+    for (k, frame) in frames.iter().enumerate() {
+        let name = format!("render_{k:03}.png");
+        outputs.push((out.join(&name), crate::render::picture(frame, &camera)?));
+        files.push(name);
+    }
+    outputs.push((out.join("target.png"), crate::render::picture(target, &camera)?));
+    files.push("target.png".into());
+    // The source at the end of the geodesic, whatever the times asked for:
+    // with target.ply, what `fshape transfer` carries values through.
+    let (x, f) = traj.at(1.0);
+    let mut matched_ply = Vec::new();
+    io::write_to(
+        &mut matched_ply,
+        &template.clone().with_points(x)?.with_signals(Some(f), channels)?,
+        io::Format::Ply,
+        Encoding::Binary,
+    )?;
+    outputs.push((out.join("matched.ply"), matched_ply));
+    files.push("matched.ply".into());
+    let mut target_ply = Vec::new();
+    io::write_to(&mut target_ply, target, io::Format::Ply, Encoding::Binary)?;
+    outputs.push((out.join("target.ply"), target_ply));
+    files.push("target.ply".into());
+    let gamma_w = reg.plan.model.gamma_w();
+    let (svg, png) = crate::plot::energy_plot(&result.stages, gamma_w, "matching: objective by iteration")?;
+    outputs.push((out.join("energy.svg"), svg.clone().into_bytes()));
+    outputs.push((out.join("energy.png"), png));
+    files.extend(["energy.svg".into(), "energy.png".into()]);
+    files.push("report.html".into());
+    let seconds = result.seconds + reg.stages_ended.elapsed().as_secs_f64();
+    let Some(record) = reg.record(&labels, seconds, files) else { return Ok(None) };
+    outputs.push((out.join("summary.json"), record.to_json()));
+    // The page a colleague opens, from what is in memory: the states the
+    // files hold, the record, the configuration and the plot (`fshape
+    // report` builds the same page from the files).
+    let states: Vec<(f64, FShape)> = times.iter().copied().zip(frames).collect();
+    let page = crate::registration_page(&states, target, &record, Some(&shoot), Some(&svg), view)?;
+    let report = out.join("report.html");
+    outputs.push((report.clone(), crate::html(&page).into_bytes()));
+    for (path, bytes) in &outputs {
+        io::write_atomic(path, bytes, false)?;
+    }
+    Ok(Some(Written { record, report, files: outputs.len() }))
 }

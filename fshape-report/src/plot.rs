@@ -1,12 +1,15 @@
 //! The energy curve of a run (plotters: SVG, and PNG through its bitmap
 //! backend with an embedded font).
 
-use anyhow::Result;
 use fshape_match::StageRecord;
+
+use crate::ReportError;
+
+type Result<T> = std::result::Result<T, ReportError>;
 
 /// J, the energy and γ_W·A against the iteration number (log scale), all
 /// stages one after the other, as (SVG text, PNG bytes).
-pub(crate) fn energy_plot(stages: &[StageRecord], gamma_w: f64, title: &str) -> Result<(String, Vec<u8>)> {
+pub fn energy_plot(stages: &[StageRecord], gamma_w: f64, title: &str) -> Result<(String, Vec<u8>)> {
     use plotters::prelude::*;
     let mut series: [Vec<(f64, f64)>; 3] = Default::default();
     let mut n = 0usize;
@@ -44,7 +47,9 @@ fn register_plot_font() -> Result<()> {
         )
         .is_ok()
     });
-    anyhow::ensure!(*ok, "plot: the embedded font assets/DejaVuSansMono.ttf did not load");
+    if !*ok {
+        return Err(ReportError::Plot("the embedded font assets/DejaVuSansMono.ttf did not load".into()));
+    }
     Ok(())
 }
 
@@ -55,7 +60,7 @@ fn draw_energy<DB: plotters::prelude::DrawingBackend>(
     title: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("plot: {e}");
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| ReportError::Plot(e.to_string());
     let all = series.iter().flatten().map(|p| p.1);
     let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     let (lo, hi) = if lo.is_finite() { (lo / 2.0, hi * 2.0) } else { (1e-3, 1.0) };

@@ -130,7 +130,7 @@ pub fn blue_white_red(t: f64) -> [f64; 3] {
 }
 
 /// The PNG file of `shape` seen by `view`.
-pub fn picture(shape: &FShape, view: &View) -> anyhow::Result<Vec<u8>> {
+pub fn picture(shape: &FShape, view: &View) -> Result<Vec<u8>, png::EncodingError> {
     png(&rasterise(shape, view))
 }
 
@@ -237,12 +237,12 @@ pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
 }
 
 /// `rgb` (SIZE × SIZE) as PNG bytes.
-pub fn png(rgb: &[u8]) -> anyhow::Result<Vec<u8>> {
+pub fn png(rgb: &[u8]) -> Result<Vec<u8>, png::EncodingError> {
     png_sized(rgb, SIZE as u32, SIZE as u32)
 }
 
 /// `rgb` (width × height, row-major RGB8) as PNG bytes.
-pub fn png_sized(rgb: &[u8], width: u32, height: u32) -> anyhow::Result<Vec<u8>> {
+pub fn png_sized(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, png::EncodingError> {
     let mut out = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut out, width, height);

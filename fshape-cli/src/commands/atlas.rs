@@ -14,7 +14,7 @@ use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
 
-use crate::render::{self, SIZE, View};
+use fshape_report::render::{self, SIZE, View};
 
 /// `fshape atlas`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -344,7 +344,8 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         let (rgb, width, height) = mode_grid(&pairs, &view);
         push("modes.png".into(), render::png_sized(&rgb, width, height)?);
     }
-    let (svg, png) = crate::plots::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
+    let (svg, png) =
+        fshape_report::plot::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
     push("energy.svg".into(), svg.clone().into_bytes());
     push("energy.png".into(), png);
     let n = result.subjects.len() as f64;

@@ -5,8 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use fshape_mesh::FShape;
 use fshape_mesh::io;
-
-use crate::render;
+use fshape_report::render;
 
 use crate::inputs::load;
 

@@ -7,7 +7,7 @@ use fshape_match::record::{self, FinalState, RunRecord, ShootRecord, ShootTiming
 use fshape_mesh::io;
 
 use crate::inputs::load;
-use crate::outputs::trajectory_files;
+use fshape_report::outputs::trajectory_files;
 
 /// `fshape shoot`'s arguments (its help is on the command).
 #[derive(clap::Args)]

@@ -17,7 +17,7 @@ use fshape_mesh::io::{self, Encoding, ReadOptions};
 use fshape_stats::{Covariates, Inference, MapKind, MapTest, MeshGraph, StatKind, Tail, TfceParams};
 use serde::Serialize;
 
-use crate::render::{self, SIZE, View};
+use fshape_report::render::{self, SIZE, View};
 
 /// `fshape stats`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -448,5 +448,5 @@ fn picture(template: &FShape, test: &MapTest, p: &[f64], alpha: f64, azimuth: f6
             }
         }
     }
-    render::png_sized(&rgb, width as u32, height as u32)
+    Ok(render::png_sized(&rgb, width as u32, height as u32)?)
 }

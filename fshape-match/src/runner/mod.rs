@@ -61,6 +61,12 @@ pub trait Observer {
     fn setup(&mut self, step: &str) {
         let _ = step;
     }
+    /// The setup is done: the checked plan (the model with its effective
+    /// weights, the stages) the run follows. Called by the operations
+    /// ([`crate::ops`]) before the first stage.
+    fn planned(&mut self, plan: &Plan) {
+        let _ = plan;
+    }
 }
 
 impl Observer for () {}

@@ -100,9 +100,9 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
     });
     io::write_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&report)?.as_bytes(), false)?;
     let (azimuth, elevation) = crate::args::DEFAULT_CAMERA.pair();
-    let view = crate::render::View::fit(&[&truth, &estimate, &sphere], azimuth, elevation);
+    let view = fshape_report::render::View::fit(&[&truth, &estimate, &sphere], azimuth, elevation);
     for (name, shape) in [("truth.png", &truth), ("estimate.png", &estimate)] {
-        io::write_atomic(&dir.join(name), &crate::render::picture(shape, &view)?, false)?;
+        io::write_atomic(&dir.join(name), &fshape_report::render::picture(shape, &view)?, false)?;
     }
     println!(
         "  the template against the truth: mean distance {:.3}% of the diagonal (start {:.3}%; bound {:.3}% = mean displacement {:.3}% + residual {:.3}%)",

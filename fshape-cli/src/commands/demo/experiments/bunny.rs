@@ -139,10 +139,10 @@ pub fn bunny(a: &RunArgs<'_>) -> Result<()> {
 fn render_from_below(dir: &Path, template: &fshape_mesh::FShape, target: &fshape_mesh::FShape) -> Result<()> {
     let end = |name: &str| io::read_mesh(&dir.join(name).join("state_005.ply"), &io::ReadOptions::default());
     let (h1, l2) = (end("h1")?, end("l2-lumped")?);
-    let view = crate::render::View::fit(&[&h1, &l2, target], 0.0, 0.0).with_range_of(&[template, target]);
+    let view = fshape_report::render::View::fit(&[&h1, &l2, target], 0.0, 0.0).with_range_of(&[template, target]);
     for (shape, name) in [(&h1, "h1"), (&l2, "l2-lumped"), (target, "target")] {
         let path = dir.join(format!("below_{name}.png"));
-        io::write_atomic(&path, &crate::render::picture(shape, &view)?, false)?;
+        io::write_atomic(&path, &fshape_report::render::picture(shape, &view)?, false)?;
     }
     eprintln!("bunny: both norms and the target seen from below -> {}", dir.join("below_*.png").display());
     Ok(())

@@ -13,7 +13,7 @@ use fshape_mesh::io::{self, Encoding, write_mesh};
 use fshape_shoot::ModelKind;
 
 use super::attachment;
-use crate::render::{self, SIZE, View};
+use fshape_report::render::{self, SIZE, View};
 
 /// Where the geometric effect and the signal effect sit, as unit
 /// directions from the centre (projected onto the ellipsoid).
