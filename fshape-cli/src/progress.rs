@@ -26,9 +26,10 @@ pub struct Progress {
 }
 
 impl Progress {
-    /// For a model with weight γ_W, stopping after `budget` iterations,
-    /// reporting as `verbosity` says.
-    pub(crate) fn new(gamma_w: f64, budget: Option<usize>, verbosity: crate::args::Verbosity) -> Progress {
+    /// Stopping after `budget` iterations, reporting as `verbosity` says
+    /// (the model's γ_W, which the iteration lines weigh the attachment
+    /// by, comes with [`Observer::planned`]).
+    pub(crate) fn new(budget: Option<usize>, verbosity: crate::args::Verbosity) -> Progress {
         use crate::args::Verbosity;
         use std::io::IsTerminal;
         let lines = match verbosity {
@@ -37,7 +38,7 @@ impl Progress {
             Verbosity::Verbose => true,
         };
         Progress {
-            gamma_w,
+            gamma_w: f64::NAN,
             budget,
             bar: None,
             hidden: verbosity == Verbosity::Quiet,
@@ -53,12 +54,6 @@ impl Progress {
         self.hidden = true;
         self.lines = false;
         self
-    }
-
-    /// The model's γ_W, known once the session is set up (the iteration
-    /// lines show γ_W·A).
-    pub(crate) fn set_gamma_w(&mut self, gamma_w: f64) {
-        self.gamma_w = gamma_w;
     }
 
     /// Each line starts with `[label] `.

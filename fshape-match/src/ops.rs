@@ -10,8 +10,9 @@ use std::time::Instant;
 
 use fshape_mesh::FShape;
 
+use crate::atlas::{Atlas, AtlasResult, Cluster, Modes};
 use crate::record::{self, MatchRecord};
-use crate::{Config, MatchError, MatchResult, Observer, Outcome, Plan, Session};
+use crate::{Config, MatchError, MatchResult, Observer, Outcome, Plan, Runner, Session, Staged};
 
 /// Where a registration keeps its checkpoint, written after every accepted
 /// iteration.
@@ -28,6 +29,37 @@ pub enum Checkpointing {
     /// Continuing from this file when it exists, else starting (the Python
     /// package's policy: the same call continues a stopped run).
     Continue(PathBuf),
+    /// Continuing from this file, which must exist, never writing it: the
+    /// processes of an MPI run other than process 0, which writes.
+    ReadOnly(PathBuf),
+}
+
+impl Checkpointing {
+    /// The checkpoint's folder, made once the setup has succeeded (none
+    /// for a checkpoint only read).
+    fn make_folder(&self) -> Result<(), MatchError> {
+        if let Checkpointing::Start(path) | Checkpointing::Resume(path) | Checkpointing::Continue(path) = self
+            && let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        {
+            std::fs::create_dir_all(dir).map_err(|e| MatchError::File {
+                path: dir.to_path_buf(),
+                message: format!("creating the folder: {e}"),
+            })?;
+        }
+        Ok(())
+    }
+
+    /// `runner` with this checkpointing.
+    fn apply<S: Staged>(&self, runner: Runner<S>) -> Result<Runner<S>, MatchError> {
+        self.make_folder()?;
+        Ok(match self {
+            Checkpointing::None => runner,
+            Checkpointing::Start(path) => runner.with_checkpoint_file(path),
+            Checkpointing::Resume(path) => runner.resume_from_file(path)?.with_checkpoint_file(path),
+            Checkpointing::Continue(path) => runner.continuing_from(path)?,
+            Checkpointing::ReadOnly(path) => runner.resume_from_file(path)?,
+        })
+    }
 }
 
 /// What a registration needs.
@@ -88,19 +120,7 @@ pub fn register(
         Some(templates) => session.with_stage_templates(templates)?,
         None => session,
     };
-    // The checkpoint's folder is made once the setup has succeeded.
-    if let Checkpointing::Start(path) | Checkpointing::Resume(path) | Checkpointing::Continue(path) = checkpointing
-        && let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-    {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| MatchError::File { path: dir.to_path_buf(), message: format!("creating the folder: {e}") })?;
-    }
-    let mut session = match checkpointing {
-        Checkpointing::None => session,
-        Checkpointing::Start(path) => session.with_checkpoint_file(path),
-        Checkpointing::Resume(path) => session.resume_from_file(path)?.with_checkpoint_file(path),
-        Checkpointing::Continue(path) => session.continuing_from(path)?,
-    };
+    let mut session = checkpointing.apply(session)?;
     observer.planned(session.plan());
     let outcome = session.run(observer)?;
     let stages_ended = Instant::now();
@@ -183,4 +203,113 @@ impl MatchError {
             }))
         )
     }
+}
+
+/// What an atlas estimation needs.
+#[derive(Clone, Copy, Debug)]
+pub struct AtlasRequest<'a> {
+    /// The initial template ([`crate::atlas::initial_template`] makes one
+    /// from a subject or the subjects' mean signal).
+    pub template: &'a FShape,
+    /// The population.
+    pub subjects: &'a [FShape],
+    /// The configuration as the user gave it.
+    pub config: &'a Config,
+    /// The principal modes of the momenta to compute (at most).
+    pub modes: usize,
+    /// Whether to collect the result once the run ends: `false` for the
+    /// processes of an MPI run other than process 0, which only take their
+    /// share of every evaluation.
+    pub collect: bool,
+}
+
+/// An atlas estimation as it ended.
+#[derive(Clone, Debug)]
+pub struct AtlasRun {
+    /// Finished, or stopped by an observer.
+    pub outcome: Outcome,
+    /// The result, once finished and collected.
+    pub result: Option<AtlasResult>,
+    /// The initial template as the atlas set it up.
+    pub start: FShape,
+    /// With a result: each subject as the atlas saw it (pre-aligned with
+    /// `[prealign]`), and the estimated template shot onto it.
+    pub subjects: Vec<(FShape, FShape)>,
+    /// With a result: the principal modes of the initial momenta, and
+    /// the template shot to −2, 0 and +2 standard deviations along each.
+    pub modes: Option<(Modes, Vec<[FShape; 3]>)>,
+    /// The configuration as given.
+    pub config: Config,
+    /// The checked plan.
+    pub plan: Plan,
+    /// When the stages ended (as [`Registration::stages_ended`]).
+    pub stages_ended: Instant,
+}
+
+/// Estimates the atlas of `request.subjects` from `request.template`:
+/// sets it up (the subjects' pre-alignments, reported to `observer`), runs
+/// its stages on `stage_templates` (coarser initial templates of the
+/// stages before the last) over `cluster`'s processes (none: this one)
+/// with the checkpoint `checkpointing` asks for, then collects the
+/// result: the subjects as seen and matched, the principal modes and
+/// their shapes.
+pub fn estimate_atlas(
+    request: &AtlasRequest<'_>,
+    stage_templates: Option<Vec<Option<FShape>>>,
+    checkpointing: &Checkpointing,
+    cluster: Option<Box<dyn Cluster>>,
+    observer: &mut impl Observer,
+) -> Result<AtlasRun, MatchError> {
+    let atlas = Atlas::new_observed(request.template, request.subjects, request.config, observer)?;
+    let atlas = match stage_templates {
+        Some(templates) => atlas.with_stage_templates(templates)?,
+        None => atlas,
+    };
+    let atlas = checkpointing.apply(atlas)?;
+    let mut atlas = match cluster {
+        Some(c) => atlas.with_cluster(c),
+        None => atlas,
+    };
+    observer.planned(atlas.plan());
+    let outcome = atlas.run(observer)?;
+    let stages_ended = Instant::now();
+    let mut run = AtlasRun {
+        outcome,
+        result: None,
+        start: atlas.initial_template().clone(),
+        subjects: Vec::new(),
+        modes: None,
+        config: request.config.clone(),
+        plan: atlas.plan().clone(),
+        stages_ended,
+    };
+    if outcome == Outcome::Interrupted || !request.collect {
+        return Ok(run);
+    }
+    let result = atlas.result()?;
+    for (subject, r) in request.subjects.iter().zip(&result.subjects) {
+        let seen = r.alignment.as_ref().map_or_else(|| Ok(subject.clone()), |a| a.apply(subject))?;
+        let last = r.trajectory.steps();
+        let matched = result
+            .template
+            .clone()
+            .with_points(r.trajectory.points(last).to_vec())?
+            .with_signal(Some(r.trajectory.signal(last).to_vec()))?;
+        run.subjects.push((seen, matched));
+    }
+    if request.modes > 0 {
+        let pca = atlas.principal_modes(&result, request.modes)?;
+        let mut shapes = Vec::with_capacity(pca.modes.len());
+        for mode in &pca.modes {
+            let mut at = |c: f64| {
+                let p0: Vec<f64> = pca.mean_p0.iter().zip(&mode.p0).map(|(m, e)| m + c * mode.sd * e).collect();
+                let pf: Vec<f64> = pca.mean_pf.iter().zip(&mode.pf).map(|(m, e)| m + c * mode.sd * e).collect();
+                atlas.shoot_template(&result, &p0, &pf)
+            };
+            shapes.push([at(-2.0)?, at(0.0)?, at(2.0)?]);
+        }
+        run.modes = Some((pca, shapes));
+    }
+    run.result = Some(result);
+    Ok(run)
 }

@@ -1,9 +1,9 @@
 //! Registration and atlas estimation: `match` and `atlas`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use fshape_match::ops::{self, Checkpointing, MatchRequest};
-use fshape_match::{MatchError, Outcome, Runner, Staged};
+use fshape_match::MatchError;
+use fshape_match::ops::{self, AtlasRequest, Checkpointing, MatchRequest};
 use fshape_mesh::FShape;
 use numpy::PyArray1;
 use pyo3::prelude::*;
@@ -22,23 +22,6 @@ pub(crate) fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<O
     let mut t = list.iter().map(|s| shape_of(s).map(Some)).collect::<PyResult<Vec<_>>>()?;
     t.push(None);
     Ok(Some(t))
-}
-
-/// A run with its stage templates, continuing from its checkpoint file
-/// when that exists (the same call continues a stopped run).
-fn prepared<S: Staged>(
-    runner: Runner<S>,
-    templates: Option<Vec<Option<FShape>>>,
-    checkpoint: Option<&Path>,
-) -> Result<Runner<S>, MatchError> {
-    let runner = match templates {
-        Some(t) => runner.with_stage_templates(t)?,
-        None => runner,
-    };
-    match checkpoint {
-        Some(path) => runner.continuing_from(path),
-        None => Ok(runner),
-    }
 }
 
 /// Registers `source` onto `target` (both `FShape`) as `fshape match`
@@ -158,24 +141,24 @@ pub(crate) fn atlas<'py>(
     let config = config_of(config)?;
     let templates = self::stage_templates(stage_templates)?;
     let mut observer = Progress::new(progress);
+    let checkpointing = checkpoint.clone().map_or(Checkpointing::None, Checkpointing::Continue);
     let run = py.detach(|| -> Result<_, MatchError> {
         let start = fshape_match::atlas::initial_template(start, &subjects)?;
-        let mut atlas =
-            prepared(fshape_match::Atlas::new(&start, &subjects, &config)?, templates, checkpoint.as_deref())?;
-        let outcome = atlas.run(&mut observer)?;
-        let result = if outcome == Outcome::Finished { Some(atlas.result()?) } else { None };
-        let steps = atlas.plan().model.steps();
-        Ok((outcome, result, steps))
+        let request = AtlasRequest { template: &start, subjects: &subjects, config: &config, modes: 0, collect: true };
+        ops::estimate_atlas(&request, templates, &checkpointing, None, &mut observer)
     });
-    let (outcome, result, steps) = run.map_err(err)?;
-    observer.finish(outcome, checkpoint.as_deref())?;
-    let r = result.expect("a finished run has a result");
+    let run = run.map_err(err)?;
+    observer.finish(run.outcome, checkpoint.as_deref())?;
+    let steps = run.plan.model.steps();
+    let Some(r) = &run.result else {
+        return Err(err("the atlas ended without a result"));
+    };
     let dim = r.template.dim();
     let d = PyDict::new(py);
     d.set_item("template", PyFShape { inner: r.template.clone() })?;
     d.set_item("template_momenta", r.template_momenta.as_ref().map(|p| rows(py, p.clone(), dim)))?;
     let list = PyList::empty(py);
-    for s in &r.subjects {
+    for (s, (_, matched)) in r.subjects.iter().zip(&run.subjects) {
         let e = PyDict::new(py);
         e.set_item("p0", rows(py, s.p0.clone(), dim))?;
         e.set_item("pf", PyArray1::from_slice(py, &s.pf))?;
@@ -185,14 +168,7 @@ pub(crate) fn atlas<'py>(
         e.set_item("initial_attachment", s.initial_attachment)?;
         e.set_item("alignment", s.alignment.as_ref().map(|a| to_py(py, a)).transpose()?)?;
         e.set_item("geodesic", geodesic(py, &s.trajectory, dim, &node_times(steps))?)?;
-        let last = s.trajectory.steps();
-        let matched = r
-            .template
-            .clone()
-            .with_points(s.trajectory.points(last).to_vec())
-            .and_then(|t| t.with_signal(Some(s.trajectory.signal(last).to_vec())))
-            .map_err(err)?;
-        e.set_item("matched", PyFShape { inner: matched })?;
+        e.set_item("matched", PyFShape { inner: matched.clone() })?;
         list.append(e)?;
     }
     d.set_item("subjects", list)?;

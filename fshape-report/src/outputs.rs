@@ -1,18 +1,20 @@
-//! The folder a registration leaves ([`write_registration`]): the
-//! geodesic's states, the momenta, renders, the matched and target
-//! surfaces, the energy plot, summary.json and report.html, written
-//! atomically once everything is computed; and a geodesic's states as files
-//! ([`trajectory_files`], which `fshape shoot` writes too).
+//! The folders runs leave, each computed whole before its first file is
+//! written, each file written atomically: a registration's
+//! ([`write_registration`]: the geodesic's states, the momenta, renders,
+//! the matched and target surfaces, the energy plot, summary.json and
+//! report.html), an atlas's ([`write_atlas`]), and a geodesic's states as
+//! files ([`trajectory_files`], which `fshape shoot` writes too).
 
 use std::path::{Path, PathBuf};
 
-use fshape_match::ops::{Labels, Registration};
-use fshape_match::record::{MatchRecord, RunRecord};
+use fshape_match::ops::{AtlasRun, Labels, Registration};
+use fshape_match::record::{self, AtlasRecord, MatchRecord, ModeRecord, RunRecord, SubjectRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
 
 use crate::ReportError;
+use crate::render::{self, SIZE, View};
 
 type Result<T> = std::result::Result<T, ReportError>;
 
@@ -133,13 +135,13 @@ pub fn write_registration(reg: &Registration, folder: &Folder<'_>) -> Result<Opt
     let target = &reg.target;
     let mut all: Vec<&FShape> = frames.iter().collect();
     all.push(target);
-    let camera = crate::render::View::fit(&all, view.0, view.1).with_range_of(&[&frames[0], target]);
+    let camera = View::fit(&all, view.0, view.1).with_range_of(&[&frames[0], target]);
     for (k, frame) in frames.iter().enumerate() {
         let name = format!("render_{k:03}.png");
-        outputs.push((out.join(&name), crate::render::picture(frame, &camera)?));
+        outputs.push((out.join(&name), render::picture(frame, &camera)?));
         files.push(name);
     }
-    outputs.push((out.join("target.png"), crate::render::picture(target, &camera)?));
+    outputs.push((out.join("target.png"), render::picture(target, &camera)?));
     files.push("target.png".into());
     // The source at the end of the geodesic, whatever the times asked for:
     // with target.ply, what `fshape transfer` carries values through.
@@ -177,4 +179,258 @@ pub fn write_registration(reg: &Registration, folder: &Folder<'_>) -> Result<Opt
         io::write_atomic(path, bytes, false)?;
     }
     Ok(Some(Written { record, report, files: outputs.len() }))
+}
+
+/// Where and how an atlas's folder is written.
+#[derive(Clone, Copy, Debug)]
+pub struct AtlasFolder<'a> {
+    /// The folder.
+    pub out: &'a Path,
+    /// What the record calls the initial template.
+    pub template: &'a str,
+    /// What it calls the configuration.
+    pub config: &'a str,
+    /// What it calls each subject (its file).
+    pub subjects: &'a [String],
+    /// Azimuth and elevation of the pictures and the page's camera, degrees.
+    pub view: (f64, f64),
+}
+
+/// What [`write_atlas`] wrote.
+#[derive(Clone, Debug)]
+pub struct AtlasWritten {
+    /// summary.json's contents.
+    pub record: AtlasRecord,
+    /// The page.
+    pub report: PathBuf,
+    /// The number of files written, the page included.
+    pub files: usize,
+}
+
+/// Writes the folder of an atlas with a result (`None` without one): the
+/// template (PLY, VTK) and the initial one, per subject its momenta, the
+/// template shot onto it and the subject as the atlas saw it
+/// (`subject_NNN/`), momenta.csv (a row per subject), the principal modes
+/// (pca.csv, the template at ±2 standard deviations), the pictures
+/// (template, subjects beside their matched templates, modes), the energy
+/// plot, summary.json and report.html.
+pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<AtlasWritten>> {
+    let Some(result) = &run.result else { return Ok(None) };
+    let AtlasFolder { out, view, .. } = *folder;
+    let model = &run.plan.model;
+    let mut outputs: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let mut files: Vec<String> = Vec::new();
+    let mut push = |name: String, bytes: Vec<u8>| {
+        outputs.push((out.join(&name), bytes));
+        files.push(name);
+    };
+    let ply = |shape: &FShape| -> Result<Vec<u8>> {
+        let mut bytes = Vec::new();
+        io::write_to(&mut bytes, shape, io::Format::Ply, Encoding::Binary)?;
+        Ok(bytes)
+    };
+    push("template.ply".into(), ply(&result.template)?);
+    let mut bytes = Vec::new();
+    io::write_to(&mut bytes, &result.template, io::Format::Vtk, Encoding::Binary)?;
+    push("template.vtk".into(), bytes);
+    push("template_start.ply".into(), ply(&run.start)?);
+    let dim = result.template.dim();
+    let kind = model.kind();
+    let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
+    // One row per subject: p_0 (vertex by vertex), then p^f (or ζ).
+    let mut header: Vec<String> = vec!["subject".into()];
+    for v in 0..result.template.n_vertices() {
+        header.extend(names.iter().map(|n| format!("{n}_{v}")));
+    }
+    if kind != ModelKind::Lddmm {
+        header.extend((0..result.template.n_vertices()).map(|v| format!("pf_{v}")));
+    }
+    let mut table = header.join(",") + "\n";
+    let mut subject_records = Vec::new();
+    for (i, ((s, (seen, matched)), file)) in result.subjects.iter().zip(&run.subjects).zip(folder.subjects).enumerate()
+    {
+        let dir = format!("subject_{i:03}");
+        push(format!("{dir}/p0.csv"), io::csv::vectors_text(names, &s.p0).into_bytes());
+        if kind != ModelKind::Lddmm {
+            let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
+            push(format!("{dir}/pf.csv"), io::csv::vectors_text(&[name], &s.pf).into_bytes());
+        }
+        push(format!("{dir}/matched.ply"), ply(matched)?);
+        push(format!("{dir}/subject.ply"), ply(seen)?);
+        let row: Vec<String> = std::iter::once(i.to_string())
+            .chain(
+                s.p0.iter().chain(if kind == ModelKind::Lddmm { &[][..] } else { &s.pf[..] }).map(|v| format!("{v:e}")),
+            )
+            .collect();
+        table.push_str(&(row.join(",") + "\n"));
+        subject_records.push(SubjectRecord {
+            file: file.clone(),
+            value: s.energies.value,
+            energy: s.energies.energy,
+            attachment: s.energies.attachment,
+            attachment_start: s.initial_attachment,
+            attachment_fall: (s.initial_attachment > 0.0).then(|| 1.0 - s.energies.attachment / s.initial_attachment),
+            quality: s.quality.clone(),
+            template_quality: s.template_quality.clone(),
+            prealign: s.alignment.clone(),
+            directory: dir,
+        });
+    }
+    push("momenta.csv".into(), table.into_bytes());
+    // Pictures: the template, and a grid of each subject (left, as the
+    // atlas saw it) next to the template shot onto it (right), all with
+    // one camera and colour range.
+    let mut all: Vec<&FShape> = run.subjects.iter().map(|(seen, _)| seen).collect();
+    all.push(&result.template);
+    all.push(&run.start);
+    let camera = View::fit(&all, view.0, view.1);
+    push("template.png".into(), render::picture(&result.template, &camera)?);
+    push("template_start.png".into(), render::picture(&run.start, &camera)?);
+    let pairs: Vec<(&FShape, &FShape)> =
+        run.subjects.iter().map(|(s, m)| (s, m)).take(GRID_ROWS * GRID_PAIRS).collect();
+    let (grid, width, height) = subjects_grid(&pairs, &camera);
+    push("subjects.png".into(), render::png_sized(&grid, width, height)?);
+    // The population's main modes of variation: principal components of
+    // the initial momenta in the energy metric, the template shot to ±2
+    // standard deviations along each.
+    let mut mode_records = Vec::new();
+    let mut mode_rows: Vec<&[FShape; 3]> = Vec::new();
+    if let Some((pca, shapes)) = &run.modes {
+        let mut scores = std::iter::once("subject".to_string())
+            .chain((0..pca.modes.len()).map(|k| format!("mode_{}", k + 1)))
+            .collect::<Vec<_>>()
+            .join(",")
+            + "\n";
+        for (i, row) in pca.scores.iter().enumerate() {
+            let cells: Vec<String> =
+                std::iter::once(i.to_string()).chain(row.iter().map(|v| format!("{v:e}"))).collect();
+            scores.push_str(&(cells.join(",") + "\n"));
+        }
+        push("pca.csv".into(), scores.into_bytes());
+        for (k, (mode, row)) in pca.modes.iter().zip(shapes).enumerate() {
+            for (c, shape) in [("minus2sd", &row[0]), ("plus2sd", &row[2])] {
+                push(format!("mode_{}_{c}.ply", k + 1), ply(shape)?);
+            }
+            mode_records.push(ModeRecord { sd: mode.sd, share: mode.share });
+            mode_rows.push(row);
+        }
+    }
+    if !mode_rows.is_empty() {
+        let (rgb, width, height) = modes_grid(&mode_rows, &camera);
+        push("modes.png".into(), render::png_sized(&rgb, width, height)?);
+    }
+    let (svg, png) = crate::plot::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
+    push("energy.svg".into(), svg.clone().into_bytes());
+    push("energy.png".into(), png);
+    let n = result.subjects.len() as f64;
+    let mean_distance = result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n;
+    let rms: Vec<f64> = result.subjects.iter().filter_map(|s| s.quality.signal_rms).collect();
+    let mean_signal_rms = (rms.len() == result.subjects.len()).then(|| rms.iter().sum::<f64>() / n);
+    let min_attachment_fall = result
+        .subjects
+        .iter()
+        .filter(|s| s.initial_attachment > 0.0)
+        .map(|s| 1.0 - s.energies.attachment / s.initial_attachment)
+        .reduce(f64::min);
+    let e = result.energies;
+    let record = AtlasRecord {
+        kind: record::Kind::Atlas,
+        format: record::FORMAT,
+        template_start: folder.template.to_string(),
+        config: folder.config.to_string(),
+        model: kind.name().into(),
+        norm: model.norm().name().into(),
+        gamma_v: run.config.model.gamma_v,
+        gamma_f: run.config.model.gamma_f,
+        gamma_w: run.config.model.gamma_w,
+        scales: run.plan.scales.clone(),
+        effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
+        stages: result.stages.clone(),
+        final_value: e.value,
+        final_energy: e.energy,
+        final_attachment: e.attachment,
+        subjects: subject_records,
+        mean_distance,
+        mean_signal_rms,
+        min_attachment_fall,
+        modes: mode_records,
+        iterations: result.iterations,
+        evaluations: result.evaluations,
+        seconds: result.seconds + run.stages_ended.elapsed().as_secs_f64(),
+        files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
+    };
+    outputs.push((out.join("summary.json"), record.to_json()));
+    // The page a colleague opens, from what is in memory (`fshape report`
+    // builds the same page from the files).
+    let shapes = crate::AtlasShapes {
+        template: &result.template,
+        start: &run.start,
+        subjects: run.subjects.iter().map(|(seen, matched)| (matched, seen)).collect(),
+        modes: mode_rows.iter().map(|[minus, _, plus]| (minus, plus)).collect(),
+    };
+    let page = crate::atlas_page_of(&record, &shapes, Some(&svg), view)?;
+    let report = out.join("report.html");
+    outputs.push((report.clone(), crate::html(&page).into_bytes()));
+    for (path, bytes) in &outputs {
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| io::WriteError::Io { path: parent.into(), source: e })?;
+        }
+        io::write_atomic(path, bytes, false)?;
+    }
+    Ok(Some(AtlasWritten { record, report, files: outputs.len() }))
+}
+
+/// Rows and subject pairs per row of an atlas's subjects picture.
+const GRID_ROWS: usize = 8;
+const GRID_PAIRS: usize = 4;
+
+/// One row per mode: the template shot to −2, 0 and +2 standard
+/// deviations, at half the render size: (RGB, width, height).
+fn modes_grid(rows: &[&[FShape; 3]], view: &View) -> (Vec<u8>, u32, u32) {
+    let tile = SIZE / 2;
+    let (width, height) = (3 * tile, rows.len() * tile);
+    let mut rgb = vec![255u8; width * height * 3];
+    for (r, shapes) in rows.iter().enumerate() {
+        for (col, shape) in shapes.iter().enumerate() {
+            let full = render::rasterise(shape, view);
+            for y in 0..tile {
+                for x in 0..tile {
+                    let dst = ((r * tile + y) * width + col * tile + x) * 3;
+                    for ch in 0..3 {
+                        let sum: usize =
+                            (0..4).map(|b| usize::from(full[((2 * y + b / 2) * SIZE + 2 * x + b % 2) * 3 + ch])).sum();
+                        rgb[dst + ch] = (sum / 4) as u8;
+                    }
+                }
+            }
+        }
+    }
+    (rgb, width as u32, height as u32)
+}
+
+/// Each subject next to its matched template, at a quarter of the render
+/// size, `GRID_PAIRS` pairs per row: (RGB, width, height).
+fn subjects_grid(pairs: &[(&FShape, &FShape)], view: &View) -> (Vec<u8>, u32, u32) {
+    let tile = SIZE / 4;
+    let rows = pairs.len().div_ceil(GRID_PAIRS).max(1);
+    let (width, height) = (2 * GRID_PAIRS * tile, rows * tile);
+    let mut rgb = vec![255u8; width * height * 3];
+    for (k, (subject, matched)) in pairs.iter().enumerate() {
+        for (j, shape) in [subject, matched].iter().enumerate() {
+            let full = render::rasterise(shape, view);
+            let (col, row) = (2 * (k % GRID_PAIRS) + j, k / GRID_PAIRS);
+            for y in 0..tile {
+                for x in 0..tile {
+                    // The mean of each 4 × 4 block.
+                    let dst = ((row * tile + y) * width + col * tile + x) * 3;
+                    for c in 0..3 {
+                        let sum: usize =
+                            (0..16).map(|b| usize::from(full[((4 * y + b / 4) * SIZE + 4 * x + b % 4) * 3 + c])).sum();
+                        rgb[dst + c] = (sum / 16) as u8;
+                    }
+                }
+            }
+        }
+    }
+    (rgb, width as u32, height as u32)
 }

@@ -1,20 +1,17 @@
 //! `fshape atlas`: a template estimated from a population with
-//! fshape-match's [`Atlas`], with the program's parts around it: the
+//! fshape-match's [`ops::estimate_atlas`], with the program's parts around it: the
 //! subjects' files, a progress bar, the outputs and the summary. The atlas
 //! checkpoints after every accepted iteration; `--resume` continues to the
 //! bits an uninterrupted run gives.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
-use fshape_match::record::{self, AtlasRecord, ModeRecord, RunRecord, SubjectRecord};
-use fshape_match::{Atlas, Config, MatchError, Outcome};
+use anyhow::{Result, bail};
+use fshape_match::ops::{self, AtlasRequest, Checkpointing};
+use fshape_match::{Config, MatchError, Outcome};
 use fshape_mesh::FShape;
-use fshape_mesh::io::{self, Encoding};
-use fshape_shoot::ModelKind;
-
-use fshape_report::render::{self, SIZE, View};
+use fshape_mesh::io;
+use fshape_report::outputs::{self, AtlasFolder};
 
 /// `fshape atlas`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -175,309 +172,81 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         None => (paths[0].mesh.clone(), subjects[0].clone()),
     };
     let template = fshape_match::atlas::initial_template(template, &subjects)?;
+    let templates = crate::inputs::stage_templates(a.stage_templates, a.signal_name.clone(), config.stage_count())?;
+    let checkpoint = a.out.join("checkpoint.bin");
+    if a.resume && rank == 0 {
+        crate::inputs::warn_if_unchecked(&checkpoint);
+    }
+    // Every process reads the checkpoint it resumes from; process 0 alone
+    // writes it, and the outputs.
+    let checkpointing = match (a.resume, rank) {
+        (true, 0) => Checkpointing::Resume(checkpoint.clone()),
+        (true, _) => Checkpointing::ReadOnly(checkpoint.clone()),
+        (false, 0) => Checkpointing::Start(checkpoint.clone()),
+        (false, _) => Checkpointing::None,
+    };
     // The run's clock starts here: the subjects' pre-alignments report on
-    // it too (on process 0 only).
-    let mut progress = crate::progress::Progress::new(f64::NAN, a.stop_after, a.verbosity);
+    // it too (on process 0 only). Every process runs the same iterations
+    // (so --stop-after stops them all at once, counted by its hidden
+    // progress).
+    let mut progress = crate::progress::Progress::new(a.stop_after, a.verbosity);
     if rank > 0 {
         progress = progress.hidden();
     }
-    let atlas = match Atlas::new_observed(&template, &subjects, &config, &mut progress) {
+    let request =
+        AtlasRequest { template: &template, subjects: &subjects, config: &config, modes: MODES, collect: rank == 0 };
+    let run = match ops::estimate_atlas(&request, templates, &checkpointing, cluster, &mut progress) {
+        Ok(run) => run,
         Err(e @ MatchError::Kinds(_)) => bail!("{}: {e}", template_path.display()),
-        other => other.with_context(|| format!("setting up the atlas of {} subjects", subjects.len()))?,
+        Err(e @ (MatchError::Checkpoint { .. } | MatchError::InFile { .. })) if a.resume => {
+            return Err(anyhow::Error::new(e).context("--resume"));
+        }
+        Err(e @ MatchError::StageTemplates(_)) => return Err(anyhow::Error::new(e).context("--stage-templates")),
+        Err(e) => return Err(anyhow::Error::new(e).context(format!("the atlas of {} subjects", subjects.len()))),
     };
-    let atlas =
-        match crate::inputs::stage_templates(a.stage_templates, a.signal_name.clone(), atlas.plan().stages.len())? {
-            None => atlas,
-            Some(templates) => atlas.with_stage_templates(templates).context("--stage-templates")?,
-        };
-    let checkpoint_path = a.out.join("checkpoint.bin");
-    if a.resume {
-        crate::inputs::warn_if_unchecked(&checkpoint_path);
-    }
-    let atlas = if a.resume { atlas.resume_from_file(&checkpoint_path).context("--resume")? } else { atlas };
-    let atlas = match cluster {
-        Some(c) => atlas.with_cluster(c),
-        None => atlas,
-    };
-    let model = atlas.plan().model.clone();
-    progress.set_gamma_w(model.gamma_w());
     if rank > 0 {
-        // Every process runs the same iterations (so --stop-after stops
-        // them all at once, counted by its hidden progress); process 0
-        // writes.
-        let mut atlas = atlas;
-        atlas.run(&mut progress)?;
         return Ok(());
     }
-    std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let mut atlas = atlas.with_checkpoint_file(&checkpoint_path);
-    if atlas.run(&mut progress)? == Outcome::Interrupted {
+    if run.outcome == Outcome::Interrupted {
         progress.abandon("stopped by --stop-after; continue with --resume");
-        eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint_path.display());
+        eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint.display());
         return Ok(());
     }
-    let after = Instant::now();
-    let result = atlas.result()?;
-    let mut outputs: Vec<(PathBuf, Vec<u8>)> = Vec::new();
-    let mut files: Vec<String> = Vec::new();
-    let mut push = |name: String, bytes: Vec<u8>| {
-        outputs.push((a.out.join(&name), bytes));
-        files.push(name);
+    let (template_label, config_label) = (template_path.display().to_string(), a.config.display().to_string());
+    let subject_labels: Vec<String> = paths.iter().map(|p| p.mesh.display().to_string()).collect();
+    let folder = AtlasFolder {
+        out: a.out,
+        template: &template_label,
+        config: &config_label,
+        subjects: &subject_labels,
+        view: a.view,
     };
-    for (name, format) in [("template.ply", io::Format::Ply), ("template.vtk", io::Format::Vtk)] {
-        let mut bytes = Vec::new();
-        io::write_to(&mut bytes, &result.template, format, Encoding::Binary)?;
-        push(name.into(), bytes);
-    }
-    let mut bytes = Vec::new();
-    io::write_to(&mut bytes, atlas.initial_template(), io::Format::Ply, Encoding::Binary)?;
-    push("template_start.ply".into(), bytes);
-    let dim = result.template.dim();
-    let kind = model.kind();
-    let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
-    // One row per subject: p_0 (vertex by vertex), then p^f (or ζ).
-    let mut header: Vec<String> = vec!["subject".into()];
-    for v in 0..result.template.n_vertices() {
-        header.extend(names.iter().map(|n| format!("{n}_{v}")));
-    }
-    if kind != ModelKind::Lddmm {
-        header.extend((0..result.template.n_vertices()).map(|v| format!("pf_{v}")));
-    }
-    let mut table = header.join(",") + "\n";
-    // Each subject as the atlas saw it (pre-aligned with [prealign]).
-    let subjects: Vec<FShape> = subjects
-        .iter()
-        .zip(&result.subjects)
-        .map(|(s, r)| r.alignment.as_ref().map_or_else(|| Ok(s.clone()), |a| a.apply(s)))
-        .collect::<Result<_, _>>()?;
-    let mut matched = Vec::new();
-    let mut subject_summaries = Vec::new();
-    for (i, (s, SubjectFiles { mesh: path, .. })) in result.subjects.iter().zip(&paths).enumerate() {
-        let dir = format!("subject_{i:03}");
-        push(format!("{dir}/p0.csv"), io::csv::vectors_text(names, &s.p0).into_bytes());
-        if kind != ModelKind::Lddmm {
-            let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
-            push(format!("{dir}/pf.csv"), io::csv::vectors_text(&[name], &s.pf).into_bytes());
-        }
-        let last = s.trajectory.steps();
-        let end = result
-            .template
-            .clone()
-            .with_points(s.trajectory.points(last).to_vec())?
-            .with_signal(Some(s.trajectory.signal(last).to_vec()))?;
-        let mut bytes = Vec::new();
-        io::write_to(&mut bytes, &end, io::Format::Ply, Encoding::Binary)?;
-        push(format!("{dir}/matched.ply"), bytes);
-        matched.push(end);
-        let mut bytes = Vec::new();
-        io::write_to(&mut bytes, &subjects[i], io::Format::Ply, Encoding::Binary)?;
-        push(format!("{dir}/subject.ply"), bytes);
-        let row: Vec<String> = std::iter::once(i.to_string())
-            .chain(
-                s.p0.iter().chain(if kind == ModelKind::Lddmm { &[][..] } else { &s.pf[..] }).map(|v| format!("{v:e}")),
-            )
-            .collect();
-        table.push_str(&(row.join(",") + "\n"));
-        subject_summaries.push(SubjectRecord {
-            file: path.display().to_string(),
-            value: s.energies.value,
-            energy: s.energies.energy,
-            attachment: s.energies.attachment,
-            attachment_start: s.initial_attachment,
-            attachment_fall: (s.initial_attachment > 0.0).then(|| 1.0 - s.energies.attachment / s.initial_attachment),
-            quality: s.quality.clone(),
-            template_quality: s.template_quality.clone(),
-            prealign: s.alignment.clone(),
-            directory: dir,
-        });
-    }
-    push("momenta.csv".into(), table.into_bytes());
-    // Pictures: the template, and a grid of each subject (left, as the
-    // atlas saw it) next to the template shot onto it (right), all with
-    // one camera and colour range.
-    let mut all: Vec<&FShape> = subjects.iter().collect();
-    all.push(&result.template);
-    all.push(atlas.initial_template());
-    let view = View::fit(&all, a.view.0, a.view.1);
-    push("template.png".into(), render::picture(&result.template, &view)?);
-    push("template_start.png".into(), render::picture(atlas.initial_template(), &view)?);
-    let pairs: Vec<(&FShape, &FShape)> = subjects.iter().zip(&matched).take(GRID_ROWS * GRID_PAIRS).collect();
-    let (grid, width, height) = grid(&pairs, &view);
-    push("subjects.png".into(), render::png_sized(&grid, width, height)?);
-    // The population's main modes of variation: principal components of
-    // the initial momenta in the energy metric, the template shot to ±2
-    // standard deviations along each.
-    let pca = atlas.principal_modes(&result, MODES)?;
-    let mut scores = std::iter::once("subject".to_string())
-        .chain((0..pca.modes.len()).map(|k| format!("mode_{}", k + 1)))
-        .collect::<Vec<_>>()
-        .join(",")
-        + "\n";
-    for (i, row) in pca.scores.iter().enumerate() {
-        let cells: Vec<String> = std::iter::once(i.to_string()).chain(row.iter().map(|v| format!("{v:e}"))).collect();
-        scores.push_str(&(cells.join(",") + "\n"));
-    }
-    push("pca.csv".into(), scores.into_bytes());
-    let mut mode_rows: Vec<[FShape; 3]> = Vec::new();
-    let mut mode_summaries = Vec::new();
-    for (k, mode) in pca.modes.iter().enumerate() {
-        let at = |c: f64| -> (Vec<f64>, Vec<f64>) {
-            let p0 = pca.mean_p0.iter().zip(&mode.p0).map(|(m, e)| m + c * mode.sd * e).collect();
-            let pf = pca.mean_pf.iter().zip(&mode.pf).map(|(m, e)| m + c * mode.sd * e).collect();
-            (p0, pf)
-        };
-        let mut row = Vec::new();
-        for c in [-2.0, 0.0, 2.0] {
-            let (p0, pf) = at(c);
-            row.push(atlas.shoot_template(&result, &p0, &pf)?);
-        }
-        for (c, shape) in [("minus2sd", &row[0]), ("plus2sd", &row[2])] {
-            let mut bytes = Vec::new();
-            io::write_to(&mut bytes, shape, io::Format::Ply, Encoding::Binary)?;
-            push(format!("mode_{}_{c}.ply", k + 1), bytes);
-        }
-        mode_summaries.push(ModeRecord { sd: mode.sd, share: mode.share });
-        mode_rows.push([row[0].clone(), row[1].clone(), row[2].clone()]);
-    }
-    if !mode_rows.is_empty() {
-        let pairs: Vec<(&FShape, &FShape, &FShape)> = mode_rows.iter().map(|r| (&r[0], &r[1], &r[2])).collect();
-        let (rgb, width, height) = mode_grid(&pairs, &view);
-        push("modes.png".into(), render::png_sized(&rgb, width, height)?);
-    }
-    let (svg, png) =
-        fshape_report::plot::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
-    push("energy.svg".into(), svg.clone().into_bytes());
-    push("energy.png".into(), png);
-    let n = result.subjects.len() as f64;
-    let mean_distance = result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n;
-    let rms: Vec<f64> = result.subjects.iter().filter_map(|s| s.quality.signal_rms).collect();
-    let mean_signal_rms = (rms.len() == result.subjects.len()).then(|| rms.iter().sum::<f64>() / n);
-    let min_attachment_fall = result
-        .subjects
-        .iter()
-        .filter(|s| s.initial_attachment > 0.0)
-        .map(|s| 1.0 - s.energies.attachment / s.initial_attachment)
-        .reduce(f64::min);
-    let e = result.energies;
-    let summary = AtlasRecord {
-        kind: record::Kind::Atlas,
-        format: record::FORMAT,
-        template_start: template_path.display().to_string(),
-        config: a.config.display().to_string(),
-        model: kind.name().into(),
-        norm: model.norm().name().into(),
-        gamma_v: config.model.gamma_v,
-        gamma_f: config.model.gamma_f,
-        gamma_w: config.model.gamma_w,
-        scales: atlas.plan().scales.clone(),
-        effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
-        stages: result.stages.clone(),
-        final_value: e.value,
-        final_energy: e.energy,
-        final_attachment: e.attachment,
-        subjects: subject_summaries,
-        mean_distance,
-        mean_signal_rms,
-        min_attachment_fall,
-        modes: mode_summaries,
-        iterations: result.iterations,
-        evaluations: result.evaluations,
-        seconds: result.seconds + after.elapsed().as_secs_f64(),
-        files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
+    let Some(written) = outputs::write_atlas(&run, &folder)? else {
+        bail!("the atlas of {} subjects ended without a result", subjects.len());
     };
-    outputs.push((a.out.join("summary.json"), summary.to_json()));
-    // The page a colleague opens, from what is in memory (`fshape report`
-    // builds the same page from the files).
-    let shapes = fshape_report::AtlasShapes {
-        template: &result.template,
-        start: atlas.initial_template(),
-        subjects: matched.iter().zip(&subjects).collect(),
-        modes: mode_rows.iter().map(|[minus, _, plus]| (minus, plus)).collect(),
-    };
-    let page = fshape_report::atlas_page_of(&summary, &shapes, Some(&svg), a.view)?;
-    let report = a.out.join("report.html");
-    outputs.push((report.clone(), fshape_report::html(&page).into_bytes()));
-    for (path, bytes) in &outputs {
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
-        }
-        io::write_atomic(path, bytes, false)?;
-    }
+    let summary = &written.record;
     println!(
         "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files and {}",
-        result.subjects.len(),
-        e.value,
-        e.energy,
-        e.attachment,
-        result.iterations,
-        result.stages.len(),
-        outputs.len() - 1,
-        report.display()
+        summary.subjects.len(),
+        summary.final_value,
+        summary.final_energy,
+        summary.final_attachment,
+        summary.iterations,
+        summary.stages.len(),
+        written.files - 1,
+        written.report.display()
     );
-    let signal = mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
-    let fall = min_attachment_fall
+    let signal =
+        summary.mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
+    let fall = summary
+        .min_attachment_fall
         .map_or(String::new(), |f| format!("; every subject's data term fell by at least {:.2}%", 100.0 * f));
     println!(
         "  subjects matched from the template: mean distance {:.3}% of the diagonal (mean over subjects){signal}{fall}",
-        100.0 * mean_distance,
+        100.0 * summary.mean_distance,
     );
     Ok(())
 }
 
 /// Principal modes written and drawn.
 const MODES: usize = 3;
-
-/// One row per mode: the template shot to −2, 0 and +2 standard
-/// deviations, at half the render size: (RGB, width, height).
-fn mode_grid(rows: &[(&FShape, &FShape, &FShape)], view: &View) -> (Vec<u8>, u32, u32) {
-    let tile = SIZE / 2;
-    let (width, height) = (3 * tile, rows.len() * tile);
-    let mut rgb = vec![255u8; width * height * 3];
-    for (r, (a, b, c)) in rows.iter().enumerate() {
-        for (col, shape) in [a, b, c].iter().enumerate() {
-            let full = render::rasterise(shape, view);
-            for y in 0..tile {
-                for x in 0..tile {
-                    let dst = ((r * tile + y) * width + col * tile + x) * 3;
-                    for ch in 0..3 {
-                        let sum: usize =
-                            (0..4).map(|b| usize::from(full[((2 * y + b / 2) * SIZE + 2 * x + b % 2) * 3 + ch])).sum();
-                        rgb[dst + ch] = (sum / 4) as u8;
-                    }
-                }
-            }
-        }
-    }
-    (rgb, width as u32, height as u32)
-}
-
-/// Rows and subject pairs per row of the subjects' picture.
-const GRID_ROWS: usize = 8;
-const GRID_PAIRS: usize = 4;
-
-/// Each subject next to its matched template, at a quarter of the render
-/// size, `GRID_PAIRS` pairs per row: (RGB, width, height).
-fn grid(pairs: &[(&FShape, &FShape)], view: &View) -> (Vec<u8>, u32, u32) {
-    let tile = SIZE / 4;
-    let rows = pairs.len().div_ceil(GRID_PAIRS).max(1);
-    let (width, height) = (2 * GRID_PAIRS * tile, rows * tile);
-    let mut rgb = vec![255u8; width * height * 3];
-    for (k, (subject, matched)) in pairs.iter().enumerate() {
-        for (j, shape) in [subject, matched].iter().enumerate() {
-            let full = render::rasterise(shape, view);
-            let (col, row) = (2 * (k % GRID_PAIRS) + j, k / GRID_PAIRS);
-            for y in 0..tile {
-                for x in 0..tile {
-                    // The mean of each 4 × 4 block.
-                    let dst = ((row * tile + y) * width + col * tile + x) * 3;
-                    for c in 0..3 {
-                        let sum: usize =
-                            (0..16).map(|b| usize::from(full[((4 * y + b / 4) * SIZE + 4 * x + b % 4) * 3 + c])).sum();
-                        rgb[dst + c] = (sum / 16) as u8;
-                    }
-                }
-            }
-        }
-    }
-    (rgb, width as u32, height as u32)
-}

@@ -97,7 +97,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     };
     // The run's clock starts here: the setup (pre-alignment, simplified
     // stages) reports on it too.
-    let mut progress = Progress::new(f64::NAN, a.stop_after, a.verbosity).labelled(a.label);
+    let mut progress = Progress::new(a.stop_after, a.verbosity).labelled(a.label);
     let request = MatchRequest { source: &source, target: &target, config: &config, result_when_stopped: false };
     let pair = || format!("{} -> {}", a.source.display(), a.target.display());
     let reg = match ops::register(&request, templates, &checkpointing, &mut progress) {
