@@ -152,9 +152,9 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // FSHAPE_SIMD caps the kernel sums' instruction set (fshape_kernels::simd);
-    // a value the library would ignore is refused here, before any work.
-    if let Err(e) = fshape_kernels::simd::Cap::from_env() {
+    // FSHAPE_SIMD caps the kernel sums' instruction set; a value the
+    // library would ignore is refused here, before any work.
+    if let Err(e) = fshape_match::ops::check_environment() {
         eprintln!("error: {e}");
         return ExitCode::from(1);
     }

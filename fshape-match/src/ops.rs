@@ -10,6 +10,12 @@ use std::time::Instant;
 
 use fshape_mesh::FShape;
 
+pub use fshape_fem::Norm;
+pub use fshape_shoot::{Model, ModelKind, Trajectory};
+pub use fshape_varifold::{Distance, VarifoldKernel};
+
+use fshape_shoot::ShootError;
+
 use crate::atlas::{Atlas, AtlasResult, Cluster, Modes};
 use crate::record::{self, MatchRecord};
 use crate::{Config, MatchError, MatchResult, Observer, Outcome, Plan, Runner, Session, Staged};
@@ -198,9 +204,7 @@ impl MatchError {
     pub fn is_missing_target_signal(&self) -> bool {
         matches!(
             self,
-            MatchError::Shoot(fshape_shoot::ShootError::Varifold(fshape_varifold::VarifoldError::MissingSignal {
-                which: "target"
-            }))
+            MatchError::Shoot(ShootError::Varifold(fshape_varifold::VarifoldError::MissingSignal { which: "target" }))
         )
     }
 }
@@ -312,4 +316,89 @@ pub fn estimate_atlas(
     }
     run.result = Some(result);
     Ok(run)
+}
+
+/// A geodesic shot from a template.
+#[derive(Clone, Debug)]
+pub struct Shot {
+    /// The template as the model holds it (its signal f₀, 0 without one).
+    pub template: FShape,
+    /// The geodesic.
+    pub trajectory: Trajectory,
+}
+
+/// Shoots `template` with the initial momenta `p0` (n × d) and `pf` (the
+/// signal momentum, n × channels; ζ for the tangential model) under
+/// `model` (`Config::model`: the weights as written).
+pub fn shoot(template: &FShape, model: &Model, p0: &[f64], pf: &[f64]) -> Result<Shot, MatchError> {
+    let problem = fshape_shoot::Problem::new(template, model.clone())?;
+    let trajectory = problem.shoot(p0, pf)?;
+    Ok(Shot { template: problem.template().clone(), trajectory })
+}
+
+/// The varifold kernel of a data attachment from its parts as the
+/// configuration and the program write them: a position kernel
+/// (`gaussian:σ`, a sum `gaussian:σ1,σ2,…`, `cauchy:σ`), an optional
+/// signal kernel (`gaussian:σ_f`) and a direction kernel (`linear`,
+/// `binet`, `gaussian-oriented:σ_t`, `gaussian-unoriented:σ_t`),
+/// truncated at `tolerance` if given (each inner product then moves by at
+/// most τ·k(0)·mass(X)·mass(Y)).
+pub fn attachment_kernel(
+    geom: &str,
+    signal: Option<&str>,
+    grass: &str,
+    tolerance: Option<f64>,
+) -> Result<VarifoldKernel, MatchError> {
+    let parse = || -> Result<VarifoldKernel, fshape_varifold::VarifoldError> {
+        let kernel = VarifoldKernel::parse(geom, signal, grass)?;
+        match tolerance {
+            Some(tol) => kernel.truncated(tol),
+            None => Ok(kernel),
+        }
+    };
+    Ok(parse().map_err(ShootError::from)?)
+}
+
+/// The data attachment A(X, Y) = ‖X − Y‖² between `source` and `target`
+/// with `kernel`, and its three inner products.
+pub fn attachment(source: &FShape, target: &FShape, kernel: &VarifoldKernel) -> Result<Distance, MatchError> {
+    let eval = || fshape_varifold::Attachment::new(target, kernel.clone())?.eval(source);
+    Ok(eval().map_err(ShootError::from)?)
+}
+
+/// A signal norm's matrix D_s on a mesh: its lower triangle in compressed
+/// columns.
+#[derive(Clone, Debug)]
+pub struct NormMatrix {
+    /// Its order: the mesh's vertices.
+    pub n: usize,
+    /// Where each column starts in `row_index` and `values` (n + 1).
+    pub column_start: Vec<usize>,
+    /// The row of each stored entry.
+    pub row_index: Vec<usize>,
+    /// The stored entries (row ≥ column).
+    pub values: Vec<f64>,
+    /// Its trace.
+    pub trace: f64,
+}
+
+/// Assembles the matrix of the signal norm `norm` on `shape`.
+pub fn signal_norm_matrix(shape: &FShape, norm: Norm) -> Result<NormMatrix, MatchError> {
+    let d = fshape_fem::SignalNorm::try_new(shape, norm).map_err(ShootError::from)?;
+    let values = d.assemble(shape.points()).map_err(ShootError::from)?;
+    let (column_start, row_index) = d.pattern();
+    let n = d.n_vertices();
+    let trace = (0..n)
+        .flat_map(|c| (column_start[c]..column_start[c + 1]).filter(move |&e| row_index[e] == c))
+        .map(|e| values[e])
+        .sum();
+    Ok(NormMatrix { n, column_start: column_start.to_vec(), row_index: row_index.to_vec(), values, trace })
+}
+
+/// Checks the environment the kernel sums read (`FSHAPE_SIMD`, which caps
+/// their instruction set): an error naming the variable when its value is
+/// not one the library knows, so that a program can refuse it before any
+/// work rather than have it ignored.
+pub fn check_environment() -> Result<(), String> {
+    fshape_kernels::simd::Cap::from_env().map(|_| ())
 }

@@ -4,7 +4,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use fshape_mesh::FShape;
-use fshape_varifold::{Attachment, VarifoldKernel};
 use serde::Serialize;
 
 /// `fshape distance`'s arguments (its help is on the command).
@@ -88,17 +87,13 @@ fn warn_massless(path: &Path, s: &FShape) {
 
 fn distance(a: &DistanceArgs<'_>) -> Result<()> {
     let (geom, signal, grass) = a.kernel;
-    let mut kernel = VarifoldKernel::parse(geom, signal, grass)?;
-    if let Some(tol) = a.tolerance {
-        kernel = kernel.truncated(tol)?;
-    }
+    let kernel = fshape_match::ops::attachment_kernel(geom, signal, grass, a.tolerance)?;
     let x = crate::inputs::load_masked(a.source, a.signal_name.clone(), a.signals.0, &Default::default())?;
     let y = crate::inputs::load_masked(a.target, a.signal_name.clone(), a.signals.1, &Default::default())?;
     warn_massless(a.source, &x);
     warn_massless(a.target, &y);
     let start = std::time::Instant::now();
-    let d = Attachment::new(&y, kernel)
-        .and_then(|att| att.eval(&x))
+    let d = fshape_match::ops::attachment(&x, &y, &kernel)
         .with_context(|| format!("A({}, {})", a.source.display(), a.target.display()))?;
     let summary = DistanceSummary {
         source: a.source.display().to_string(),

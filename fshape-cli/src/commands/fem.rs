@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use fshape_fem::{Norm, SignalNorm};
+use fshape_match::ops::{self, Norm};
 use fshape_mesh::io;
 use serde::Serialize;
 
@@ -70,18 +70,8 @@ struct FemSummary {
 
 fn fem(path: &Path, norm: Norm, out: Option<&Path>, json: bool) -> Result<()> {
     let shape = load(path, None, None)?;
-    let d = SignalNorm::try_new(&shape, norm)?;
-    let values = d.assemble(shape.points()).with_context(|| format!("assembling D for {}", path.display()))?;
-    let (col_ptr, row_idx) = d.pattern();
-    let mut trace = 0.0;
-    for c in 0..d.n_vertices() {
-        for e in col_ptr[c]..col_ptr[c + 1] {
-            if row_idx[e] == c {
-                trace += values[e];
-            }
-        }
-    }
-    let n = d.n_vertices();
+    let d = ops::signal_norm_matrix(&shape, norm).with_context(|| format!("assembling D for {}", path.display()))?;
+    let n = d.n;
     let summary = FemSummary {
         path: path.display().to_string(),
         norm: norm.name(),
@@ -90,14 +80,14 @@ fn fem(path: &Path, norm: Norm, out: Option<&Path>, json: bool) -> Result<()> {
             _ => None,
         },
         n,
-        nnz: 2 * values.len() - n,
-        nnz_lower: values.len(),
-        trace,
+        nnz: 2 * d.values.len() - n,
+        nnz_lower: d.values.len(),
+        trace: d.trace,
         total_area: shape.total_volume(),
     };
     if let Some(out) = out {
         let comment = format!("fshape signal norm {} of {}", norm.name(), path.display());
-        io::mtx::write_symmetric_lower(out, n, col_ptr, row_idx, &values, &comment)?;
+        io::mtx::write_symmetric_lower(out, n, &d.column_start, &d.row_index, &d.values, &comment)?;
     }
     if json {
         println!("{}", serde_json::to_string_pretty(&summary)?);

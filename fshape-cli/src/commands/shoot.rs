@@ -59,7 +59,6 @@ struct ShootArgs<'a> {
 
 fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     use fshape_match::Config;
-    use fshape_shoot::Problem;
     let start = std::time::Instant::now();
     let config = Config::read(a.config)?;
     let model = config.model()?;
@@ -102,10 +101,10 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
     };
     let kind = model.kind().name().to_string();
     let (norm, integrator, steps) = (model.norm().name(), model.integrator().name().to_string(), model.steps());
-    let problem = Problem::new(&shape, model).with_context(|| format!("setting up {}", a.source.display()))?;
-    let traj = problem.shoot(&p0, &pf).with_context(|| format!("shooting from {}", a.source.display()))?;
+    let shot = fshape_match::ops::shoot(&shape, &model, &p0, &pf)
+        .with_context(|| format!("shooting from {}", a.source.display()))?;
     // Everything is computed before anything is written.
-    let template = problem.template().clone();
+    let (template, traj) = (shot.template, shot.trajectory);
     let (mut outputs, files) = trajectory_files(&template, &traj, a.times, a.out)?;
     let h = traj.hamiltonian.clone();
     let drift = traj.drift().0;

@@ -3,12 +3,12 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use fshape_match::ops::ModelKind;
 use fshape_match::{Config, NormKind};
 use fshape_mesh::FShape;
 use fshape_mesh::generate::{sample_image, square};
 use fshape_mesh::io::image::read_image;
 use fshape_mesh::io::{self, Encoding, write_mesh};
-use fshape_shoot::ModelKind;
 
 use super::{BUNNY_DECREASE, DigitsArgs, attachment, from_fshapestk, schedule};
 

@@ -3,9 +3,9 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use fshape_match::ops::ModelKind;
 use fshape_match::{Config, NormKind};
 use fshape_mesh::io::{self, Encoding, write_mesh};
-use fshape_shoot::ModelKind;
 
 use super::{BUNNY_DECREASE, attachment};
 
@@ -45,13 +45,12 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
     config.optimizer.decrease_tolerance = 1e-3;
     config.optimizer.decrease_window = BUNNY_DECREASE.1;
     let plan = config.plan(&truth, &truth)?;
-    let shooter = fshape_shoot::Problem::new(&truth, plan.model.clone())?;
     let n = truth.n_vertices();
     let mut list = String::from("# the truth shot by seeded random momenta\n");
     let mut subjects = Vec::new();
     for i in 0..ATLAS_SPHERES_SUBJECTS as u64 {
-        let traj =
-            shooter.shoot(&random_vector_field(n, 3, 0.002, 100 + i), &random_vector_field(n, 1, 0.002, 200 + i))?;
+        let (p0, pf) = (random_vector_field(n, 3, 0.002, 100 + i), random_vector_field(n, 1, 0.002, 200 + i));
+        let traj = fshape_match::ops::shoot(&truth, &plan.model, &p0, &pf)?.trajectory;
         let k = traj.steps();
         let subject = truth.clone().with_points(traj.points(k).to_vec())?.with_signal(Some(traj.signal(k).to_vec()))?;
         let name = format!("subject_{i:02}.ply");

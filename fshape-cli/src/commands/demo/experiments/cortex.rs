@@ -1,9 +1,9 @@
 //! The cortex (paper section 5.2): a left hemisphere's thickness onto the right one's.
 
 use anyhow::{Context, Result};
+use fshape_match::ops::ModelKind;
 use fshape_match::{Config, NormKind};
 use fshape_mesh::io::{self, Encoding, write_mesh};
-use fshape_shoot::ModelKind;
 
 use super::{BUNNY_DECREASE, RunArgs, attachment, run_match, schedule, write_inputs};
 

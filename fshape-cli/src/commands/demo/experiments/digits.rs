@@ -1,11 +1,11 @@
 //! The digits (paper section 5.1): a handwritten 2 onto a 3 for three ratios γ_V/γ_f.
 
 use anyhow::{Context, Result};
+use fshape_match::ops::ModelKind;
 use fshape_match::{Config, NormKind};
 use fshape_mesh::generate::{sample_image, square};
 use fshape_mesh::io::image::read_image;
 use fshape_mesh::io::{Encoding, write_mesh};
-use fshape_shoot::ModelKind;
 
 use super::{BUNNY_DECREASE, DigitsArgs, attachment, from_fshapestk, run_match, schedule, write_inputs};
 

@@ -6,11 +6,11 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use fshape_match::ops::ModelKind;
 use fshape_match::{AlignKind, Config, NormKind, PrealignSection};
 use fshape_mesh::FShape;
 use fshape_mesh::generate::{SplitMix64, icosphere};
 use fshape_mesh::io::{self, Encoding, write_mesh};
-use fshape_shoot::ModelKind;
 
 use super::attachment;
 use fshape_report::render::{self, SIZE, View};
