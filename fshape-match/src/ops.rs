@@ -325,6 +325,58 @@ pub struct Shot {
     pub template: FShape,
     /// The geodesic.
     pub trajectory: Trajectory,
+    /// The model it was shot with.
+    pub model: Model,
+}
+
+impl Shot {
+    /// The run record of `fshape shoot`: what the template (`source`) and
+    /// the configuration are called, the model, the Hamiltonian along the
+    /// geodesic and its drift, how far the end state moved, `seconds` of
+    /// wall time in all, the states written at `times` as `files`.
+    pub fn record(
+        &self,
+        (source, config): (&str, &str),
+        times: &[f64],
+        files: Vec<String>,
+        seconds: f64,
+    ) -> record::ShootRecord {
+        let (traj, dim, steps) = (&self.trajectory, self.template.dim(), self.model.steps());
+        let (x0, x1) = (self.template.points(), traj.points(steps));
+        let disp: Vec<f64> = x0
+            .chunks_exact(dim)
+            .zip(x1.chunks_exact(dim))
+            .map(|(p, q)| p.iter().zip(q).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt())
+            .collect();
+        let norm_rows =
+            |v: &[f64]| v.chunks_exact(dim).map(|r| r.iter().map(|u| u * u).sum::<f64>().sqrt()).fold(0.0, f64::max);
+        record::ShootRecord {
+            kind: record::Kind::Shoot,
+            format: record::FORMAT,
+            source: source.to_string(),
+            config: config.to_string(),
+            model: self.model.kind().name().to_string(),
+            norm: self.model.norm().name().into(),
+            integrator: self.model.integrator().name().to_string(),
+            steps,
+            hamiltonian_drift: traj.drift().0,
+            hamiltonian: traj.hamiltonian.clone(),
+            times: times.to_vec(),
+            files,
+            final_state: record::FinalState {
+                max_displacement: disp.iter().copied().fold(0.0, f64::max),
+                rms_displacement: (disp.iter().map(|d| d * d).sum::<f64>() / disp.len().max(1) as f64).sqrt(),
+                max_signal_change: traj
+                    .signal(steps)
+                    .iter()
+                    .zip(self.template.signal().unwrap_or(&[]))
+                    .map(|(u, v)| (u - v).abs())
+                    .fold(0.0, f64::max),
+                max_momentum: norm_rows(traj.momenta(steps)),
+            },
+            seconds: record::ShootTiming { total: seconds, kernels: traj.timings.kernels, fem: traj.timings.fem },
+        }
+    }
 }
 
 /// Shoots `template` with the initial momenta `p0` (n × d) and `pf` (the
@@ -333,7 +385,7 @@ pub struct Shot {
 pub fn shoot(template: &FShape, model: &Model, p0: &[f64], pf: &[f64]) -> Result<Shot, MatchError> {
     let problem = fshape_shoot::Problem::new(template, model.clone())?;
     let trajectory = problem.shoot(p0, pf)?;
-    Ok(Shot { template: problem.template().clone(), trajectory })
+    Ok(Shot { template: problem.template().clone(), trajectory, model: model.clone() })
 }
 
 /// The varifold kernel of a data attachment from its parts as the

@@ -224,6 +224,12 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
     let Some(written) = outputs::write_atlas(&run, &folder)? else {
         bail!("the atlas of {} subjects ended without a result", subjects.len());
     };
+    print_summary(&written);
+    Ok(())
+}
+
+/// The few lines `fshape atlas` prints (summary.json has every figure).
+fn print_summary(written: &outputs::AtlasWritten) {
     let summary = &written.record;
     println!(
         "atlas of {} subjects: J {:.6e} (mean energy {:.4e}, mean attachment {:.4e}) after {} iterations in {} stage(s); wrote {} files and {}",
@@ -245,7 +251,6 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         "  subjects matched from the template: mean distance {:.3}% of the diagonal (mean over subjects){signal}{fall}",
         100.0 * summary.mean_distance,
     );
-    Ok(())
 }
 
 /// Principal modes written and drawn.

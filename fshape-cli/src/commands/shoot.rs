@@ -3,7 +3,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use fshape_match::record::{self, FinalState, RunRecord, ShootRecord, ShootTiming};
+use fshape_match::record::RunRecord;
+use fshape_mesh::FShape;
 use fshape_mesh::io;
 
 use crate::inputs::load;
@@ -57,23 +58,9 @@ struct ShootArgs<'a> {
     signal_name: Option<String>,
 }
 
-fn shoot(a: &ShootArgs<'_>) -> Result<()> {
-    use fshape_match::Config;
-    let start = std::time::Instant::now();
-    let config = Config::read(a.config)?;
-    let model = config.model()?;
-    if config.model.normalize {
-        anyhow::bail!(
-            "{}: [model] normalize = true makes the weights relative to a registration's target, and shooting \
-             has none: set normalize = false (the weights are then taken as written), or shoot a registration's \
-             momenta with the shoot.toml that fshape match wrote next to them",
-            a.config.display()
-        );
-    }
-    if let Some(t) = a.times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
-        anyhow::bail!("--times: {t} is outside [0, 1]");
-    }
-    let shape = load(a.source, a.signal_name.clone(), None)?;
+/// The initial momenta of `--momentum` and `--signal-momentum` (0 without
+/// one), checked against the template's vertices and channels.
+fn momenta(a: &ShootArgs<'_>, shape: &FShape) -> Result<(Vec<f64>, Vec<f64>)> {
     let (n, dim) = (shape.n_vertices(), shape.dim());
     let p0 = io::csv::read_vectors(a.momentum, dim)?;
     if p0.len() != n * dim {
@@ -99,53 +86,34 @@ fn shoot(a: &ShootArgs<'_>) -> Result<()> {
         }
         None => vec![0.0; n * k],
     };
-    let kind = model.kind().name().to_string();
-    let (norm, integrator, steps) = (model.norm().name(), model.integrator().name().to_string(), model.steps());
+    Ok((p0, pf))
+}
+
+fn shoot(a: &ShootArgs<'_>) -> Result<()> {
+    use fshape_match::Config;
+    let start = std::time::Instant::now();
+    let config = Config::read(a.config)?;
+    let model = config.model()?;
+    if config.model.normalize {
+        anyhow::bail!(
+            "{}: [model] normalize = true makes the weights relative to a registration's target, and shooting \
+             has none: set normalize = false (the weights are then taken as written), or shoot a registration's \
+             momenta with the shoot.toml that fshape match wrote next to them",
+            a.config.display()
+        );
+    }
+    if let Some(t) = a.times.iter().find(|t| !(0.0..=1.0).contains(*t)) {
+        anyhow::bail!("--times: {t} is outside [0, 1]");
+    }
+    let shape = load(a.source, a.signal_name.clone(), None)?;
+    let (p0, pf) = momenta(a, &shape)?;
     let shot = fshape_match::ops::shoot(&shape, &model, &p0, &pf)
         .with_context(|| format!("shooting from {}", a.source.display()))?;
     // Everything is computed before anything is written.
-    let (template, traj) = (shot.template, shot.trajectory);
-    let (mut outputs, files) = trajectory_files(&template, &traj, a.times, a.out)?;
-    let h = traj.hamiltonian.clone();
-    let drift = traj.drift().0;
-    let (x0, x1) = (template.points(), traj.points(steps));
-    let disp: Vec<f64> = x0
-        .chunks_exact(dim)
-        .zip(x1.chunks_exact(dim))
-        .map(|(p, q)| p.iter().zip(q).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt())
-        .collect();
-    let norm_rows =
-        |v: &[f64]| v.chunks_exact(dim).map(|r| r.iter().map(|u| u * u).sum::<f64>().sqrt()).fold(0.0, f64::max);
-    let summary = ShootRecord {
-        kind: record::Kind::Shoot,
-        format: record::FORMAT,
-        source: a.source.display().to_string(),
-        config: a.config.display().to_string(),
-        model: kind,
-        norm: norm.into(),
-        integrator,
-        steps,
-        hamiltonian_drift: drift,
-        hamiltonian: h,
-        times: a.times.to_vec(),
-        files,
-        final_state: FinalState {
-            max_displacement: disp.iter().copied().fold(0.0, f64::max),
-            rms_displacement: (disp.iter().map(|d| d * d).sum::<f64>() / n.max(1) as f64).sqrt(),
-            max_signal_change: traj
-                .signal(steps)
-                .iter()
-                .zip(template.signal().unwrap_or(&[]))
-                .map(|(u, v)| (u - v).abs())
-                .fold(0.0, f64::max),
-            max_momentum: norm_rows(traj.momenta(steps)),
-        },
-        seconds: ShootTiming {
-            total: start.elapsed().as_secs_f64(),
-            kernels: traj.timings.kernels,
-            fem: traj.timings.fem,
-        },
-    };
+    let (mut outputs, files) = trajectory_files(&shot.template, &shot.trajectory, a.times, a.out)?;
+    let (source, config) = (a.source.display().to_string(), a.config.display().to_string());
+    let summary = shot.record((&source, &config), a.times, files, start.elapsed().as_secs_f64());
+    let steps = summary.steps;
     outputs.push((a.out.join("summary.json"), summary.to_json()));
     std::fs::create_dir_all(a.out).with_context(|| format!("creating {}", a.out.display()))?;
     for (path, bytes) in &outputs {
