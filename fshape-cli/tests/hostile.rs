@@ -195,6 +195,16 @@ fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
     annot.extend([0u8; 64]);
     std::fs::write(sub.join("lh.huge.annot"), &annot).unwrap();
     std::os::unix::fs::symlink("/dev/zero", sub.join("lh.zero.annot")).unwrap();
+    // Run records: a folder whose summary.json or index.json is a FIFO, a
+    // device or a nesting bomb.
+    for (run, file) in [("fifo_run", "summary.json"), ("fifo_batch", "index.json")] {
+        std::fs::create_dir_all(sub.join(run)).unwrap();
+        assert!(Command::new("mkfifo").arg(sub.join(run).join(file)).status().unwrap().success(), "mkfifo");
+    }
+    std::fs::create_dir_all(sub.join("zero_run")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", sub.join("zero_run/summary.json")).unwrap();
+    std::fs::create_dir_all(sub.join("nested_run")).unwrap();
+    std::fs::write(sub.join("nested_run/summary.json"), "[".repeat(1 << 20)).unwrap();
 
     let small_s = small.to_str().unwrap();
     // `fshape info SMALL --signal FILE`: the hostile file as a signal.
@@ -228,6 +238,10 @@ fn hostile_files_end_in_clean_errors_within_bounded_time_and_memory() {
         ("exec", signal(&format!("{}:CORTEX_LEFT", p("huge_matrix.dscalar.nii"))), "expected 1000000000, found 1"),
         ("exec", mask(&format!("{}:x", p("lh.huge.annot"))), "claims 2147483647"),
         ("exec", mask(&format!("{}:x", p("lh.zero.annot"))), "device"),
+        ("exec", vec!["report".into(), p("fifo_run")], "not a regular file"),
+        ("exec", vec!["report".into(), p("fifo_batch")], "not a regular file"),
+        ("exec", vec!["report".into(), p("zero_run")], "not a regular file"),
+        ("exec", vec!["report".into(), p("nested_run")], "recursion limit"),
     ];
     let mut failures = Vec::new();
     for (prefix, args, says) in &cases {

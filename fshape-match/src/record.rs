@@ -64,6 +64,12 @@ pub enum RecordError {
         /// Why.
         source: std::io::Error,
     },
+    /// The path names a FIFO, a device or a folder, not a file.
+    #[error("{}: not a regular file (a FIFO, a device or a folder?): a run record is a file", path.display())]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+    },
     /// The file is not JSON.
     #[error("{}: not JSON ({message})", path.display())]
     Json {
@@ -517,11 +523,17 @@ impl RunRecord for BatchIndex {
 fn read_value(path: &Path) -> Result<(Kind, serde_json::Value), RecordError> {
     // A regular file only, read no further than its length: a FIFO or a
     // device named as summary.json neither blocks nor fills the memory.
+    // Checked before opening (opening a FIFO waits for a writer) and
+    // again on the file opened.
     let read_err = |source| RecordError::Read { path: path.to_path_buf(), source };
+    let not_regular = || RecordError::NotAFile { path: path.to_path_buf() };
+    if !std::fs::metadata(path).map_err(read_err)?.is_file() {
+        return Err(not_regular());
+    }
     let file = std::fs::File::open(path).map_err(read_err)?;
     let meta = file.metadata().map_err(read_err)?;
     if !meta.is_file() {
-        return Err(RecordError::Json { path: path.to_path_buf(), message: "not a regular file".into() });
+        return Err(not_regular());
     }
     let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0).min(1 << 26));
     std::io::Read::read_to_end(&mut std::io::Read::take(file, meta.len()), &mut bytes).map_err(read_err)?;
@@ -619,6 +631,12 @@ mod tests {
         {
             let device = Record::read(Path::new("/dev/zero")).unwrap_err().to_string();
             assert!(device.contains("not a regular file"), "{device}");
+            // A FIFO is refused at once: opening it would wait for a writer.
+            let fifo = dir.join("fifo.json");
+            if std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()) {
+                let e = Record::read(&fifo).unwrap_err().to_string();
+                assert!(e.contains("fifo.json") && e.contains("not a regular file"), "{e}");
+            }
         }
         std::fs::write(dir.join("bad.json"), b"{\"source\": ").unwrap();
         let bad = Record::read(&dir.join("bad.json")).unwrap_err().to_string();
