@@ -1,4 +1,4 @@
-//! `fshape match`: the registration of fshape-match's [`Session`] with
+//! `fshape match`: the registration of fshape-match's [`ops::register`] with
 //! the program's parts around it: arguments, a progress bar, file names,
 //! renders and the summary. The session checkpoints after every accepted
 //! iteration, so a run killed at any point resumes (`--resume`) to the
