@@ -122,11 +122,7 @@ pub fn register(
     observer: &mut impl Observer,
 ) -> Result<Registration, MatchError> {
     let session = Session::new_observed(request.source, request.target, request.config, observer)?;
-    let session = match stage_templates {
-        Some(templates) => session.with_stage_templates(templates)?,
-        None => session,
-    };
-    let mut session = checkpointing.apply(session)?;
+    let mut session = prepared(session, stage_templates, checkpointing)?;
     observer.planned(session.plan());
     let outcome = session.run(observer)?;
     let stages_ended = Instant::now();
@@ -146,6 +142,20 @@ pub fn register(
         plan,
         stages_ended,
     })
+}
+
+/// A set-up run with its stage templates (the templates enter the
+/// checkpoint's fingerprint, so they come first) and its checkpointing.
+fn prepared<S: Staged>(
+    runner: Runner<S>,
+    stage_templates: Option<Vec<Option<FShape>>>,
+    checkpointing: &Checkpointing,
+) -> Result<Runner<S>, MatchError> {
+    let runner = match stage_templates {
+        Some(templates) => runner.with_stage_templates(templates)?,
+        None => runner,
+    };
+    checkpointing.apply(runner)
 }
 
 /// What a run record says the inputs were called (paths as the user gave
@@ -250,6 +260,88 @@ pub struct AtlasRun {
     pub stages_ended: Instant,
 }
 
+/// What an atlas's run record says its inputs were called.
+#[derive(Clone, Copy, Debug)]
+pub struct AtlasLabels<'a> {
+    /// The initial template.
+    pub template: &'a str,
+    /// The configuration.
+    pub config: &'a str,
+    /// Each subject (its file).
+    pub subjects: &'a [String],
+}
+
+/// The folder of subject `i` (from 0) in an atlas's outputs.
+pub fn subject_directory(i: usize) -> String {
+    format!("subject_{i:03}")
+}
+
+impl AtlasRun {
+    /// The run record of an atlas with a result (`None` without one):
+    /// per subject its energies, data term before and after, quality and
+    /// pre-alignment; the means over subjects; the modes' standard
+    /// deviations and shares; `seconds` of wall time in all, `files` the
+    /// folder's files.
+    pub fn record(&self, labels: &AtlasLabels<'_>, seconds: f64, files: Vec<String>) -> Option<record::AtlasRecord> {
+        let result = self.result.as_ref()?;
+        let model = &self.plan.model;
+        let subjects = result
+            .subjects
+            .iter()
+            .zip(labels.subjects)
+            .enumerate()
+            .map(|(i, (s, file))| record::SubjectRecord {
+                file: file.clone(),
+                value: s.energies.value,
+                energy: s.energies.energy,
+                attachment: s.energies.attachment,
+                attachment_start: s.initial_attachment,
+                attachment_fall: (s.initial_attachment > 0.0)
+                    .then(|| 1.0 - s.energies.attachment / s.initial_attachment),
+                quality: s.quality.clone(),
+                template_quality: s.template_quality.clone(),
+                prealign: s.alignment.clone(),
+                directory: subject_directory(i),
+            })
+            .collect();
+        let n = result.subjects.len() as f64;
+        let rms: Vec<f64> = result.subjects.iter().filter_map(|s| s.quality.signal_rms).collect();
+        let modes = self.modes.as_ref().map_or(&[][..], |(pca, _)| &pca.modes[..]);
+        let e = result.energies;
+        Some(record::AtlasRecord {
+            kind: record::Kind::Atlas,
+            format: record::FORMAT,
+            template_start: labels.template.to_string(),
+            config: labels.config.to_string(),
+            model: model.kind().name().into(),
+            norm: model.norm().name().into(),
+            gamma_v: self.config.model.gamma_v,
+            gamma_f: self.config.model.gamma_f,
+            gamma_w: self.config.model.gamma_w,
+            scales: self.plan.scales.clone(),
+            effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
+            stages: result.stages.clone(),
+            final_value: e.value,
+            final_energy: e.energy,
+            final_attachment: e.attachment,
+            subjects,
+            mean_distance: result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n,
+            mean_signal_rms: (rms.len() == result.subjects.len()).then(|| rms.iter().sum::<f64>() / n),
+            min_attachment_fall: result
+                .subjects
+                .iter()
+                .filter(|s| s.initial_attachment > 0.0)
+                .map(|s| 1.0 - s.energies.attachment / s.initial_attachment)
+                .reduce(f64::min),
+            modes: modes.iter().map(|m| record::ModeRecord { sd: m.sd, share: m.share }).collect(),
+            iterations: result.iterations,
+            evaluations: result.evaluations,
+            seconds,
+            files,
+        })
+    }
+}
+
 /// Estimates the atlas of `request.subjects` from `request.template`:
 /// sets it up (the subjects' pre-alignments, reported to `observer`), runs
 /// its stages on `stage_templates` (coarser initial templates of the
@@ -265,11 +357,7 @@ pub fn estimate_atlas(
     observer: &mut impl Observer,
 ) -> Result<AtlasRun, MatchError> {
     let atlas = Atlas::new_observed(request.template, request.subjects, request.config, observer)?;
-    let atlas = match stage_templates {
-        Some(templates) => atlas.with_stage_templates(templates)?,
-        None => atlas,
-    };
-    let atlas = checkpointing.apply(atlas)?;
+    let atlas = prepared(atlas, stage_templates, checkpointing)?;
     let mut atlas = match cluster {
         Some(c) => atlas.with_cluster(c),
         None => atlas,

@@ -7,14 +7,14 @@
 
 use std::path::{Path, PathBuf};
 
-use fshape_match::ops::{AtlasRun, Labels, Registration};
-use fshape_match::record::{self, AtlasRecord, MatchRecord, ModeRecord, RunRecord, SubjectRecord};
+use fshape_match::ops::{AtlasLabels, AtlasRun, Labels, Registration};
+use fshape_match::record::{AtlasRecord, MatchRecord, RunRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
 
 use crate::ReportError;
-use crate::render::{self, SIZE, View};
+use crate::render::{self, View};
 
 type Result<T> = std::result::Result<T, ReportError>;
 
@@ -246,10 +246,8 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
         header.extend((0..result.template.n_vertices()).map(|v| format!("pf_{v}")));
     }
     let mut table = header.join(",") + "\n";
-    let mut subject_records = Vec::new();
-    for (i, ((s, (seen, matched)), file)) in result.subjects.iter().zip(&run.subjects).zip(folder.subjects).enumerate()
-    {
-        let dir = format!("subject_{i:03}");
+    for (i, (s, (seen, matched))) in result.subjects.iter().zip(&run.subjects).enumerate() {
+        let dir = fshape_match::ops::subject_directory(i);
         push(format!("{dir}/p0.csv"), io::csv::vectors_text(names, &s.p0).into_bytes());
         if kind != ModelKind::Lddmm {
             let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
@@ -263,18 +261,6 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
             )
             .collect();
         table.push_str(&(row.join(",") + "\n"));
-        subject_records.push(SubjectRecord {
-            file: file.clone(),
-            value: s.energies.value,
-            energy: s.energies.energy,
-            attachment: s.energies.attachment,
-            attachment_start: s.initial_attachment,
-            attachment_fall: (s.initial_attachment > 0.0).then(|| 1.0 - s.energies.attachment / s.initial_attachment),
-            quality: s.quality.clone(),
-            template_quality: s.template_quality.clone(),
-            prealign: s.alignment.clone(),
-            directory: dir,
-        });
     }
     push("momenta.csv".into(), table.into_bytes());
     // Pictures: the template, and a grid of each subject (left, as the
@@ -286,14 +272,15 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
     let camera = View::fit(&all, view.0, view.1);
     push("template.png".into(), render::picture(&result.template, &camera)?);
     push("template_start.png".into(), render::picture(&run.start, &camera)?);
-    let pairs: Vec<(&FShape, &FShape)> =
-        run.subjects.iter().map(|(s, m)| (s, m)).take(GRID_ROWS * GRID_PAIRS).collect();
-    let (grid, width, height) = subjects_grid(&pairs, &camera);
+    // Each subject beside its matched template at a quarter of the render
+    // size, GRID_PAIRS pairs a row.
+    let tiles: Vec<&FShape> = run.subjects.iter().take(GRID_ROWS * GRID_PAIRS).flat_map(|(s, m)| [s, m]).collect();
+    let (grid, width, height) =
+        render::mosaic(tiles.iter().map(|shape| render::rasterise(shape, &camera)), 2 * GRID_PAIRS, 4);
     push("subjects.png".into(), render::png_sized(&grid, width, height)?);
     // The population's main modes of variation: principal components of
     // the initial momenta in the energy metric, the template shot to ±2
     // standard deviations along each.
-    let mut mode_records = Vec::new();
     let mut mode_rows: Vec<&[FShape; 3]> = Vec::new();
     if let Some((pca, shapes)) = &run.modes {
         let mut scores = std::iter::once("subject".to_string())
@@ -307,58 +294,26 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
             scores.push_str(&(cells.join(",") + "\n"));
         }
         push("pca.csv".into(), scores.into_bytes());
-        for (k, (mode, row)) in pca.modes.iter().zip(shapes).enumerate() {
+        for (k, row) in shapes.iter().enumerate() {
             for (c, shape) in [("minus2sd", &row[0]), ("plus2sd", &row[2])] {
                 push(format!("mode_{}_{c}.ply", k + 1), ply(shape)?);
             }
-            mode_records.push(ModeRecord { sd: mode.sd, share: mode.share });
             mode_rows.push(row);
         }
     }
     if !mode_rows.is_empty() {
-        let (rgb, width, height) = modes_grid(&mode_rows, &camera);
+        // A row per mode: −2, 0 and +2 standard deviations, at half size.
+        let tiles: Vec<&FShape> = mode_rows.iter().flat_map(|row| row.iter()).collect();
+        let (rgb, width, height) = render::mosaic(tiles.iter().map(|shape| render::rasterise(shape, &camera)), 3, 2);
         push("modes.png".into(), render::png_sized(&rgb, width, height)?);
     }
     let (svg, png) = crate::plot::energy_plot(&result.stages, model.gamma_w(), "atlas: mean objective by iteration")?;
     push("energy.svg".into(), svg.clone().into_bytes());
     push("energy.png".into(), png);
-    let n = result.subjects.len() as f64;
-    let mean_distance = result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n;
-    let rms: Vec<f64> = result.subjects.iter().filter_map(|s| s.quality.signal_rms).collect();
-    let mean_signal_rms = (rms.len() == result.subjects.len()).then(|| rms.iter().sum::<f64>() / n);
-    let min_attachment_fall = result
-        .subjects
-        .iter()
-        .filter(|s| s.initial_attachment > 0.0)
-        .map(|s| 1.0 - s.energies.attachment / s.initial_attachment)
-        .reduce(f64::min);
-    let e = result.energies;
-    let record = AtlasRecord {
-        kind: record::Kind::Atlas,
-        format: record::FORMAT,
-        template_start: folder.template.to_string(),
-        config: folder.config.to_string(),
-        model: kind.name().into(),
-        norm: model.norm().name().into(),
-        gamma_v: run.config.model.gamma_v,
-        gamma_f: run.config.model.gamma_f,
-        gamma_w: run.config.model.gamma_w,
-        scales: run.plan.scales.clone(),
-        effective_weights: [model.gamma_v(), model.gamma_f(), model.gamma_w()],
-        stages: result.stages.clone(),
-        final_value: e.value,
-        final_energy: e.energy,
-        final_attachment: e.attachment,
-        subjects: subject_records,
-        mean_distance,
-        mean_signal_rms,
-        min_attachment_fall,
-        modes: mode_records,
-        iterations: result.iterations,
-        evaluations: result.evaluations,
-        seconds: result.seconds + run.stages_ended.elapsed().as_secs_f64(),
-        files: files.iter().cloned().chain(["report.html".to_string()]).collect(),
-    };
+    files.push("report.html".into());
+    let seconds = result.seconds + run.stages_ended.elapsed().as_secs_f64();
+    let labels = AtlasLabels { template: folder.template, config: folder.config, subjects: folder.subjects };
+    let Some(record) = run.record(&labels, seconds, files) else { return Ok(None) };
     outputs.push((out.join("summary.json"), record.to_json()));
     // The page a colleague opens, from what is in memory (`fshape report`
     // builds the same page from the files).
@@ -383,54 +338,3 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
 /// Rows and subject pairs per row of an atlas's subjects picture.
 const GRID_ROWS: usize = 8;
 const GRID_PAIRS: usize = 4;
-
-/// One row per mode: the template shot to −2, 0 and +2 standard
-/// deviations, at half the render size: (RGB, width, height).
-fn modes_grid(rows: &[&[FShape; 3]], view: &View) -> (Vec<u8>, u32, u32) {
-    let tile = SIZE / 2;
-    let (width, height) = (3 * tile, rows.len() * tile);
-    let mut rgb = vec![255u8; width * height * 3];
-    for (r, shapes) in rows.iter().enumerate() {
-        for (col, shape) in shapes.iter().enumerate() {
-            let full = render::rasterise(shape, view);
-            for y in 0..tile {
-                for x in 0..tile {
-                    let dst = ((r * tile + y) * width + col * tile + x) * 3;
-                    for ch in 0..3 {
-                        let sum: usize =
-                            (0..4).map(|b| usize::from(full[((2 * y + b / 2) * SIZE + 2 * x + b % 2) * 3 + ch])).sum();
-                        rgb[dst + ch] = (sum / 4) as u8;
-                    }
-                }
-            }
-        }
-    }
-    (rgb, width as u32, height as u32)
-}
-
-/// Each subject next to its matched template, at a quarter of the render
-/// size, `GRID_PAIRS` pairs per row: (RGB, width, height).
-fn subjects_grid(pairs: &[(&FShape, &FShape)], view: &View) -> (Vec<u8>, u32, u32) {
-    let tile = SIZE / 4;
-    let rows = pairs.len().div_ceil(GRID_PAIRS).max(1);
-    let (width, height) = (2 * GRID_PAIRS * tile, rows * tile);
-    let mut rgb = vec![255u8; width * height * 3];
-    for (k, (subject, matched)) in pairs.iter().enumerate() {
-        for (j, shape) in [subject, matched].iter().enumerate() {
-            let full = render::rasterise(shape, view);
-            let (col, row) = (2 * (k % GRID_PAIRS) + j, k / GRID_PAIRS);
-            for y in 0..tile {
-                for x in 0..tile {
-                    // The mean of each 4 × 4 block.
-                    let dst = ((row * tile + y) * width + col * tile + x) * 3;
-                    for c in 0..3 {
-                        let sum: usize =
-                            (0..16).map(|b| usize::from(full[((4 * y + b / 4) * SIZE + 4 * x + b % 4) * 3 + c])).sum();
-                        rgb[dst + c] = (sum / 16) as u8;
-                    }
-                }
-            }
-        }
-    }
-    (rgb, width as u32, height as u32)
-}

@@ -236,6 +236,35 @@ pub fn rasterise(shape: &FShape, view: &View) -> Vec<u8> {
     rgb
 }
 
+/// Pictures of SIZE × SIZE (as [`rasterise`] makes them) laid out in
+/// rows of `cols` on white, each shrunk `shrink` times (the mean of each
+/// `shrink` × `shrink` block; 1 keeps it whole): (RGB, width, height).
+/// The pictures are taken one at a time, so a large grid never holds
+/// them all.
+pub fn mosaic(tiles: impl ExactSizeIterator<Item = Vec<u8>>, cols: usize, shrink: usize) -> (Vec<u8>, u32, u32) {
+    let (tile, area) = (SIZE / shrink, shrink * shrink);
+    let rows = tiles.len().div_ceil(cols).max(1);
+    let (width, height) = (cols * tile, rows * tile);
+    let mut rgb = vec![255u8; width * height * 3];
+    for (k, full) in tiles.enumerate() {
+        let (col, row) = (k % cols, k / cols);
+        for y in 0..tile {
+            for x in 0..tile {
+                let dst = ((row * tile + y) * width + col * tile + x) * 3;
+                for c in 0..3 {
+                    let sum: usize = (0..area)
+                        .map(|b| {
+                            usize::from(full[((shrink * y + b / shrink) * SIZE + shrink * x + b % shrink) * 3 + c])
+                        })
+                        .sum();
+                    rgb[dst + c] = (sum / area) as u8;
+                }
+            }
+        }
+    }
+    (rgb, width as u32, height as u32)
+}
+
 /// `rgb` (SIZE × SIZE) as PNG bytes.
 pub fn png(rgb: &[u8]) -> Result<Vec<u8>, png::EncodingError> {
     png_sized(rgb, SIZE as u32, SIZE as u32)
@@ -314,6 +343,23 @@ mod tests {
             let i = 3 * (3 * SIZE / 4 * SIZE + SIZE / 4);
             assert_eq!(&img[i..i + 3], top, "the triangle at z = 1 (towards the camera) covers the one at z = 0");
         }
+    }
+
+    #[test]
+    fn a_mosaic_places_tiles_row_by_row_and_shrinks_each_to_its_block_means() {
+        // A tile whose pixel (x, y) has red x % 2, green y % 2 and blue 30:
+        // every 2 × 2 block averages to (0, 0, 30) (integer division).
+        let checker: Vec<u8> =
+            (0..SIZE * SIZE).flat_map(|i| [(i % SIZE % 2) as u8 * 2, (i / SIZE % 2) as u8 * 2, 30]).collect();
+        let solid = |v: u8| vec![v; SIZE * SIZE * 3];
+        let (rgb, w, h) = mosaic([checker, solid(10), solid(200)].into_iter(), 2, 2);
+        let half = SIZE / 2;
+        assert_eq!((w, h), (SIZE as u32, SIZE as u32), "two columns, two rows of half-size tiles");
+        let at = |x: usize, y: usize| &rgb[3 * (y * SIZE + x)..3 * (y * SIZE + x) + 3];
+        assert_eq!(at(3, 5), [1, 1, 30], "tile 0, upper left: the block means");
+        assert_eq!(at(half + 7, 9), [10; 3], "tile 1, upper right");
+        assert_eq!(at(2, half + 1), [200; 3], "tile 2 starts the second row");
+        assert_eq!(at(half + 2, half + 2), [255; 3], "no fourth tile: white");
     }
 
     #[test]

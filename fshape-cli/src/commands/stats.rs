@@ -17,7 +17,7 @@ use fshape_mesh::io::{self, Encoding, ReadOptions};
 use fshape_stats::{Covariates, Inference, MapKind, MapTest, MeshGraph, StatKind, Tail, TfceParams};
 use serde::Serialize;
 
-use fshape_report::render::{self, SIZE, View};
+use fshape_report::render::{self, View};
 
 /// `fshape stats`'s arguments (its help is on the command).
 #[derive(clap::Args)]
@@ -436,17 +436,11 @@ fn picture(template: &FShape, test: &MapTest, p: &[f64], alpha: f64, azimuth: f6
     let all = template.clone().with_signal(Some(test.statistic.clone()))?;
     let thresholded = template.clone().with_signal(Some(shown))?;
     let azimuths: &[f64] = if template.dim() == 3 { &[azimuth, azimuth + 180.0] } else { &[azimuth] };
-    let (width, height) = (azimuths.len() * SIZE, 2 * SIZE);
-    let mut rgb = vec![255u8; width * height * 3];
-    for (col, &az) in azimuths.iter().enumerate() {
-        let view = View::fit(&[template], az, elevation).diverging(bound);
-        for (row, shape) in [&all, &thresholded].into_iter().enumerate() {
-            let tile = render::rasterise(shape, &view);
-            for y in 0..SIZE {
-                let dst = ((row * SIZE + y) * width + col * SIZE) * 3;
-                rgb[dst..dst + SIZE * 3].copy_from_slice(&tile[y * SIZE * 3..(y + 1) * SIZE * 3]);
-            }
-        }
-    }
-    Ok(render::png_sized(&rgb, width as u32, height as u32)?)
+    let views: Vec<View> = azimuths.iter().map(|&az| View::fit(&[template], az, elevation).diverging(bound)).collect();
+    // A column per view: every vertex above, the thresholded map below.
+    let tiles: Vec<(&FShape, &View)> =
+        [&all, &thresholded].into_iter().flat_map(|s| views.iter().map(move |v| (s, v))).collect();
+    let (rgb, width, height) =
+        render::mosaic(tiles.iter().map(|(shape, view)| render::rasterise(shape, view)), views.len(), 1);
+    Ok(render::png_sized(&rgb, width, height)?)
 }

@@ -13,7 +13,7 @@ use fshape_mesh::generate::{SplitMix64, icosphere};
 use fshape_mesh::io::{self, Encoding, write_mesh};
 
 use super::attachment;
-use fshape_report::render::{self, SIZE, View};
+use fshape_report::render::{self, View};
 
 /// Where the geometric effect and the signal effect sit, as unit
 /// directions from the centre (projected onto the ellipsoid).
@@ -226,15 +226,10 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
     {
         let shape = template.clone().with_signal(Some(values))?;
         let (azimuth, elevation) = crate::args::DEFAULT_CAMERA.pair();
-        let mut rgb = vec![255u8; 2 * SIZE * SIZE * 3];
-        for (col, az) in [azimuth, azimuth + 180.0].into_iter().enumerate() {
-            let tile = render::rasterise(&shape, &View::fit(&[&template], az, elevation).diverging(1.0));
-            for y in 0..SIZE {
-                let dst = (y * 2 * SIZE + col * SIZE) * 3;
-                rgb[dst..dst + SIZE * 3].copy_from_slice(&tile[y * SIZE * 3..(y + 1) * SIZE * 3]);
-            }
-        }
-        io::write_atomic(&dir.join(name), &render::png_sized(&rgb, 2 * SIZE as u32, SIZE as u32)?, false)?;
+        let tiles = [azimuth, azimuth + 180.0]
+            .map(|az| render::rasterise(&shape, &View::fit(&[&template], az, elevation).diverging(1.0)));
+        let (rgb, width, height) = render::mosaic(tiles.into_iter(), 2, 1);
+        io::write_atomic(&dir.join(name), &render::png_sized(&rgb, width, height)?, false)?;
     }
     println!(
         "  p_FWE ≤ 0.05 (max-t | TFCE), vertices within {within:.2} of the geometry effect, of the signal effect, elsewhere:"
