@@ -327,6 +327,7 @@ impl AtlasRun {
             subjects,
             mean_distance: result.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / n,
             mean_signal_rms: (rms.len() == result.subjects.len()).then(|| rms.iter().sum::<f64>() / n),
+            mean_signal_rms_per_channel: per_channel_mean_rms(&result.subjects),
             min_attachment_fall: result
                 .subjects
                 .iter()
@@ -379,15 +380,9 @@ pub fn estimate_atlas(
         return Ok(run);
     }
     let result = atlas.result()?;
-    for (subject, r) in request.subjects.iter().zip(&result.subjects) {
+    for (i, (subject, r)) in request.subjects.iter().zip(&result.subjects).enumerate() {
         let seen = r.alignment.as_ref().map_or_else(|| Ok(subject.clone()), |a| a.apply(subject))?;
-        let last = r.trajectory.steps();
-        let matched = result
-            .template
-            .clone()
-            .with_points(r.trajectory.points(last).to_vec())?
-            .with_signal(Some(r.trajectory.signal(last).to_vec()))?;
-        run.subjects.push((seen, matched));
+        run.subjects.push((seen, result.matched(i)?));
     }
     if request.modes > 0 {
         let pca = atlas.principal_modes(&result, request.modes)?;
@@ -465,6 +460,18 @@ impl Shot {
             seconds: record::ShootTiming { total: seconds, kernels: traj.timings.kernels, fem: traj.timings.fem },
         }
     }
+}
+
+/// With several maps, each map's signal error averaged over the subjects
+/// (`None` for a map unless every subject has its error); empty with one.
+fn per_channel_mean_rms(subjects: &[crate::atlas::SubjectResult]) -> Vec<Option<f64>> {
+    let k = subjects.first().map_or(0, |s| s.quality.channels.len());
+    (0..k)
+        .map(|c| {
+            let rms: Vec<f64> = subjects.iter().filter_map(|s| s.quality.channels.get(c)?.signal_rms).collect();
+            (rms.len() == subjects.len()).then(|| rms.iter().sum::<f64>() / subjects.len() as f64)
+        })
+        .collect()
 }
 
 /// Shoots `template` with the initial momenta `p0` (n × d) and `pf` (the

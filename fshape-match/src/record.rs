@@ -280,6 +280,10 @@ pub struct AtlasRecord {
     pub mean_distance: f64,
     /// The same for the signal error (`None` unless every subject has one).
     pub mean_signal_rms: Option<f64>,
+    /// With several maps, the same for each map (the first is
+    /// `mean_signal_rms`); empty with one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub mean_signal_rms_per_channel: Vec<Option<f64>>,
     /// The principal modes of the initial momenta (energy metric).
     #[serde(default)]
     pub modes: Vec<ModeRecord>,

@@ -455,19 +455,6 @@ pub(crate) fn step_too_far(e: &ShootError) -> bool {
     !matches!(e, ShootError::Invalid { .. } | ShootError::Dimension { .. } | ShootError::NoTarget)
 }
 
-/// Refuses shapes of several signal channels where their stages, outputs
-/// and reports do not carry them yet (atlases; a registration of several
-/// channels runs in a [`crate::Session`]).
-pub(crate) fn one_channel<'a>(shapes: impl IntoIterator<Item = &'a FShape>) -> Result<(), MatchError> {
-    match shapes.into_iter().map(FShape::n_channels).find(|&k| k > 1) {
-        Some(k) => Err(MatchError::InvalidInput(format!(
-            "a shape carries {k} signal channels: atlases take one so far \
-             (a registration, fshape_match::Session, takes several)"
-        ))),
-        None => Ok(()),
-    }
-}
-
 /// Minimises J from (p_0, p^f) with `settings`, in one stage and in
 /// memory (a [`crate::Session`] adds stages, checkpoints and resume);
 /// `each` sees the optimiser state and J's parts after every accepted

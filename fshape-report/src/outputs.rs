@@ -237,13 +237,19 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
     let dim = result.template.dim();
     let kind = model.kind();
     let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
+    // Several maps: p^f's columns pf, pf_2, … (vertex v's pf_{v},
+    // pf_2_{v}, … in momenta.csv), as a registration writes them.
+    let channels = result.template.n_channels().max(1);
+    let pf_names: Vec<String> = (0..channels).map(|c| io::channel_name("pf", c)).collect();
     // One row per subject: p_0 (vertex by vertex), then p^f (or ζ).
     let mut header: Vec<String> = vec!["subject".into()];
     for v in 0..result.template.n_vertices() {
         header.extend(names.iter().map(|n| format!("{n}_{v}")));
     }
     if kind != ModelKind::Lddmm {
-        header.extend((0..result.template.n_vertices()).map(|v| format!("pf_{v}")));
+        for v in 0..result.template.n_vertices() {
+            header.extend(pf_names.iter().map(|n| format!("{n}_{v}")));
+        }
     }
     let mut table = header.join(",") + "\n";
     for (i, (s, (seen, matched))) in result.subjects.iter().zip(&run.subjects).enumerate() {
@@ -251,7 +257,9 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
         push(format!("{dir}/p0.csv"), io::csv::vectors_text(names, &s.p0).into_bytes());
         if kind != ModelKind::Lddmm {
             let name = if kind == ModelKind::Tangential { "zeta" } else { "pf" };
-            push(format!("{dir}/pf.csv"), io::csv::vectors_text(&[name], &s.pf).into_bytes());
+            let columns: Vec<String> = (0..channels).map(|c| io::channel_name(name, c)).collect();
+            let columns: Vec<&str> = columns.iter().map(String::as_str).collect();
+            push(format!("{dir}/pf.csv"), io::csv::vectors_text(&columns, &s.pf).into_bytes());
         }
         push(format!("{dir}/matched.ply"), ply(matched)?);
         push(format!("{dir}/subject.ply"), ply(seen)?);

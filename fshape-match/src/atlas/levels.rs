@@ -66,13 +66,14 @@ impl Level {
     /// The template's positions and signal at the unknowns `x` of this
     /// level, and the hypertemplate's momenta and energy (0 without one).
     pub(super) fn template_at(&self, x: &[f64]) -> Result<(FShape, Option<Vec<f64>>, f64), MatchError> {
-        let pn = self.template.n_vertices() * self.template.dim();
-        let p = self.template.n_vertices();
+        let t = &self.template;
+        let (pn, k) = (t.n_vertices() * t.dim(), t.n_channels());
+        let p = t.n_vertices() * k;
         let (points, traj) = positions(self.hyper.as_ref(), &self.metric, &x[..pn])?;
-        let signal = x[pn..pn + p].iter().map(|u| u * self.metric.signal).collect();
+        let signal = x[pn..pn + p].iter().zip(self.metric.signal.iter().cycle()).map(|(u, s)| u * s).collect();
         let momenta = self.hyper.as_ref().map(|h| h.unknowns.unpack(&x[..pn]).0);
         let energy = traj.map_or(0.0, |t| t.hamiltonian[0]);
-        Ok((self.template.clone().with_points(points)?.with_signal(Some(signal))?, momenta, energy))
+        Ok((t.clone().with_points(points)?.with_signals(Some(signal), k)?, momenta, energy))
     }
 
     /// The unknowns at the start: the initial template (P_0 = 0 for the
@@ -83,7 +84,8 @@ impl Level {
             Some(_) => vec![0.0; self.template.points().len()],
             None => self.template.points().iter().map(|v| v / self.metric.length).collect(),
         };
-        x.extend(known(self.template.signal().expect("levels carry a signal")).map(|v| v / self.metric.signal));
+        let signal = known(self.template.signal().expect("levels carry a signal"));
+        x.extend(signal.zip(self.metric.signal.iter().cycle()).map(|(v, s)| v / s));
         x.resize(x.len() + subjects * self.unknowns.len(), 0.0);
         x
     }
@@ -93,7 +95,7 @@ impl Level {
         AtlasObjective {
             cluster,
             pn: t.n_vertices() * t.dim(),
-            p: t.n_vertices(),
+            p: t.n_vertices() * t.n_channels(),
             problems: &mut self.problems,
             mine: self.mine.clone(),
             n_subjects,
@@ -142,7 +144,8 @@ impl Population {
     pub(super) fn solution(&mut self, k: usize, x: &[f64]) -> Result<Solution, MatchError> {
         let level = &*self.ensure_level(k)?;
         let (template, hyper_p0, _) = level.template_at(x)?;
-        let offset = level.template.n_vertices() * (level.template.dim() + 1);
+        let t = &level.template;
+        let offset = t.n_vertices() * (t.dim() + t.n_channels());
         let momenta = x[offset..].chunks_exact(level.unknowns.len()).map(|xi| level.unknowns.unpack(xi)).collect();
         Ok(Solution { initial: level.template.clone(), template, hyper_p0, momenta })
     }
@@ -153,23 +156,26 @@ impl Population {
         self.ensure_level(k)?;
         let level = self.level.as_ref().expect("ensured");
         let fine0 = &level.template;
-        let (n, dim) = (fine0.n_vertices(), fine0.dim());
+        let (n, dim, k) = (fine0.n_vertices(), fine0.dim(), fine0.n_channels());
         let kind = self.stages.plan.model.kind();
         // The template's displacement and signal change, one pass of
-        // closest points: dim + 1 values a vertex.
+        // closest points: dim + k values a vertex.
         let (now, was) = (&coarse.template, &coarse.initial);
+        let signal_change: Vec<f64> =
+            known(now.signal().expect("set")).zip(known(was.signal().expect("set"))).map(|(f, g)| f - g).collect();
         let change: Vec<f64> = now
             .points()
             .chunks_exact(dim)
             .zip(was.points().chunks_exact(dim))
-            .zip(known(now.signal().expect("set")).zip(known(was.signal().expect("set"))))
-            .flat_map(|((a, b), (f, g))| a.iter().zip(b).map(|(a, b)| a - b).chain([f - g]))
+            .zip(signal_change.chunks_exact(k))
+            .flat_map(|((a, b), df)| a.iter().zip(b).map(|(a, b)| a - b).chain(df.iter().copied()))
             .collect();
-        let change = sample(was, fine0, &change, dim + 1)?;
+        let change = sample(was, fine0, &change, dim + k)?;
         let signal: Vec<f64> = change
-            .chunks_exact(dim + 1)
+            .chunks_exact(dim + k)
+            .flat_map(|d| d[dim..].iter().copied())
             .zip(known(fine0.signal().expect("levels carry a signal")))
-            .map(|(d, f)| f + d[dim])
+            .map(|(d, f)| f + d)
             .collect();
         let (mut x, points) = match (&level.hyper, &coarse.hyper_p0) {
             (Some(h), Some(p0)) => {
@@ -183,13 +189,13 @@ impl Population {
                 let points: Vec<f64> = fine0
                     .points()
                     .chunks_exact(dim)
-                    .zip(change.chunks_exact(dim + 1))
+                    .zip(change.chunks_exact(dim + k))
                     .flat_map(|(a, d)| a.iter().zip(d).map(|(a, d)| a + d))
                     .collect();
                 (points.iter().map(|v| v / level.metric.length).collect(), points)
             }
         };
-        x.extend(signal.iter().map(|v| v / level.metric.signal));
+        x.extend(signal.iter().zip(level.metric.signal.iter().cycle()).map(|(v, s)| v / s));
         let fine = fine0.clone().with_points(points)?;
         // One factor on the (moved) fine template for every subject.
         let fit = VelocityFit::new(&fine, self.stages.plan.model.kernel())?;
@@ -197,7 +203,7 @@ impl Population {
             let (q0, qf) = fit.carry(&coarse.template, p0, pf, kind)?;
             x.extend(level.unknowns.pack(&q0, &qf));
         }
-        debug_assert_eq!(x.len(), n * (dim + 1) + self.subjects.len() * level.unknowns.len());
+        debug_assert_eq!(x.len(), n * (dim + k) + self.subjects.len() * level.unknowns.len());
         Ok(x)
     }
 

@@ -67,10 +67,35 @@ pub use pca::{Mode, Modes};
 use crate::runner::{Fnv, Runner, StageSetup, Staged, Stages};
 use crate::{Config, MatchError, StageRecord};
 
+impl AtlasResult {
+    /// The template shot by subject `i`'s momenta: the shape at t = 1
+    /// that is matched to it (the template's cells and mask).
+    ///
+    /// # Panics
+    ///
+    /// If there is no subject `i`.
+    pub fn matched(&self, i: usize) -> Result<FShape, MatchError> {
+        matched(&self.template, &self.subjects[i].trajectory)
+    }
+}
+
+/// `template` moved to the end of `trajectory`, with its signal there.
+fn matched(template: &FShape, trajectory: &Trajectory) -> Result<FShape, MatchError> {
+    let last = trajectory.steps();
+    let k = template.n_channels();
+    Ok(template
+        .clone()
+        .with_points(trajectory.points(last).to_vec())?
+        .with_signals(Some(trajectory.signal(last).to_vec()), k)?)
+}
+
 /// The initial template as the CLI and the Python package take it: a
 /// template without a signal gets the subjects' mean signal, vertex by
 /// vertex when every subject has the template's vertex count, else their
 /// overall mean; with a signal, or when no subject has one, it is kept.
+/// With several maps per vertex every map is averaged on its own; the
+/// shapes that carry a signal must carry the same number of maps
+/// ([`channels`]).
 ///
 /// Masks: a subject's signal counts with its mask's weight (its masked
 /// vertices not at all). The template keeps a mask it was given;
@@ -80,7 +105,7 @@ use crate::{Config, MatchError, StageRecord};
 /// population on one standard mesh, such as fs_LR 32k). A vertex of the
 /// template's mask without any subject's value takes the overall mean.
 pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape, MatchError> {
-    crate::session::one_channel(std::iter::once(&template).chain(subjects))?;
+    let k = channels(&template, subjects)?;
     if template.signal().is_some() {
         return Ok(template);
     }
@@ -93,13 +118,18 @@ pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape,
     let weight = |m: Option<&[f64]>, v: usize| m.map_or(1.0, |m| m[v]);
     // A weighted sum and its total weight, a masked value left out.
     let add = |(s, t): (f64, f64), w: f64, x: f64| if w > 0.0 { (s + w * x, t + w) } else { (s, t) };
-    let (sum, total) = with
-        .iter()
-        .fold((0.0, 0.0), |acc, (f, m)| f.iter().enumerate().fold(acc, |acc, (v, &x)| add(acc, weight(*m, v), x)));
-    let overall = if total > 0.0 { sum / total } else { 0.0 };
-    if !with.iter().all(|(f, _)| f.len() == n) {
-        let signal = vec![overall; n];
-        return Ok(template.with_signal(Some(signal))?);
+    // Each map's overall mean, its values read vertex by vertex.
+    let overall: Vec<f64> = (0..k)
+        .map(|c| {
+            let (sum, total) = with.iter().fold((0.0, 0.0), |acc, (f, m)| {
+                f.iter().skip(c).step_by(k).enumerate().fold(acc, |acc, (v, &x)| add(acc, weight(*m, v), x))
+            });
+            if total > 0.0 { sum / total } else { 0.0 }
+        })
+        .collect();
+    if !with.iter().all(|(f, _)| f.len() == n * k) {
+        let signal = (0..n).flat_map(|_| overall.iter().copied()).collect();
+        return Ok(template.with_signals(Some(signal), k)?);
     }
     let own = template.mask().map(<[f64]>::to_vec);
     let largest = with
@@ -107,13 +137,36 @@ pub fn initial_template(template: FShape, subjects: &[FShape]) -> Result<FShape,
         .any(|(_, m)| m.is_some())
         .then(|| (0..n).map(|v| with.iter().map(|(_, m)| weight(*m, v)).fold(0.0, f64::max)).collect::<Vec<f64>>());
     let mask = own.or(largest);
-    let signal = (0..n)
-        .map(|v| {
-            let (s, t) = with.iter().fold((0.0, 0.0), |acc, (f, m)| add(acc, weight(*m, v), f[v]));
-            if t > 0.0 { s / t } else { overall }
+    let signal = (0..n * k)
+        .map(|i| {
+            let (v, c) = (i / k, i % k);
+            let (s, t) = with.iter().fold((0.0, 0.0), |acc, (f, m)| add(acc, weight(*m, v), f[i]));
+            if t > 0.0 { s / t } else { overall[c] }
         })
         .collect();
-    Ok(template.with_signal_and_mask(Some(signal), mask)?)
+    Ok(template.with_signals_and_mask(Some(signal), k, mask)?)
+}
+
+/// The number of maps per vertex of an atlas of `template` and
+/// `subjects`: the count every shape with a signal carries (1 when none
+/// has one). Shapes that carry different counts are an error naming them.
+pub fn channels(template: &FShape, subjects: &[FShape]) -> Result<usize, MatchError> {
+    let named = std::iter::once(("the template".to_string(), template))
+        .chain(subjects.iter().enumerate().map(|(i, s)| (format!("subject {i}"), s)));
+    let mut first: Option<(String, usize)> = None;
+    for (name, shape) in named.filter(|(_, s)| s.signal().is_some()) {
+        let k = shape.n_channels();
+        match &first {
+            None => first = Some((name, k)),
+            Some((which, j)) if *j != k => {
+                return Err(MatchError::InvalidInput(format!(
+                    "{which} carries {j} signal map(s) per vertex and {name} {k}: an atlas's shapes carry the same maps"
+                )));
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(first.map_or(1, |(_, k)| k))
 }
 
 /// One subject's part of an atlas result.
@@ -212,9 +265,10 @@ pub fn atlas_fingerprint(template: &FShape, subjects: &[FShape], config: &Config
     h.hex()
 }
 
-/// The number of a subject's unknowns on a template of `n` vertices in R^dim.
-fn subject_len(n: usize, dim: usize, kind: ModelKind) -> usize {
-    n * dim + if kind == ModelKind::Lddmm { 0 } else { n }
+/// The number of a subject's unknowns on a template of `n` vertices in
+/// R^dim with `k` maps.
+fn subject_len(n: usize, dim: usize, k: usize, kind: ModelKind) -> usize {
+    n * dim + if kind == ModelKind::Lddmm { 0 } else { n * k }
 }
 
 impl Population {
@@ -222,8 +276,8 @@ impl Population {
     /// and signal, then every subject's momenta.
     fn len_at(&self, stage: usize) -> usize {
         let t = self.stages.template_of(stage).1;
-        let n = t.n_vertices();
-        n * (t.dim() + 1) + self.subjects.len() * subject_len(n, t.dim(), self.stages.plan.model.kind())
+        let (n, k) = (t.n_vertices(), t.n_channels());
+        n * (t.dim() + k) + self.subjects.len() * subject_len(n, t.dim(), k, self.stages.plan.model.kind())
     }
 
     /// The starting unknowns of stage `stage`'s template
@@ -343,7 +397,7 @@ impl Runner<Population> {
         config: &Config,
         observer: &mut dyn crate::Observer,
     ) -> Result<Atlas, MatchError> {
-        crate::session::one_channel(std::iter::once(template).chain(subjects))?;
+        let k = channels(template, subjects)?;
         let first = subjects.first().ok_or(MatchError::NoSubjects)?;
         for (i, s) in subjects.iter().enumerate() {
             if s.dim() != template.dim() || s.kind() != template.kind() {
@@ -383,7 +437,7 @@ impl Runner<Population> {
         let plan = config.plan(template, &subjects[0])?;
         let source = match template.signal() {
             Some(_) => template.clone(),
-            None => template.clone().with_signal(Some(vec![0.0; template.n_vertices()]))?,
+            None => template.clone().with_signals(Some(vec![0.0; template.n_vertices() * k]), k)?,
         };
         let section = config.atlas.clone().unwrap_or_default();
         let hyper_model = match section.template {
@@ -530,12 +584,13 @@ impl Runner<Population> {
         let level = population.level.as_mut().expect("ensured");
         let (template, template_momenta, hyper_energy) = level.template_at(&x)?;
         let len = level.unknowns.len();
-        let offset = template.n_vertices() * (template.dim() + 1);
+        let offset = template.n_vertices() * (template.dim() + template.n_channels());
         let n = population.subjects.len() as f64;
         let mut energies = Energies { value: 0.0, energy: 0.0, signal_energy: 0.0, attachment: 0.0 };
         let mut subjects = Vec::with_capacity(population.subjects.len());
         let start = &population.stages.start;
-        let zeros = (vec![0.0; start.n_vertices() * start.dim()], vec![0.0; start.n_vertices()]);
+        let k = start.n_channels();
+        let zeros = (vec![0.0; start.n_vertices() * start.dim()], vec![0.0; start.n_vertices() * k]);
         for (i, subject) in population.subjects.iter().enumerate() {
             // This process's subjects are set up; the others (on process 0
             // of a cluster, which reports) one at a time.
@@ -557,11 +612,7 @@ impl Runner<Population> {
             energies.energy += e.energy / n;
             energies.signal_energy += e.signal_energy / n;
             energies.attachment += e.attachment / n;
-            let last = trajectory.steps();
-            let matched = template
-                .clone()
-                .with_points(trajectory.points(last).to_vec())?
-                .with_signal(Some(trajectory.signal(last).to_vec()))?;
+            let matched = matched(&template, &trajectory)?;
             subjects.push(SubjectResult {
                 quality: crate::quality(&matched, subject)?,
                 template_quality: crate::quality(&template, subject)?,

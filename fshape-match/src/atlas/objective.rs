@@ -20,14 +20,15 @@ use crate::unknowns::Unknowns;
 pub(super) struct TemplateMetric {
     /// x̄ = length · u_x.
     pub(super) length: f64,
-    /// f̄ = signal · u_f.
-    pub(super) signal: f64,
+    /// f̄ = S_c · u_f, one S_c per map (c = 0, 1, … in turn).
+    pub(super) signal: Vec<f64>,
     /// The deformation kernel and the initial template's positions: M⁻¹
     /// on the positions is K(x̄_0).
     kernel: Kernel,
     points: Vec<f64>,
     dim: usize,
-    /// m̄/m_i, the lumped masses' inverse scaled to mean 1.
+    /// m̄/m_i, the lumped masses' inverse scaled to mean 1, for every
+    /// map of a vertex.
     inv_mass: Vec<f64>,
 }
 
@@ -40,13 +41,14 @@ impl TemplateMetric {
         let mean = masses.iter().sum::<f64>() / masses.len() as f64;
         // Built once here, so that applying it later cannot fail.
         KernelSums::try_new(kernel, template.points(), template.dim())?;
+        let k = template.n_channels().max(1);
         Ok(TemplateMetric {
             length: scales.map_or(1.0, |s| s.length),
-            signal: scales.map_or(1.0, |s| s.signal),
+            signal: (0..k).map(|c| scales.map_or(1.0, |s| s.channel(c))).collect(),
             kernel: kernel.clone(),
             points: template.points().to_vec(),
             dim: template.dim(),
-            inv_mass: masses.iter().map(|m| mean / m).collect(),
+            inv_mass: masses.iter().flat_map(|m| std::iter::repeat_n(mean / m, k)).collect(),
         })
     }
 }
@@ -151,7 +153,7 @@ pub struct AtlasObjective<'p> {
     pub(super) unknowns: Unknowns,
     pub(super) metric: &'p TemplateMetric,
     pub(super) hyper: Option<&'p Hyper>,
-    /// P·n and P of the template.
+    /// P·n and P·k of the template (P vertices, k maps).
     pub(super) pn: usize,
     pub(super) p: usize,
     pub(super) evaluations: usize,
@@ -220,7 +222,9 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
             Ok(p) => p,
             Err(e) => return self.step_too_far(e).and_then(|()| nan()),
         };
-        let signal: Vec<f64> = x[self.pn..self.pn + self.p].iter().map(|u| u * self.metric.signal).collect();
+        let scales = &self.metric.signal;
+        let signal: Vec<f64> =
+            x[self.pn..self.pn + self.p].iter().zip(scales.iter().cycle()).map(|(u, s)| u * s).collect();
         let len = self.subject_len();
         let unknowns = &self.unknowns;
         let (n_subjects, mine) = (self.n_subjects, self.mine.clone());
@@ -293,8 +297,8 @@ impl crate::optimize::Objective for AtlasObjective<'_> {
             for (g, v) in gx.iter_mut().zip(x0) {
                 *g += v / n;
             }
-            for (g, v) in grad[self.pn..self.pn + self.p].iter_mut().zip(f0) {
-                *g += v * self.metric.signal / n;
+            for ((g, v), s) in grad[self.pn..self.pn + self.p].iter_mut().zip(f0).zip(scales.iter().cycle()) {
+                *g += v * s / n;
             }
             let start = self.pn + self.p + i * len;
             for (g, v) in grad[start..start + len].iter_mut().zip(g_own) {

@@ -49,19 +49,30 @@ impl Runner<Population> {
     pub fn principal_modes(&self, result: &AtlasResult, count: usize) -> Result<Modes, MatchError> {
         let subjects = &result.subjects;
         let n = subjects.len();
-        let (pn, p) = (result.template.n_vertices() * result.template.dim(), result.template.n_vertices());
+        let t = &result.template;
+        let (pn, k) = (t.n_vertices() * t.dim(), t.n_channels().max(1));
+        // p^f's length: P·k (0 for LDDMM).
+        let p = subjects.first().map_or(0, |s| s.pf.len());
         let plan = self.plan();
         let kind = plan.model.kind();
         // Each subject's momenta paired with the metric: (K p_0/γ_V, the signal's).
         let tangential = if kind == ModelKind::Tangential {
             let fem = SignalNorm::try_new(&result.template, plan.model.norm()).map_err(ShootError::from)?;
-            let g = plan.model.gamma_f();
-            Some(
-                subjects
-                    .iter()
-                    .map(|s| Ok(fem.matvec(result.template.points(), &s.pf)?.iter().map(|v| g * v).collect()))
-                    .collect::<Result<Vec<Vec<f64>>, ShootError>>()?,
-            )
+            // Map c's weight γ_f·w_c, D_s applied to each map.
+            let weights = plan.model.channel_weights();
+            let g: Vec<f64> = (0..k).map(|c| plan.model.gamma_f() * weights.get(c).copied().unwrap_or(1.0)).collect();
+            let paired = |pf: &[f64]| -> Result<Vec<f64>, ShootError> {
+                let mut out = vec![0.0; pf.len()];
+                for (c, gc) in g.iter().enumerate() {
+                    let zeta: Vec<f64> = pf.iter().skip(c).step_by(k).copied().collect();
+                    let d = fem.matvec(t.points(), &zeta)?;
+                    for (o, v) in out.iter_mut().skip(c).step_by(k).zip(d) {
+                        *o = gc * v;
+                    }
+                }
+                Ok(out)
+            };
+            Some(subjects.iter().map(|s| paired(&s.pf)).collect::<Result<Vec<Vec<f64>>, ShootError>>()?)
         } else {
             None
         };
@@ -123,7 +134,7 @@ impl Runner<Population> {
         };
         problem.set_template(t.points(), t.signal())?;
         let traj = problem.shoot(p0, pf)?;
-        let k = traj.steps();
-        Ok(t.clone().with_points(traj.points(k).to_vec())?.with_signal(Some(traj.signal(k).to_vec()))?)
+        let (last, k) = (traj.steps(), t.n_channels());
+        Ok(t.clone().with_points(traj.points(last).to_vec())?.with_signals(Some(traj.signal(last).to_vec()), k)?)
     }
 }

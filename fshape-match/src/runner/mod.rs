@@ -169,13 +169,6 @@ impl StageTemplates {
         given: bool,
     ) -> Result<StageTemplates, MatchError> {
         let (n, start, what) = (staged.stages().plan.stages.len(), &staged.stages().start, S::START);
-        if start.n_channels() > 1 && templates.iter().flatten().any(|t| t.signal().is_none()) {
-            return Err(MatchError::StageTemplates(format!(
-                "the {what} carries {} signal channels and a stage template none: give the stage templates \
-                 the {what}'s channels",
-                start.n_channels()
-            )));
-        }
         if let Some(t) =
             templates.iter().flatten().find(|t| t.signal().is_some() && t.n_channels() != start.n_channels())
         {
@@ -208,6 +201,15 @@ impl StageTemplates {
                 Some(t) if given => Some(staged.stage_template(t)?),
                 Some(t) => Some(t),
             });
+        }
+        // The channels are checked once each stage template is complete (an
+        // atlas's takes the initial template's maps).
+        if start.n_channels() > 1 && filled.iter().flatten().any(|t| t.signal().is_none()) {
+            return Err(MatchError::StageTemplates(format!(
+                "the {what} carries {} signal channels and a stage template none: give the stage templates \
+                 the {what}'s channels",
+                start.n_channels()
+            )));
         }
         let keys = (0..n)
             .map(|k| match &filled[k] {

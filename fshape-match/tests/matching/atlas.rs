@@ -213,7 +213,7 @@ fn an_atlas_refuses_an_empty_population_and_mixed_shapes() {
 fn mean_displacement(truth: &FShape, subjects: &[FShape]) -> (Vec<f64>, Vec<f64>) {
     let n = subjects.len() as f64;
     let mut dx = vec![0.0; truth.points().len()];
-    let mut df = vec![0.0; truth.n_vertices()];
+    let mut df = vec![0.0; truth.signal().unwrap().len()];
     for s in subjects {
         for (d, (a, b)) in dx.iter_mut().zip(s.points().iter().zip(truth.points())) {
             *d += (a - b) / n;
@@ -227,25 +227,31 @@ fn mean_displacement(truth: &FShape, subjects: &[FShape]) -> (Vec<f64>, Vec<f64>
 
 #[test]
 fn a_population_shot_from_a_known_template_gives_it_back_within_the_derived_bound() {
-    known_template("", 0.0);
-    known_template("[atlas]\ntemplate = \"hypertemplate\"\ngamma_v0 = 0.1\n", 0.1);
+    known_template("", 0.0, 1);
+    known_template("[atlas]\ntemplate = \"hypertemplate\"\ngamma_v0 = 0.1\n", 0.1, 1);
+}
+
+#[test]
+fn a_population_carrying_two_maps_gives_back_the_template_and_each_of_its_maps() {
+    known_template("", 0.0, 2);
 }
 
 /// The known-answer test for a template model (`more`: an `[atlas]`
 /// section, or none for the free template; `gamma_v0` the hypertemplate's
-/// weight, 0 without one).
-fn known_template(more: &str, gamma_v0: f64) {
+/// weight, 0 without one), with one map per vertex (2z) or two (2z, 2x).
+fn known_template(more: &str, gamma_v0: f64, maps: usize) {
     use fshape_shoot::Problem;
-    // The truth: an ellipsoid carrying 2z.
+    // The truth: an ellipsoid carrying 2z (and 2x).
     let sphere = fshape_mesh::generate::icosphere(2, 0.5);
     let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.3 * p[0], p[1], 0.75 * p[2]]).collect();
-    let f: Vec<f64> = pts.chunks_exact(3).map(|p| 2.0 * p[2]).collect();
-    let truth = sphere.clone().with_points(pts).unwrap().with_signal(Some(f)).unwrap();
-    let mut config = Config::parse(
+    let f: Vec<f64> = pts.chunks_exact(3).flat_map(|p| [2.0 * p[2], 2.0 * p[0]].into_iter().take(maps)).collect();
+    let truth = sphere.clone().with_points(pts).unwrap().with_signals(Some(f), maps).unwrap();
+    let widths = if maps == 1 { "0.5" } else { "0.5,0.8" };
+    let mut config = Config::parse(&format!(
         "[model]\nnorm = \"h1\"\nlength = 0.3\ngamma_f = 0.1\n[deformation]\nwidths = [0.4]\n\
-         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:0.5\"\n\
+         [attachment]\nkernel_geom = \"gaussian:0.1\"\nkernel_signal = \"gaussian:{widths}\"\n\
          [optimizer]\ndecrease_tolerance = 1e-3\ndecrease_window = 5\nmax_iterations = 300\n",
-    )
+    ))
     .unwrap();
     config.atlas = Config::parse(&format!("[deformation]\nwidths = [1.0]\n{more}")).unwrap().atlas;
     config.integrator.steps = 5;
@@ -256,21 +262,21 @@ fn known_template(more: &str, gamma_v0: f64) {
     let subjects: Vec<FShape> = (0..8)
         .map(|i| {
             let p0 = random_vector_field(n, 3, 0.002, 100 + i);
-            let pf = random_vector_field(n, 1, 0.002, 200 + i);
+            let pf = random_vector_field(n, maps, 0.002, 200 + i);
             let traj = shooter.shoot(&p0, &pf).unwrap();
             let k = traj.steps();
             truth
                 .clone()
                 .with_points(traj.points(k).to_vec())
                 .unwrap()
-                .with_signal(Some(traj.signal(k).to_vec()))
+                .with_signals(Some(traj.signal(k).to_vec()), maps)
                 .unwrap()
         })
         .collect();
     // Start from the sphere with the subjects' mean signal.
     let (_, df) = mean_displacement(&truth, &subjects);
     let mean_signal: Vec<f64> = truth.signal().unwrap().iter().zip(&df).map(|(a, b)| a + b).collect();
-    let start = sphere.with_signal(Some(mean_signal)).unwrap();
+    let start = sphere.with_signals(Some(mean_signal), maps).unwrap();
     let mut atlas = Atlas::new(&start, &subjects, &config).unwrap();
     atlas.run(&mut ()).unwrap();
     let r = atlas.result().unwrap();
@@ -284,34 +290,45 @@ fn known_template(more: &str, gamma_v0: f64) {
     let diag = truth.bounding_box().diagonal();
     let bias_x =
         dx.chunks_exact(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).sum::<f64>() / n as f64 / diag;
-    let range = 2.0 * 0.75 * 0.5 * 2.0;
-    let bias_f = (df.iter().map(|d| d * d).sum::<f64>() / n as f64).sqrt() / range;
     let k = r.subjects.len() as f64;
     let residual_x = r.subjects.iter().map(|s| s.quality.mean_distance).sum::<f64>() / k;
-    let residual_f = r.subjects.iter().map(|s| s.quality.signal_rms.unwrap()).sum::<f64>() / k;
     let got = fshape_match::quality(&r.template, &truth).unwrap();
     let before = fshape_match::quality(&start, &truth).unwrap();
-    // A position error δ moves the closest point of a signal 2z by up to
-    // 2δ: the signal error the geometric error alone explains.
-    let carried_f = 2.0 * got.mean_distance * diag / range;
+    // Map c's signal error in a quality (the first's fields, else its own).
+    let signal_rms = |q: &fshape_match::Quality, c: usize| {
+        if c == 0 { q.signal_rms.unwrap() } else { q.channels[c].signal_rms.unwrap() }
+    };
     // The hypertemplate's energy pulls the template back towards it:
     // linearised (every subject's energy ½γ_V‖y_i − x̄‖²_V, the prior's
     // ½γ_V0‖x̄ − x_HT‖²_V), the optimum sits a fraction γ_V0/(γ_V + γ_V0)
     // of the way from the subjects' mean back to the hypertemplate.
     let shrink = gamma_v0 / (1.0 + gamma_v0) * fshape_match::quality(&start, &truth).unwrap().mean_distance;
-    let (tol_x, tol_f) = (bias_x + residual_x + shrink, bias_f + residual_f + carried_f);
+    let tol_x = bias_x + residual_x + shrink;
     eprintln!(
-        "{more:?} template vs truth: distance {:.4} (start {:.4}, bound {tol_x:.4} = bias {bias_x:.4} + residual {residual_x:.4} + shrinkage {shrink:.4}); \
-         signal {:.4} (bound {tol_f:.4} = {bias_f:.4} + {residual_f:.4} + {carried_f:.4})",
-        got.mean_distance,
-        before.mean_distance,
-        got.signal_rms.unwrap()
+        "{more:?}, {maps} map(s): template vs truth: distance {:.4} (start {:.4}, bound {tol_x:.4} = bias {bias_x:.4} + residual {residual_x:.4} + shrinkage {shrink:.4})",
+        got.mean_distance, before.mean_distance,
     );
     // The test has teeth: the start is well outside the bound (4.2 and
     // 3.0 times it for the free template and the hypertemplate).
     assert!(before.mean_distance > 2.5 * tol_x, "{before:?} against {tol_x}");
     assert!(got.mean_distance <= tol_x, "{got:?} against {tol_x}");
-    assert!(got.signal_rms.unwrap() <= tol_f, "{got:?} against {tol_f}");
+    // Each map on its own range: 2z spans 2 × 0.375 × 2, 2x 2 × 0.65 × 2.
+    for (c, range) in [2.0 * 0.75 * 0.5 * 2.0, 2.0 * 1.3 * 0.5 * 2.0].into_iter().take(maps).enumerate() {
+        let bias_f = (df.iter().skip(c).step_by(maps).map(|d| d * d).sum::<f64>() / n as f64).sqrt() / range;
+        let residual_f = r.subjects.iter().map(|s| signal_rms(&s.quality, c)).sum::<f64>() / k;
+        // A position error δ moves the closest point of a signal 2z (or
+        // 2x) by up to 2δ: the signal error the geometric error alone
+        // explains.
+        let carried_f = 2.0 * got.mean_distance * diag / range;
+        let tol_f = bias_f + residual_f + carried_f;
+        let e = signal_rms(&got, c);
+        eprintln!(
+            "  map {}: signal {e:.4} (start {:.4}, bound {tol_f:.4} = {bias_f:.4} + {residual_f:.4} + {carried_f:.4})",
+            c + 1,
+            signal_rms(&before, c)
+        );
+        assert!(e <= tol_f, "map {}: {got:?} against {tol_f}", c + 1);
+    }
 }
 
 #[test]
@@ -347,16 +364,23 @@ fn the_eigensolver_reconstructs_its_matrix_in_order_with_signs_fixed() {
 #[test]
 fn principal_modes_are_orthonormal_in_the_energy_metric_and_their_scores_give_back_the_gram_matrix() {
     use fshape_shoot::Problem;
-    for (kind, norm) in [("metamorphosis", "h1"), ("tangential", "l2"), ("lddmm", "l2-lumped")] {
-        let mut config = config(kind, norm);
+    let cases = [("metamorphosis", "h1", 1), ("tangential", "l2", 1), ("lddmm", "l2-lumped", 1)];
+    let two_maps = [("metamorphosis", "h1", 2), ("tangential", "l2", 2)];
+    for (kind, norm, maps) in cases.into_iter().chain(two_maps) {
+        let (mut config, subjects, template) = if maps == 1 {
+            (config(kind, norm), subjects(), template())
+        } else {
+            let subjects = subjects().into_iter().enumerate().map(|(i, s)| with_second_map(s, 0.1 * i as f64));
+            (two_map_config(kind, norm, ""), subjects.collect(), with_second_map(template(), 0.0))
+        };
         config.optimizer.max_iterations = 4;
-        let subjects = subjects();
-        let mut atlas = Atlas::new(&template(), &subjects, &config).unwrap();
+        let mut atlas = Atlas::new(&template, &subjects, &config).unwrap();
         atlas.run(&mut ()).unwrap();
         let r = atlas.result().unwrap();
         let pca = atlas.principal_modes(&r, 10).unwrap();
         // Three subjects: at most two modes, largest first.
         assert_eq!(pca.modes.len(), 2, "{kind}");
+        assert!(pca.modes.iter().all(|m| m.pf.len() == maps * r.template.n_vertices()), "{kind}");
         assert!(pca.modes[0].sd >= pca.modes[1].sd);
         let share: f64 = pca.modes.iter().map(|m| m.share).sum();
         assert!((share - 1.0).abs() < 1e-9, "{kind}: {share}");
@@ -364,13 +388,18 @@ fn principal_modes_are_orthonormal_in_the_energy_metric_and_their_scores_give_ba
         // tangential model's signal term (γ_f/2)ζᵀDζ, which H leaves out.
         let problem = Problem::new(&r.template, atlas.plan().model.clone()).unwrap();
         let fem = fshape_fem::SignalNorm::try_new(&r.template, atlas.plan().model.norm()).unwrap();
+        // With two maps, map c's term is γ_f·w_c ζ_cᵀDζ_c.
+        let weights = atlas.plan().model.channel_weights().to_vec();
+        assert_eq!(weights.len(), if maps == 1 { 0 } else { 2 });
         let norm2 = |p0: &[f64], pf: &[f64]| {
             let h = 2.0 * problem.shoot(p0, pf).unwrap().hamiltonian[0];
             let g = atlas.plan().model.gamma_f();
             match kind {
-                "tangential" => {
-                    h + g * pf.iter().zip(fem.matvec(r.template.points(), pf).unwrap()).map(|(a, b)| a * b).sum::<f64>()
-                }
+                "tangential" => (0..maps).fold(h, |h, c| {
+                    let zeta: Vec<f64> = pf.iter().skip(c).step_by(maps).copied().collect();
+                    let d = fem.matvec(r.template.points(), &zeta).unwrap();
+                    h + g * weights.get(c).unwrap_or(&1.0) * zeta.iter().zip(d).map(|(a, b)| a * b).sum::<f64>()
+                }),
                 _ => h,
             }
         };
@@ -739,4 +768,115 @@ fn a_masked_population_gives_its_mask_to_the_template_and_its_wall_is_never_read
     assert_eq!(result.template.mask(), initial.mask());
     assert!(result.template.signal().unwrap().iter().zip(&cap).all(|(f, c)| f.is_nan() == *c));
     assert!(result.energies.value.is_finite());
+}
+
+/// `s` with a second map beside its signal: 0.3 z + `shift` y.
+fn with_second_map(s: FShape, shift: f64) -> FShape {
+    let first = s.signal().unwrap().to_vec();
+    let f: Vec<f64> = s.points().chunks_exact(3).zip(first).flat_map(|(p, f)| [f, 0.3 * p[2] + shift * p[1]]).collect();
+    s.with_signals(Some(f), 2).unwrap()
+}
+
+/// [`config_with`] for two maps: a width each and weights 1 and 2.
+fn two_map_config(kind: &str, norm: &str, more: &str) -> Config {
+    let mut config = config_with(kind, norm, more);
+    let maps = Config::parse(
+        "[model]\nchannel_weights = [1.0, 2.0]\n[deformation]\nwidths = [0.5]\n[attachment]\nkernel_geom = \"gaussian:0.3\"\n\
+         kernel_signal = \"gaussian:1.0,0.7\"\n",
+    )
+    .unwrap();
+    config.model.channel_weights = maps.model.channel_weights;
+    config.attachment = maps.attachment;
+    config
+}
+
+#[test]
+fn with_two_maps_the_atlas_gradient_matches_central_differences_in_every_block() {
+    let mut rng = SplitMix64(41);
+    let subjects: Vec<FShape> =
+        subjects().into_iter().enumerate().map(|(i, s)| with_second_map(s, 0.1 * i as f64)).collect();
+    let template = with_second_map(template(), 0.0);
+    let (n, pn) = (template.n_vertices(), 3 * template.n_vertices());
+    let p = 2 * n;
+    let hyper = "[atlas]\ntemplate = \"hypertemplate\"\ngamma_v0 = 0.5\n";
+    for (kind, norm, more) in [
+        ("metamorphosis", "h1", ""),
+        ("tangential", "l2", ""),
+        ("lddmm", "l2-lumped", ""),
+        ("metamorphosis", "h1", hyper),
+    ] {
+        let mut atlas = Atlas::new(&template, &subjects, &two_map_config(kind, norm, more)).unwrap();
+        let per_subject = 3 * n + if kind == "lddmm" { 0 } else { p };
+        assert_eq!(atlas.len(), pn + p + 3 * per_subject, "{kind}");
+        let mut x = atlas.initial_unknowns_at(0).unwrap();
+        // The template's maps are unknowns in their own units: read back.
+        let (t, _) = atlas.unpack(0, &x).unwrap();
+        for (a, b) in t.signal().unwrap().iter().zip(template.signal().unwrap()) {
+            assert!((a - b).abs() <= 1e-15 * b.abs(), "{kind}: {a} read back as {b}");
+        }
+        let noise = random_vector_field(x.len(), 1, 0.2, 9);
+        let from = if more.is_empty() { pn + p } else { 0 };
+        for (v, e) in x[from..].iter_mut().zip(&noise[from..]) {
+            *v += e;
+        }
+        let (_, grad) = atlas.value_grad(0, &x).unwrap();
+        let cell = std::cell::RefCell::new(&mut atlas);
+        let j = |z: &[f64]| cell.borrow_mut().value_grad(0, z).unwrap().0;
+        for (what, range) in [
+            ("all", 0..x.len()),
+            ("positions", 0..pn),
+            ("maps", pn..pn + p),
+            ("subject 1", pn + p + per_subject..pn + p + 2 * per_subject),
+        ] {
+            let mut v = vec![0.0; x.len()];
+            v[range.clone()].copy_from_slice(&random_direction(range.len(), &mut rng));
+            // The hypertemplate's shooting gives J a large third
+            // derivative in P_0: a smaller step there.
+            let h = if more.is_empty() { 1e-5 } else { 3e-6 };
+            let c = check_gradient(j, &x, &grad, &v, h);
+            assert!(c.rel_error < 1e-6, "{kind}, {norm}, {more}, {what}: {c:?}");
+        }
+    }
+}
+
+#[test]
+fn with_two_maps_a_coarse_stage_reads_both_maps_and_carries_its_solution_to_the_template() {
+    let (fine, coarse) = fine_and_coarse();
+    let fine = with_second_map(fine, 0.0);
+    let subjects: Vec<FShape> =
+        subjects().into_iter().enumerate().map(|(i, s)| with_second_map(s, 0.1 * i as f64)).collect();
+    let config =
+        two_map_config("metamorphosis", "h1", "[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.3\"]\n");
+    let mut atlas =
+        Atlas::new(&fine, &subjects, &config).unwrap().with_stage_templates(vec![Some(coarse), None]).unwrap();
+    assert_eq!(atlas.len_at(0), 42 * 5 + 3 * 42 * 5);
+    assert_eq!(atlas.len(), 162 * 5 + 3 * 162 * 5);
+    // The stage template's maps are the template's, read at its vertices.
+    let start = atlas.initial_unknowns_at(0).unwrap();
+    let (t, _) = atlas.unpack(0, &start).unwrap();
+    assert_eq!(t.n_channels(), 2);
+    for (p, f) in t.points().chunks_exact(3).zip(t.signal().unwrap().chunks_exact(2)) {
+        assert!((f[0] - (0.5 * p[0] + 0.25 * p[2] * p[2])).abs() < 0.02, "{p:?}: {f:?}");
+        assert!((f[1] - 0.3 * p[2]).abs() < 0.02, "{p:?}: {f:?}");
+    }
+    // The gradient on the coarse stage, then a run through both stages:
+    // the template keeps two maps, each subject's p^f has two a vertex.
+    let mut x = start.clone();
+    for (v, e) in x[42 * 5..].iter_mut().zip(random_vector_field(3 * 42 * 5, 1, 0.2, 5)) {
+        *v += e;
+    }
+    let (_, grad) = atlas.value_grad(0, &x).unwrap();
+    let mut rng = SplitMix64(12);
+    let dir = random_direction(x.len(), &mut rng);
+    let cell = std::cell::RefCell::new(&mut atlas);
+    let j = |z: &[f64]| cell.borrow_mut().value_grad(0, z).unwrap().0;
+    let c = check_gradient(j, &x, &grad, &dir, 3e-6);
+    assert!(c.rel_error < 1e-6, "{c:?}");
+    assert_eq!(atlas.run(&mut ()).unwrap(), Outcome::Finished);
+    let r = atlas.result().unwrap();
+    assert_eq!((r.template.n_vertices(), r.template.n_channels()), (162, 2));
+    assert!(r.subjects.iter().all(|s| s.pf.len() == 2 * 162 && s.quality.channels.len() == 2));
+    assert!(r.stages.iter().all(|s| s.iterations.last().is_some_and(|i| i.value < s.initial.value)), "{:?}", r.stages);
+    let modes = atlas.principal_modes(&r, 2).unwrap();
+    assert!(modes.modes.iter().all(|m| m.pf.len() == 2 * 162));
 }

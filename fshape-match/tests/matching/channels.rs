@@ -236,7 +236,7 @@ fn channel_weights_are_relative_to_each_channels_deviation() {
 }
 
 #[test]
-fn sessions_take_several_channels_and_atlases_name_that_they_do_not_yet() {
+fn sessions_and_atlases_take_several_channels_when_every_shape_carries_the_same_count() {
     let s = icosphere(1, 1.0);
     let f = s.points().to_vec();
     let three = s.clone().with_signals(Some(f.clone()), 3).unwrap();
@@ -250,8 +250,11 @@ fn sessions_take_several_channels_and_atlases_name_that_they_do_not_yet() {
     let two = s.clone().with_signals(Some(pairs), 2).unwrap();
     let e = fshape_match::Session::new(&three, &two, &config).err().expect("refused").to_string();
     assert!(e.contains("the source carries 3 signal channels, the target 2"), "{e}");
-    let e = fshape_match::Atlas::new(&s, &[three.clone(), three.clone()], &config).err().expect("refused").to_string();
-    assert!(e.contains("3 signal channels") && e.contains("atlases take one"), "{e}");
+    fshape_match::Atlas::new(&s, &[three.clone(), three.clone()], &config).expect("three maps on every subject");
+    let e = fshape_match::Atlas::new(&s, &[three.clone(), two.clone()], &config).err().expect("refused").to_string();
+    assert!(e.contains("subject 0 carries 3 signal map(s) per vertex and subject 1 2"), "{e}");
+    let e = fshape_match::Atlas::new(&two, std::slice::from_ref(&three), &config).err().expect("refused").to_string();
+    assert!(e.contains("the template carries 2 signal map(s) per vertex and subject 0 3"), "{e}");
     // A stage template of several channels, given to a one-channel session.
     let geometric =
         fshape_match::Config::parse("[deformation]\nwidths = [0.5]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n")
