@@ -176,6 +176,7 @@ class MatchResult(TypedDict):
     and shot)."""
     p0: npt.NDArray[np.float64]
     pf: npt.NDArray[np.float64]
+    """n, or n x k when the shapes carry k maps."""
     energies: Energies
     quality: Quality
     initial_quality: Quality
@@ -194,6 +195,7 @@ class MatchResult(TypedDict):
 class SubjectResult(TypedDict):
     p0: npt.NDArray[np.float64]
     pf: npt.NDArray[np.float64]
+    """n, or n x k when the shapes carry k maps."""
     energies: Energies
     quality: Quality
     template_quality: Quality
@@ -319,7 +321,8 @@ def atlas(
     checkpoint: Union[str, "PathLike[str]", None] = None,
 ) -> AtlasResult:
     """Estimates a metamorphosis atlas as `fshape atlas` does; `checkpoint`
-    as for `match`."""
+    as for `match`. Subjects may carry several maps (n x k signals), the
+    same k for every subject and the template."""
 
 
 class MapTest(TypedDict):
@@ -344,7 +347,8 @@ class StatsResult(TypedDict):
     contrast: dict[str, Any]
     rows_not_in_the_atlas: list[str]
     maps: dict[str, MapTest]
-    """By map: "signal", "momentum", "displacement", "area"."""
+    """By map: "signal" ("signal_2", … for a template of several maps),
+    "momentum", "displacement", "area"."""
     multivariate: Optional[dict[str, Any]]
     """With `scores`: statistic (Hotelling T² for a one-row contrast), p."""
 
@@ -352,7 +356,7 @@ def stats(
     atlas: AtlasResult,
     covariates: Union[str, "PathLike[str]", Mapping[str, Sequence[Any]]],
     contrast: str,
-    maps: Optional[Sequence[Literal["signal", "momentum", "displacement", "area"]]] = None,
+    maps: Optional[Sequence[str]] = None,
     columns: Optional[Sequence[str]] = None,
     permutations: int = 5000,
     seed: int = 0,
@@ -365,7 +369,10 @@ def stats(
     stats` does: per-vertex maps on the template (signal change, normal
     momentum, normal displacement, log area change) tested with a general
     linear model and Freedman–Lane permutations (FWE by the maximum
-    statistic; TFCE with `tfce`). `covariates`: a CSV table whose first
+    statistic; TFCE with `tfce`). `maps`: "signal" ("signal_2", … for
+    the template's further maps), "momentum", "displacement", "area"
+    (default: every one the template allows); the template's masked
+    vertices are left out of every test. `covariates`: a CSV table whose first
     column names the subjects (index or `subject_003`), or a dict
     {column: one value per subject, in the atlas's order}; numbers enter
     as they are, names as a factor (treatment coding). `contrast`: a

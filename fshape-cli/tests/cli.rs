@@ -2329,6 +2329,38 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
+    // An atlas of the two, each subject's maps listed with `;`: the
+    // template, each subject's p^f and momenta.csv carry both maps, and
+    // summary.json each map's mean error.
+    std::fs::write(
+        dir.join("subjects.csv"),
+        "source.ply,source1.csv;source2.csv\ntarget.ply,target1.csv;target2.csv\n",
+    )
+    .unwrap();
+    let atlas = dir.join("atlas");
+    let list = s(&dir.join("subjects.csv"));
+    let o = fshape(&["atlas", "--subjects", &list, "--config", &config, "--out", &s(&atlas), "--allow-missing"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains(", map 2: "), "{}", String::from_utf8_lossy(&o.stdout));
+    let template = read_mesh(&atlas.join("template.ply"), &ReadOptions::default()).unwrap();
+    assert_eq!(template.n_channels(), 2);
+    let pf = std::fs::read_to_string(atlas.join("subject_001/pf.csv")).unwrap();
+    assert!(pf.starts_with("pf,pf_2\n"), "{}", &pf[..40]);
+    let table = std::fs::read_to_string(atlas.join("momenta.csv")).unwrap();
+    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
+    assert_eq!(header.len(), 1 + sphere.n_vertices() * (3 + 2));
+    assert_eq!(header[1 + 3 * sphere.n_vertices()..][..4], ["pf_0", "pf_2_0", "pf_1", "pf_2_1"]);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(atlas.join("summary.json")).unwrap()).unwrap();
+    let per_map = summary["mean_signal_rms_per_channel"].as_array().unwrap();
+    assert_eq!(per_map.len(), 2);
+    assert_eq!(per_map[0], summary["mean_signal_rms"]);
+    // A subject with one map fewer: refused, naming both.
+    std::fs::write(dir.join("subjects.csv"), "source.ply,source1.csv;source2.csv\ntarget.ply,target1.csv\n").unwrap();
+    let o =
+        fshape(&["atlas", "--subjects", &list, "--config", &config, "--out", &s(&dir.join("no")), "--allow-missing"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("carries 2 signal map(s) per vertex and subject 1 1"), "{err}");
 }
 
 #[test]
@@ -2359,4 +2391,77 @@ fn maps_of_another_length_than_the_mesh_are_refused_by_name() {
             "{err}"
         );
     }
+}
+
+#[test]
+fn stats_on_an_atlas_of_two_maps_finds_the_group_difference_in_the_map_that_has_it() {
+    use fshape_mesh::io::{Encoding, write_mesh};
+    // Ten spheres of one mesh (five a group: 252 labellings, enough for a
+    // corrected p under 0.05), two maps each, written as PLY (signal and
+    // signal_2): the first map differs between subjects but not between
+    // the groups; the second gains a bump at +x in group b alone.
+    let dir = tmp("stats_two_maps");
+    std::fs::create_dir_all(&dir).unwrap();
+    let sphere = fshape_mesh::generate::icosphere(2, 0.5);
+    let bump = |p: &[f64]| {
+        let d2 = (p[0] - 0.5).powi(2) + p[1] * p[1] + p[2] * p[2];
+        (-d2 / (2.0 * 0.15 * 0.15)).exp()
+    };
+    let mut list = String::new();
+    let mut covariates = String::from("subject,group\n");
+    for i in 0..10 {
+        let group = i % 2;
+        let noise = |v: usize, c: usize| 0.05 * (((v * 7 + i * 13 + c * 5) % 11) as f64 / 10.0 - 0.5);
+        let f: Vec<f64> = sphere
+            .points()
+            .chunks_exact(3)
+            .enumerate()
+            .flat_map(|(v, p)| [p[2] + 0.1 * i as f64 + noise(v, 0), p[1] + 0.5 * group as f64 * bump(p) + noise(v, 1)])
+            .collect();
+        let a = 1.0 + 0.02 * i as f64;
+        let pts: Vec<f64> = sphere.points().iter().map(|x| a * x).collect();
+        let subject = sphere.clone().with_points(pts).unwrap().with_signals(Some(f), 2).unwrap();
+        write_mesh(&dir.join(format!("s{i}.ply")), &subject, Encoding::Binary).unwrap();
+        list.push_str(&format!("s{i}.ply\n"));
+        covariates.push_str(&format!("{i},{}\n", ["a", "b"][group]));
+    }
+    std::fs::write(dir.join("list.csv"), list).unwrap();
+    std::fs::write(dir.join("covariates.csv"), covariates).unwrap();
+    let config = dir.join("atlas.toml");
+    std::fs::write(&config, sphere_config(8).replace("\"gaussian:0.5\"", "\"gaussian:0.5,0.5\"")).unwrap();
+    let s = |p: PathBuf| p.display().to_string();
+    let (atlas, stats) = (dir.join("atlas"), dir.join("stats"));
+    let o =
+        fshape(&["atlas", "--subjects", &s(dir.join("list.csv")), "--config", &s(config), "--out", &s(atlas.clone())]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let args = |maps: Option<&str>, out: &PathBuf| -> Vec<String> {
+        let mut v: Vec<String> =
+            ["stats", &s(atlas.clone()), "--covariates", &s(dir.join("covariates.csv"))].map(String::from).to_vec();
+        v.extend(["--contrast", "group", "--permutations", "500", "--out", &s(out.clone())].map(String::from));
+        if let Some(m) = maps {
+            v.extend(["--maps".to_string(), m.to_string()]);
+        }
+        v
+    };
+    let run = |v: Vec<String>| fshape(&v.iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run(args(None, &stats));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(stats.join("summary.json")).unwrap()).unwrap();
+    let maps = summary["maps"].as_array().unwrap();
+    let names: Vec<&str> = maps.iter().map(|m| m["map"].as_str().unwrap()).collect();
+    assert_eq!(names, ["signal", "signal_2", "momentum", "displacement", "area"]);
+    let found = |m: &str| maps.iter().find(|x| x["map"] == m).unwrap()["found"]["vertices"].as_u64().unwrap();
+    // The difference is found in the second map, at the bump, and not in
+    // the first.
+    assert!(found("signal_2") > 0 && found("signal") == 0, "{summary}");
+    let peak = &maps[1]["peak"]["position"];
+    assert!(peak[0].as_f64().unwrap() > 0.35, "{peak}");
+    assert!(stats.join("signal_2_t.gii").exists() && stats.join("signal_2.png").exists());
+    // One map by name; a map the atlas does not carry is refused.
+    let o = run(args(Some("signal_2"), &dir.join("one")));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(args(Some("signal_3"), &dir.join("none")));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--maps signal_3") && err.contains("with 2 signal map(s)"), "{err}");
 }

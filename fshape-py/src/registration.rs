@@ -84,13 +84,8 @@ pub(crate) fn match_shapes<'py>(
     d.set_item("stopped", !r.finished)?;
     let dim = template.dim();
     d.set_item("p0", rows(py, r.p0.clone(), dim))?;
-    // n, or n × k with several signal channels.
     let channels = template.n_channels().max(1);
-    if channels == 1 {
-        d.set_item("pf", PyArray1::from_slice(py, &r.pf))?;
-    } else {
-        d.set_item("pf", rows(py, r.pf.clone(), channels))?;
-    }
+    d.set_item("pf", signal_momentum(py, &r.pf, channels)?)?;
     d.set_item("energies", to_py(py, &r.energies)?)?;
     d.set_item("quality", to_py(py, &r.quality)?)?;
     d.set_item("initial_quality", to_py(py, &r.initial_quality)?)?;
@@ -106,6 +101,12 @@ pub(crate) fn match_shapes<'py>(
     d.set_item("target", PyFShape { inner: matched_target })?;
     d.set_item("config", to_py(py, &used)?)?;
     Ok(d)
+}
+
+/// A signal momentum as Python sees it: n values, or n × k with several
+/// maps.
+fn signal_momentum<'py>(py: Python<'py>, pf: &[f64], channels: usize) -> PyResult<Bound<'py, PyAny>> {
+    Ok(if channels == 1 { PyArray1::from_slice(py, pf).into_any() } else { rows(py, pf.to_vec(), channels).into_any() })
 }
 
 /// Estimates a metamorphosis atlas of `subjects` (FShapes) as `fshape
@@ -153,7 +154,7 @@ pub(crate) fn atlas<'py>(
     let Some(r) = &run.result else {
         return Err(err("the atlas ended without a result"));
     };
-    let dim = r.template.dim();
+    let (dim, channels) = (r.template.dim(), r.template.n_channels().max(1));
     let d = PyDict::new(py);
     d.set_item("template", PyFShape { inner: r.template.clone() })?;
     d.set_item("template_momenta", r.template_momenta.as_ref().map(|p| rows(py, p.clone(), dim)))?;
@@ -161,7 +162,7 @@ pub(crate) fn atlas<'py>(
     for (s, (_, matched)) in r.subjects.iter().zip(&run.subjects) {
         let e = PyDict::new(py);
         e.set_item("p0", rows(py, s.p0.clone(), dim))?;
-        e.set_item("pf", PyArray1::from_slice(py, &s.pf))?;
+        e.set_item("pf", signal_momentum(py, &s.pf, channels)?)?;
         e.set_item("energies", to_py(py, &s.energies)?)?;
         e.set_item("quality", to_py(py, &s.quality)?)?;
         e.set_item("template_quality", to_py(py, &s.template_quality)?)?;

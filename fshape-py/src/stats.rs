@@ -1,7 +1,7 @@
 //! Group statistics on an atlas: `stats`.
 
 use fshape_mesh::FShape;
-use fshape_stats::{Covariates, Inference, MapKind, MeshGraph, StatKind, Tail, TfceParams};
+use fshape_stats::{Covariates, Inference, Map, MeshGraph, StatKind, Tail, TfceParams};
 use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
@@ -89,13 +89,14 @@ pub(crate) fn stats<'py>(
     }
     let n = inputs.len();
     let (text, source) = covariates_text(covariates, n)?;
-    let kinds: Vec<MapKind> = match maps {
-        None => MapKind::ALL.into_iter().filter(|k| k.available(&template)).collect(),
+    let kinds: Vec<Map> = match maps {
+        None => Map::every(&template),
         Some(names) => names
             .iter()
             .map(|m| {
-                MapKind::from_name(m)
-                    .ok_or_else(|| err(format!("maps: `{m}` is not signal, momentum, displacement or area")))
+                Map::from_name(m).ok_or_else(|| {
+                    err(format!("maps: `{m}` is not signal, signal_2, …, momentum, displacement or area"))
+                })
             })
             .collect::<PyResult<_>>()?,
     };
@@ -118,13 +119,18 @@ pub(crate) fn stats<'py>(
         let contrast = design.contrast(contrast)?;
         let graph = MeshGraph::new(&template);
         let m = template.n_vertices();
+        // The template's masked vertices (a medial wall) are outside every
+        // test, as `fshape stats` leaves them.
+        let tested: Vec<bool> =
+            template.mask().map_or_else(|| vec![true; m], |w| w.iter().map(|&w| w > 0.0).collect());
         let mut tests = Vec::new();
         for kind in &kinds {
             let mut values = Vec::with_capacity(n * m);
             for (p0, matched) in &inputs {
                 values.extend(fshape_stats::subject_map(*kind, &template, p0, matched)?);
             }
-            tests.push((*kind, fshape_stats::test_maps(&design, &contrast, &values, m, Some(&graph), &inference)?));
+            let test = fshape_stats::test_maps_within(&design, &contrast, &values, &tested, Some(&graph), &inference)?;
+            tests.push((*kind, test));
         }
         let multivariate = match &scores {
             Some((values, k)) => Some(fshape_stats::test_scores(&design, &contrast, values, *k, &inference)?),

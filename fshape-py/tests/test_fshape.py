@@ -429,6 +429,30 @@ def test_an_atlas_of_three_subjects_brings_its_template_closer():
     assert 0 < after < 0.5 * before
 
 
+def test_an_atlas_of_subjects_with_two_maps_gives_a_template_of_two_maps():
+    src, tgt = sphere_pair()
+    two = [s.with_signal(np.column_stack([s.signal, s.points[:, 1] - 0.1 * i])) for i, s in enumerate([src, tgt])]
+    config = {**CONFIG, "attachment": {"kernel_geom": "gaussian:0.1", "kernel_signal": "gaussian:0.5,0.5"},
+              "optimizer": {"max_iterations": 6}}
+    del config["schedule"]
+    r = fshape.atlas(two, config)
+    assert r["template"].n_channels == 2 and r["template"].signal.shape == (12, 2)
+    for s in r["subjects"]:
+        assert s["pf"].shape == (12, 2) and s["matched"].n_channels == 2
+        assert s["geodesic"]["signals"].shape[1:] == (12, 2)
+        assert len(s["quality"]["channels"]) == 2
+    with pytest.raises(fshape.FShapeError, match="subject 1 1"):
+        fshape.atlas([two[0], tgt], config)
+    # Stats test each map: `signal_2` beside `signal`, by name too.
+    four = two + [s.with_signal(s.signal + [0.1, 0.3]) for s in two]
+    r4 = fshape.atlas(four, {**config, "optimizer": {"max_iterations": 2}})
+    st = fshape.stats(r4, {"group": ["a", "a", "b", "b"]}, "group", permutations=24)
+    assert {"signal", "signal_2", "area"} <= set(st["maps"])
+    one = fshape.stats(r4, {"group": ["a", "a", "b", "b"]}, "group", maps=["signal_2"], permutations=24)
+    assert list(one["maps"]) == ["signal_2"]
+    assert np.array_equal(one["maps"]["signal_2"]["statistic"], st["maps"]["signal_2"]["statistic"])
+
+
 def test_an_atlas_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(tmp_path):
     src, tgt = sphere_pair()
     config = {**CONFIG, "optimizer": {"max_iterations": 4}}

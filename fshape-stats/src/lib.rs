@@ -41,7 +41,7 @@ pub mod tfce;
 
 pub use design::{Contrast, Covariates, Design, Term};
 pub use glm::{Inference, MapTest, ScoresTest, StatKind, Tail, test_maps, test_maps_within, test_scores};
-pub use maps::{MapKind, subject_map, vertex_normals};
+pub use maps::{Map, MapKind, subject_map, vertex_normals};
 pub use tfce::{MeshGraph, TfceParams};
 
 /// What can go wrong in a group test; each names the place.

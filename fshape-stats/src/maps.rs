@@ -4,7 +4,9 @@
 //! function on the template's vertices:
 //!
 //! - `signal`: f_1ⁱ − f̄, the signal change the metamorphosis carries to
-//!   the template's point (the transported signal residual);
+//!   the template's point (the transported signal residual); with several
+//!   maps per vertex, one map each (`signal`, `signal_2`, …: a [`Map`]
+//!   names which);
 //! - `momentum`: p_0ⁱ · n̄ / ā, the initial momentum's normal component per
 //!   unit area (the momenta are densities times areas in the discrete
 //!   model), n̄ the template's unit normal;
@@ -75,6 +77,67 @@ impl MapKind {
     }
 }
 
+/// A map to test: its kind and, for [`MapKind::Signal`], which of the
+/// template's maps (0 the first; 0 for the other kinds).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Map {
+    /// What the map measures.
+    pub kind: MapKind,
+    /// The signal map it reads (0 unless `kind` is `Signal`).
+    pub channel: usize,
+}
+
+impl From<MapKind> for Map {
+    fn from(kind: MapKind) -> Map {
+        Map { kind, channel: 0 }
+    }
+}
+
+impl Map {
+    /// Its name in file names, summaries and on the command line: the
+    /// kind's, the signal's maps after the first as `signal_2`, `signal_3`, …
+    /// (as mesh files name a signal's maps).
+    pub fn name(self) -> String {
+        match self.channel {
+            0 => self.kind.name().to_string(),
+            c => format!("{}_{}", self.kind.name(), c + 1),
+        }
+    }
+
+    /// The map a name gives (`signal_2`: the second signal map).
+    pub fn from_name(name: &str) -> Option<Map> {
+        if let Some(kind) = MapKind::from_name(name) {
+            return Some(kind.into());
+        }
+        let number: usize = name.strip_prefix("signal_")?.parse().ok()?;
+        (number >= 2).then_some(Map { kind: MapKind::Signal, channel: number - 1 })
+    }
+
+    /// What the map is, for legends and summaries.
+    pub fn describe(self) -> String {
+        match self.channel {
+            0 => self.kind.describe().to_string(),
+            c => format!("{}, map {}", self.kind.describe(), c + 1),
+        }
+    }
+
+    /// Whether the template allows this map (a signal map it carries).
+    pub fn available(self, template: &FShape) -> bool {
+        match self.kind {
+            MapKind::Signal => self.channel < template.n_channels(),
+            _ => self.channel == 0 && self.kind.available(template),
+        }
+    }
+
+    /// Every map the template allows, in the order of outputs: each of its
+    /// signal maps, then the geometric ones.
+    pub fn every(template: &FShape) -> Vec<Map> {
+        let signals = (0..template.n_channels()).map(|channel| Map { kind: MapKind::Signal, channel });
+        let geometric = MapKind::ALL.into_iter().filter(|k| *k != MapKind::Signal && k.available(template));
+        signals.chain(geometric.map(Map::from)).collect()
+    }
+}
+
 /// The template's unit vertex normals (area-weighted mean of its cells'
 /// normals; for a plane curve its tangents turned by −90°), or `None` when
 /// the shape has no normal (planar triangles, space curves). A vertex
@@ -102,13 +165,16 @@ pub fn vertex_normals(shape: &FShape) -> Option<Vec<[f64; 3]>> {
     Some(normals)
 }
 
-/// One subject's map of `kind` on the template's vertices, from its
-/// initial momenta `p0` (d per vertex) and the template shot onto it,
-/// `matched` (the template's cells).
-pub fn subject_map(kind: MapKind, template: &FShape, p0: &[f64], matched: &FShape) -> Result<Vec<f64>, StatsError> {
-    if let Some(k) = [template, matched].iter().map(|s| s.n_channels()).find(|&k| k > 1) {
-        return Err(StatsError::Maps { message: format!("a shape carries {k} signal channels; maps take one so far") });
-    }
+/// One subject's `map` on the template's vertices, from its initial
+/// momenta `p0` (d per vertex) and the template shot onto it, `matched`
+/// (the template's cells and maps).
+pub fn subject_map(
+    map: impl Into<Map>,
+    template: &FShape,
+    p0: &[f64],
+    matched: &FShape,
+) -> Result<Vec<f64>, StatsError> {
+    let Map { kind, channel } = map.into();
     let (n, d) = (template.n_vertices(), template.dim());
     if matched.n_vertices() != n || matched.dim() != d || matched.cells() != template.cells() {
         return Err(StatsError::Maps {
@@ -132,10 +198,18 @@ pub fn subject_map(kind: MapKind, template: &FShape, p0: &[f64], matched: &FShap
         (0..n).map(|v| (0..d).map(|k| vectors(v, k) * normals[v][k]).sum()).collect()
     };
     match kind {
-        MapKind::Signal => match (template.signal(), matched.signal()) {
-            (Some(f), Some(f1)) => Ok(f1.iter().zip(f).map(|(a, b)| a - b).collect()),
+        MapKind::Signal => match (template.channel(channel), matched.channel(channel)) {
+            (Some(f), Some(f1)) if template.n_channels() == matched.n_channels() => {
+                Ok(f1.iter().zip(f).map(|(a, b)| a - b).collect())
+            }
             _ => Err(StatsError::Maps {
-                message: "the `signal` map needs the template's and the subject's signals".into(),
+                message: format!(
+                    "the `{}` map needs signal map {} of the template (it carries {}) and of the subject ({})",
+                    Map { kind, channel }.name(),
+                    channel + 1,
+                    template.n_channels(),
+                    matched.n_channels()
+                ),
             }),
         },
         MapKind::Momentum => {
@@ -175,6 +249,21 @@ mod tests {
             assert!((subject_map(MapKind::Area, &sphere, &p0, &grown).unwrap()[v] - 2.0 * 1.1f64.ln()).abs() < 1e-12);
             assert!((subject_map(MapKind::Signal, &sphere, &p0, &grown).unwrap()[v] - 0.5).abs() < 1e-15);
         }
+        // A second map: each map's change on its own, refused past the last.
+        let two = |s: &FShape, a: f64, b: f64| s.clone().with_signals(Some([a, b].repeat(s.n_vertices())), 2).unwrap();
+        let (before, after) = (two(&sphere, 1.0, 10.0), two(&grown, 1.5, 7.0));
+        for (map, change) in [("signal", 0.5), ("signal_2", -3.0)] {
+            let map = Map::from_name(map).unwrap();
+            assert!(subject_map(map, &before, &p0, &after).unwrap().iter().all(|c| *c == change), "{map:?}");
+        }
+        let third = Map::from_name("signal_3").unwrap();
+        assert_eq!(third, Map { kind: MapKind::Signal, channel: 2 });
+        assert!(!third.available(&before) && Map::from_name("signal_2").unwrap().available(&before));
+        let e = subject_map(third, &before, &p0, &after).unwrap_err().to_string();
+        assert!(e.contains("signal map 3 of the template (it carries 2)"), "{e}");
+        assert!(Map::from_name("signal_1").is_none() && Map::from_name("area_2").is_none());
+        let names: Vec<String> = Map::every(&before).into_iter().map(Map::name).collect();
+        assert_eq!(names, ["signal", "signal_2", "momentum", "displacement", "area"]);
         // p0 = x (radial, length 1): its normal component per unit area.
         let areas = sphere.vertex_volumes();
         let m = subject_map(MapKind::Momentum, &sphere, &p0, &grown).unwrap();

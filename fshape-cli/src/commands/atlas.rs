@@ -19,8 +19,9 @@ pub struct Args {
     /// The subjects' meshes (with a `signal` vertex property).
     pub subjects: Vec<PathBuf>,
     /// A list of subjects, one per line: `mesh[,signal file[,mask file]]`
-    /// (a mask as for `fshape match --source-mask`), paths relative to the
-    /// list (read before the positional ones).
+    /// (a mask as for `fshape match --source-mask`; several maps as
+    /// `thickness.csv;myelin.csv`, a map each, every subject the same
+    /// maps), paths relative to the list (read before the positional ones).
     #[arg(long = "subjects")]
     pub list: Option<PathBuf>,
     /// The initial template (default: the first subject). Without a
@@ -97,10 +98,11 @@ pub struct AtlasArgs<'a> {
     pub verbosity: crate::args::Verbosity,
 }
 
-/// A subject's files: its mesh, its signal and its mask.
+/// A subject's files: its mesh, its maps (none: the mesh's own signal)
+/// and its mask.
 struct SubjectFiles {
     mesh: PathBuf,
-    signal: Option<PathBuf>,
+    signals: Vec<PathBuf>,
     mask: Option<PathBuf>,
 }
 
@@ -123,10 +125,19 @@ fn subject_paths(a: &AtlasArgs<'_>) -> Result<Vec<SubjectFiles>> {
             if mesh.is_empty() {
                 bail!("{}:{line}: no mesh named (expected `mesh[,signal[,mask]]`)", list.display());
             }
-            paths.push(SubjectFiles { mesh: base.join(mesh), signal: optional(1), mask: optional(2) });
+            // Several maps: `a.csv;b.csv`, a channel each (as in batch's pairs).
+            let signals = fields
+                .get(1)
+                .into_iter()
+                .flat_map(|f| f.split(';'))
+                .map(str::trim)
+                .filter(|f| !f.is_empty())
+                .map(|f| base.join(f))
+                .collect();
+            paths.push(SubjectFiles { mesh: base.join(mesh), signals, mask: optional(2) });
         }
     }
-    paths.extend(a.subjects.iter().map(|p| SubjectFiles { mesh: p.clone(), signal: None, mask: None }));
+    paths.extend(a.subjects.iter().map(|p| SubjectFiles { mesh: p.clone(), signals: Vec::new(), mask: None }));
     if paths.is_empty() {
         bail!("no subjects: give their files, or --subjects LIST");
     }
@@ -162,7 +173,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         .iter()
         .map(|s| {
             let masking = crate::inputs::Masking { mask: s.mask.as_deref(), allow_missing: a.allow_missing };
-            crate::inputs::load_masked(&s.mesh, a.signal_name.clone(), s.signal.as_slice(), &masking)
+            crate::inputs::load_masked(&s.mesh, a.signal_name.clone(), &s.signals, &masking)
         })
         .collect::<Result<_>>()?;
     let template_masking = crate::inputs::Masking { mask: a.template_mask, allow_missing: a.allow_missing };
@@ -242,8 +253,13 @@ fn print_summary(written: &outputs::AtlasWritten) {
         written.files - 1,
         written.report.display()
     );
-    let signal =
+    let mut signal =
         summary.mean_signal_rms.map_or(String::new(), |r| format!(", signal error {:.2}% of its range", 100.0 * r));
+    for (c, r) in summary.mean_signal_rms_per_channel.iter().enumerate().skip(1) {
+        if let Some(r) = r {
+            signal.push_str(&format!(", map {}: {:.2}%", c + 1, 100.0 * r));
+        }
+    }
     let fall = summary
         .min_attachment_fall
         .map_or(String::new(), |f| format!("; every subject's data term fell by at least {:.2}%", 100.0 * f));

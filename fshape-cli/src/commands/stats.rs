@@ -14,7 +14,7 @@ use anyhow::{Context, Result, bail};
 use fshape_match::record::{self, AtlasRecord, RunRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding, ReadOptions};
-use fshape_stats::{Covariates, Inference, MapKind, MapTest, MeshGraph, StatKind, Tail, TfceParams};
+use fshape_stats::{Covariates, Inference, Map, MapKind, MapTest, MeshGraph, StatKind, Tail, TfceParams};
 use serde::Serialize;
 
 use fshape_report::render::{self, View};
@@ -43,10 +43,11 @@ pub struct Args {
     /// The covariates to enter (default: every column of the table).
     #[arg(long, value_delimiter = ',')]
     pub columns: Vec<String>,
-    /// Maps to test: signal, momentum, displacement, area (default: every
-    /// one the template allows).
-    #[arg(long, value_delimiter = ',', value_parser = map_kind)]
-    pub maps: Vec<MapKind>,
+    /// Maps to test: signal, momentum, displacement, area; with several
+    /// signal maps per vertex, signal_2, signal_3, … after the first
+    /// (default: every one the template allows).
+    #[arg(long, value_delimiter = ',', value_parser = map_of)]
+    pub maps: Vec<Map>,
     /// Permutations, the observed labelling included.
     #[arg(long, default_value_t = 5000)]
     pub permutations: usize,
@@ -72,9 +73,9 @@ pub struct Args {
     pub view: crate::args::View,
 }
 
-fn map_kind(s: &str) -> Result<MapKind, String> {
-    MapKind::from_name(s.trim())
-        .ok_or_else(|| format!("`{s}` is not a map (expected signal, momentum, displacement or area)"))
+fn map_of(s: &str) -> Result<Map, String> {
+    Map::from_name(s.trim())
+        .ok_or_else(|| format!("`{s}` is not a map (expected signal, signal_2, …, momentum, displacement or area)"))
 }
 
 /// One subject of the atlas: the names a table row may use, its momenta
@@ -172,8 +173,8 @@ struct Found {
 
 #[derive(Serialize)]
 struct MapSummary {
-    map: &'static str,
-    description: &'static str,
+    map: String,
+    description: String,
     statistic: &'static str,
     dof: (usize, usize),
     /// The tested value (|t| when two-sided) that reaches p_FWE ≤ alpha.
@@ -233,8 +234,8 @@ pub fn run(a: Args) -> Result<()> {
         tail: if a.one_sided { Tail::Positive } else { Tail::TwoSided },
         tfce: a.tfce.then(TfceParams::default),
     };
-    let kinds: Vec<MapKind> = if a.maps.is_empty() {
-        MapKind::ALL.into_iter().filter(|k| k.available(&template)).collect()
+    let kinds: Vec<Map> = if a.maps.is_empty() {
+        Map::every(&template)
     } else {
         for k in &a.maps {
             if !k.available(&template) {
@@ -243,7 +244,11 @@ pub fn run(a: Args) -> Result<()> {
                     k.name(),
                     template.kind().name(),
                     template.dim(),
-                    if *k == MapKind::Signal { ", without a signal" } else { "" }
+                    match (k.kind, template.n_channels()) {
+                        (MapKind::Signal, 0) => ", without a signal".to_string(),
+                        (MapKind::Signal, c) => format!(", with {c} signal map(s)"),
+                        _ => String::new(),
+                    }
                 );
             }
         }
@@ -279,6 +284,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         let test = fshape_stats::test_maps_within(&design, &contrast, &maps, &tested, Some(&graph), &inference)?;
         let name = kind.name();
+        let name = name.as_str();
         let stat_name = if test.kind == StatKind::T { "t" } else { "f" };
         let mut files = Vec::new();
         let mut gifti = |suffix: &str, values: &[f64]| -> Result<()> {
@@ -324,7 +330,7 @@ pub fn run(a: Args) -> Result<()> {
             .max_by(|&x, &y| tested(test.statistic[x]).total_cmp(&tested(test.statistic[y])))
             .unwrap_or(0);
         map_summaries.push(MapSummary {
-            map: name,
+            map: name.to_string(),
             description: kind.describe(),
             statistic: if test.kind == StatKind::T { "t" } else { "F" },
             dof: test.dof,
