@@ -2355,12 +2355,15 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
     let per_map = summary["mean_signal_rms_per_channel"].as_array().unwrap();
     assert_eq!(per_map.len(), 2);
     assert_eq!(per_map[0], summary["mean_signal_rms"]);
+    // Its report: the template in a scene per map, each map's error.
+    let page = std::fs::read_to_string(atlas.join("report.html")).unwrap();
+    assert!(page.contains("the template, map 2 of 2") && page.contains("map 2 error"));
     // A subject with one map fewer: refused, naming both.
     std::fs::write(dir.join("subjects.csv"), "source.ply,source1.csv;source2.csv\ntarget.ply,target1.csv\n").unwrap();
     let o =
         fshape(&["atlas", "--subjects", &list, "--config", &config, "--out", &s(&dir.join("no")), "--allow-missing"]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("carries 2 signal map(s) per vertex and subject 1 1"), "{err}");
+    assert!(!o.status.success() && err.contains("carries 2 signal map(s) per vertex and subject 1 carries 1"), "{err}");
 }
 
 #[test]

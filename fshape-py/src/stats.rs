@@ -121,8 +121,7 @@ pub(crate) fn stats<'py>(
         let m = template.n_vertices();
         // The template's masked vertices (a medial wall) are outside every
         // test, as `fshape stats` leaves them.
-        let tested: Vec<bool> =
-            template.mask().map_or_else(|| vec![true; m], |w| w.iter().map(|&w| w > 0.0).collect());
+        let tested: Vec<bool> = template.mask().map_or_else(|| vec![true; m], |w| w.iter().map(|&w| w > 0.0).collect());
         let mut tests = Vec::new();
         for kind in &kinds {
             let mut values = Vec::with_capacity(n * m);

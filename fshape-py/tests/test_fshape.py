@@ -441,7 +441,7 @@ def test_an_atlas_of_subjects_with_two_maps_gives_a_template_of_two_maps():
         assert s["pf"].shape == (12, 2) and s["matched"].n_channels == 2
         assert s["geodesic"]["signals"].shape[1:] == (12, 2)
         assert len(s["quality"]["channels"]) == 2
-    with pytest.raises(fshape.FShapeError, match="subject 1 1"):
+    with pytest.raises(fshape.FShapeError, match="and subject 1 carries 1"):
         fshape.atlas([two[0], tgt], config)
     # Stats test each map: `signal_2` beside `signal`, by name too.
     four = two + [s.with_signal(s.signal + [0.1, 0.3]) for s in two]

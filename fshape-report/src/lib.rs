@@ -227,6 +227,11 @@ pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Opt
     })
 }
 
+/// `s` with map `c` of its signal alone (to show one map of several).
+fn one_map(s: &FShape, c: usize) -> Result<FShape> {
+    Ok(s.clone().with_signal(s.channel(c))?)
+}
+
 /// HTML-escaped text.
 pub fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
@@ -434,14 +439,12 @@ pub fn registration_page(
     // viewer's scene picker.
     let k = states.first().map_or(0, |(_, s)| s.n_channels());
     let scenes = if k > 1 {
-        let one = |s: &FShape, c: usize| s.clone().with_signal(s.channel(c));
         (0..k)
             .map(|c| {
-                let frames: Vec<FShape> =
-                    states.iter().map(|(_, s)| one(s, c)).collect::<std::result::Result<_, _>>()?;
+                let frames: Vec<FShape> = states.iter().map(|(_, s)| one_map(s, c)).collect::<Result<_>>()?;
                 let frames: Vec<&FShape> = frames.iter().collect();
                 let name = format!("the geodesic, signal channel {} of {k}", c + 1);
-                scene(&name, &frames, labels.clone(), Some(("target", &one(target, c)?)))
+                scene(&name, &frames, labels.clone(), Some(("target", &one_map(target, c)?)))
             })
             .collect::<Result<Vec<_>>>()?
     } else {
@@ -559,12 +562,19 @@ pub fn atlas_page_of(
     view: (f64, f64),
 ) -> Result<Page> {
     let (template, start) = (shapes.template, shapes.start);
-    let mut scenes = vec![scene(
-        "the template",
-        &[start, template],
-        vec!["the initial template".into(), "the estimated template".into()],
-        None,
-    )?];
+    let labels = || vec!["the initial template".to_string(), "the estimated template".to_string()];
+    let maps = template.n_channels().max(1);
+    // Several maps: the template in a scene per map (the viewer's picker).
+    let mut scenes = if maps > 1 {
+        (0..maps)
+            .map(|c| {
+                let (s, t) = (one_map(start, c)?, one_map(template, c)?);
+                scene(&format!("the template, map {} of {maps}", c + 1), &[&s, &t], labels(), None)
+            })
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        vec![scene("the template", &[start, template], labels(), None)?]
+    };
     let subjects = &summary.subjects;
     let mut rows = Vec::new();
     for (i, s) in subjects.iter().enumerate() {
@@ -577,14 +587,17 @@ pub fn atlas_page_of(
             )?);
         }
         let q = &s.quality;
-        rows.push(vec![
+        let mut row = vec![
             i.to_string(),
             escape(&s.file),
             percent(Some(q.mean_distance)),
             percent(Some(q.target_within_1pct)),
             percent(q.signal_rms),
-            percent(s.attachment_fall),
-        ]);
+        ];
+        // Several maps: each further map's error in a column of its own.
+        row.extend((1..maps).map(|c| percent(q.channels.get(c).and_then(|m| m.signal_rms))));
+        row.push(percent(s.attachment_fall));
+        rows.push(row);
     }
     let modes = &summary.modes;
     let mut mode_rows = Vec::new();
@@ -597,6 +610,13 @@ pub fn atlas_page_of(
         )?);
         mode_rows.push(vec![(k + 1).to_string(), format!("{:.4e}", m.sd), percent(Some(m.share))]);
     }
+    let error = |c: usize| if maps == 1 { "signal error".to_string() } else { format!("map {} error", c + 1) };
+    let header: Vec<String> = ["subject", "file", "mean distance", "within 1 %"]
+        .map(String::from)
+        .into_iter()
+        .chain((0..maps).map(error))
+        .chain(["data term removed".to_string()])
+        .collect();
     let mut sections = vec![format!(
         "<h2>The subjects</h2><p>How close the template shot by each subject's momenta came to it. Click a header to sort.{}</p>{}",
         if subjects.len() > ATLAS_SUBJECTS {
@@ -604,11 +624,7 @@ pub fn atlas_page_of(
         } else {
             String::new()
         },
-        table(
-            "sortable",
-            &["subject", "file", "mean distance", "within 1 %", "signal error", "data term removed"],
-            &rows
-        )
+        table("sortable", &header.iter().map(String::as_str).collect::<Vec<_>>(), &rows)
     )];
     if !mode_rows.is_empty() {
         sections.push(format!(

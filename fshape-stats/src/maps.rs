@@ -199,9 +199,19 @@ pub fn subject_map(
     };
     match kind {
         MapKind::Signal => match (template.channel(channel), matched.channel(channel)) {
-            (Some(f), Some(f1)) if template.n_channels() == matched.n_channels() => {
-                Ok(f1.iter().zip(f).map(|(a, b)| a - b).collect())
+            _ if template.signal().is_some()
+                && matched.signal().is_some()
+                && template.n_channels() != matched.n_channels() =>
+            {
+                Err(StatsError::Maps {
+                    message: format!(
+                        "the template carries {} signal map(s) and the subject's matched shape {}",
+                        template.n_channels(),
+                        matched.n_channels()
+                    ),
+                })
             }
+            (Some(f), Some(f1)) => Ok(f1.iter().zip(f).map(|(a, b)| a - b).collect()),
             _ => Err(StatsError::Maps {
                 message: format!(
                     "the `{}` map needs signal map {} of the template (it carries {}) and of the subject ({})",
@@ -261,6 +271,8 @@ mod tests {
         assert!(!third.available(&before) && Map::from_name("signal_2").unwrap().available(&before));
         let e = subject_map(third, &before, &p0, &after).unwrap_err().to_string();
         assert!(e.contains("signal map 3 of the template (it carries 2)"), "{e}");
+        let e = subject_map(MapKind::Signal, &before, &p0, &grown).unwrap_err().to_string();
+        assert!(e.contains("the template carries 2 signal map(s) and the subject's matched shape 1"), "{e}");
         assert!(Map::from_name("signal_1").is_none() && Map::from_name("area_2").is_none());
         let names: Vec<String> = Map::every(&before).into_iter().map(Map::name).collect();
         assert_eq!(names, ["signal", "signal_2", "momentum", "displacement", "area"]);

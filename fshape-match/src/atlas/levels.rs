@@ -179,7 +179,7 @@ impl Population {
             .collect();
         let (mut x, points) = match (&level.hyper, &coarse.hyper_p0) {
             (Some(h), Some(p0)) => {
-                let zero = vec![0.0; was.n_vertices()];
+                let zero = vec![0.0; was.n_vertices() * k];
                 let (q0, _) = prolongate_fitted(was, fine0, p0, &zero, ModelKind::Lddmm, h.problem.model().kernel())?;
                 let block = h.unknowns.pack(&q0, &[]);
                 let (points, _) = positions(Some(h), &level.metric, &block)?;

@@ -16,8 +16,8 @@
 //! run gives the same bits for any number of threads.
 //!
 //! The unknowns, in order: the template's positions (divided by the length
-//! scale L when the weights are normalised), its signal (divided by the
-//! signal scale S), then each subject's momenta packed as in matching
+//! scale L when the weights are normalised), its signal (each of its k
+//! maps divided by that map's signal scale S_c), then each subject's momenta packed as in matching
 //! ([`crate::unknowns::Unknowns`]). L-BFGS's initial Hessian is block-diagonal
 //! ([`crate::optimize::Objective::precondition`]): on the positions the
 //! deformation kernel K(x̄) (the Sobolev gradient: a step moves the template
@@ -160,7 +160,8 @@ pub fn channels(template: &FShape, subjects: &[FShape]) -> Result<usize, MatchEr
             None => first = Some((name, k)),
             Some((which, j)) if *j != k => {
                 return Err(MatchError::InvalidInput(format!(
-                    "{which} carries {j} signal map(s) per vertex and {name} {k}: an atlas's shapes carry the same maps"
+                    "{which} carries {j} signal map(s) per vertex and {name} carries {k}: an atlas's shapes carry \
+                     the same maps"
                 )));
             }
             Some(_) => {}

@@ -384,25 +384,15 @@ fn principal_modes_are_orthonormal_in_the_energy_metric_and_their_scores_give_ba
         assert!(pca.modes[0].sd >= pca.modes[1].sd);
         let share: f64 = pca.modes.iter().map(|m| m.share).sum();
         assert!((share - 1.0).abs() < 1e-9, "{kind}: {share}");
-        // ⟨m, m'⟩ by the model's own energy: 2H(m) = ⟨m, m⟩, and the
-        // tangential model's signal term (γ_f/2)ζᵀDζ, which H leaves out.
-        let problem = Problem::new(&r.template, atlas.plan().model.clone()).unwrap();
-        let fem = fshape_fem::SignalNorm::try_new(&r.template, atlas.plan().model.norm()).unwrap();
-        // With two maps, map c's term is γ_f·w_c ζ_cᵀDζ_c.
-        let weights = atlas.plan().model.channel_weights().to_vec();
-        assert_eq!(weights.len(), if maps == 1 { 0 } else { 2 });
-        let norm2 = |p0: &[f64], pf: &[f64]| {
-            let h = 2.0 * problem.shoot(p0, pf).unwrap().hamiltonian[0];
-            let g = atlas.plan().model.gamma_f();
-            match kind {
-                "tangential" => (0..maps).fold(h, |h, c| {
-                    let zeta: Vec<f64> = pf.iter().skip(c).step_by(maps).copied().collect();
-                    let d = fem.matvec(r.template.points(), &zeta).unwrap();
-                    h + g * weights.get(c).unwrap_or(&1.0) * zeta.iter().zip(d).map(|(a, b)| a * b).sum::<f64>()
-                }),
-                _ => h,
-            }
-        };
+        // ⟨m, m'⟩ by the model's own energy: the path energy J reports,
+        // 2H(m) with the tangential model's signal term (γ_f/2)Σ_c w_c
+        // ζ_cᵀDζ_c added (H leaves it out).
+        let kernel = atlas.plan().stages[0].kernel.clone();
+        let problem =
+            Problem::new(&r.template, atlas.plan().model.clone()).unwrap().with_target(&r.template, kernel).unwrap();
+        let norm2 = |p0: &[f64], pf: &[f64]| 2.0 * problem.objective(p0, pf).unwrap().0.energy;
+        // Two maps have a weight each (1 and 2 as written).
+        assert_eq!(atlas.plan().model.channel_weights().len(), if maps == 1 { 0 } else { 2 });
         let (a, b) = (&pca.modes[0], &pca.modes[1]);
         let sum = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x + y).collect::<Vec<f64>>();
         assert!((norm2(&a.p0, &a.pf) - 1.0).abs() < 1e-9, "{kind}");
@@ -841,12 +831,23 @@ fn with_two_maps_the_atlas_gradient_matches_central_differences_in_every_block()
 
 #[test]
 fn with_two_maps_a_coarse_stage_reads_both_maps_and_carries_its_solution_to_the_template() {
+    // The free template and the hypertemplate (whose momenta P_0 are
+    // carried to the finer stage as LDDMM momenta).
+    for more in ["", "[atlas]\ntemplate = \"hypertemplate\"\ngamma_v0 = 0.5\n"] {
+        two_maps_on_a_coarse_stage(more);
+    }
+}
+
+fn two_maps_on_a_coarse_stage(more: &str) {
     let (fine, coarse) = fine_and_coarse();
     let fine = with_second_map(fine, 0.0);
     let subjects: Vec<FShape> =
         subjects().into_iter().enumerate().map(|(i, s)| with_second_map(s, 0.1 * i as f64)).collect();
-    let config =
-        two_map_config("metamorphosis", "h1", "[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.3\"]\n");
+    let config = two_map_config(
+        "metamorphosis",
+        "h1",
+        &format!("[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.3\"]\n{more}"),
+    );
     let mut atlas =
         Atlas::new(&fine, &subjects, &config).unwrap().with_stage_templates(vec![Some(coarse), None]).unwrap();
     assert_eq!(atlas.len_at(0), 42 * 5 + 3 * 42 * 5);
@@ -871,7 +872,7 @@ fn with_two_maps_a_coarse_stage_reads_both_maps_and_carries_its_solution_to_the_
     let cell = std::cell::RefCell::new(&mut atlas);
     let j = |z: &[f64]| cell.borrow_mut().value_grad(0, z).unwrap().0;
     let c = check_gradient(j, &x, &grad, &dir, 3e-6);
-    assert!(c.rel_error < 1e-6, "{c:?}");
+    assert!(c.rel_error < 1e-6, "{more}: {c:?}");
     assert_eq!(atlas.run(&mut ()).unwrap(), Outcome::Finished);
     let r = atlas.result().unwrap();
     assert_eq!((r.template.n_vertices(), r.template.n_channels()), (162, 2));
