@@ -166,6 +166,9 @@ pub enum MatchError {
     /// A mesh could not be built.
     #[error(transparent)]
     Shape(#[from] fshape_mesh::ShapeError),
+    /// A group test refused its covariates, contrast or maps.
+    #[error(transparent)]
+    Stats(#[from] fshape_stats::StatsError),
     /// A stage's template or target could not be simplified to the count
     /// `[schedule] vertices` gives.
     #[error("simplifying the {what} to {vertices} vertices for stage {stage}: {source}")]

@@ -13,6 +13,9 @@ use fshape_mesh::FShape;
 pub use fshape_fem::Norm;
 pub use fshape_shoot::{Model, ModelKind, Trajectory};
 pub use fshape_varifold::{Distance, VarifoldKernel};
+pub use stats::{Scores, StatsLabels, StatsRequest, StatsRun, StatsSubject, group_stats};
+
+mod stats;
 
 use fshape_shoot::ShootError;
 

@@ -1,13 +1,14 @@
 //! The run records: what `fshape match`, `atlas`, `shoot` and `batch` write
 //! as summary.json (batch: index.json), as one type per kind, written and
 //! read back through the same type by every crate that touches them (the
-//! report, batch, stats, the demos, Python).
+//! report, batch, stats, the demos, Python). `fshape stats` writes a
+//! [`StatsRecord`].
 //!
 //! Each record starts with two keys: `kind` (`match`, `atlas`, `shoot`,
 //! `batch`, `stats`) and `format` ([`FORMAT`]); the rest are the keys users
 //! and scripts already read, unchanged. A file written before the records
-//! were typed has neither: its kind is recognised by its keys (an atlas has
-//! `subjects`, a batch index `rows`, a shoot `hamiltonian_drift`, a match
+//! were typed has neither: its kind is recognised by its keys (a group
+//! test has `contrast`, an atlas `subjects`, a batch index `rows`, a shoot `hamiltonian_drift`, a match
 //! `source` and `target`) and its format is 0. Keys added since (the match
 //! quality, the scales, a stage's setup) are optional or default on read,
 //! so the guide's summaries of 2026-11 still read (a test). A record of a
@@ -35,8 +36,7 @@ pub enum Kind {
     Shoot,
     /// `fshape batch`: the index of many registrations.
     Batch,
-    /// `fshape stats`: a group analysis (its type is fshape-cli's, which
-    /// holds fshape-stats' results; nothing reads it back here).
+    /// `fshape stats`: a group analysis.
     Stats,
 }
 
@@ -107,7 +107,7 @@ pub enum RecordError {
         found: u32,
     },
     /// Neither a `kind` nor the keys of any kind.
-    #[error("{}: not an fshape run record (no `kind`, and not the keys of a match, atlas, shoot or batch record)", path.display())]
+    #[error("{}: not an fshape run record (no `kind`, and not the keys of a match, atlas, shoot, batch or stats record)", path.display())]
     Unknown {
         /// The file.
         path: PathBuf,
@@ -125,6 +125,9 @@ fn kind_shoot() -> Kind {
 }
 fn kind_batch() -> Kind {
     Kind::Batch
+}
+fn kind_stats() -> Kind {
+    Kind::Stats
 }
 
 /// `fshape match`'s summary.json.
@@ -447,6 +450,107 @@ pub struct BatchIndex {
     pub pending: usize,
 }
 
+/// `fshape stats`'s summary.json: the design, the contrast, and per map
+/// its peak and what reaches the level.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StatsRecord {
+    /// [`Kind::Stats`].
+    #[serde(default = "kind_stats")]
+    pub kind: Kind,
+    /// [`FORMAT`].
+    #[serde(default)]
+    pub format: u32,
+    /// The atlas's folder, as given.
+    pub atlas: String,
+    /// The covariates table, as given.
+    pub covariates: String,
+    /// Subjects tested.
+    pub subjects: usize,
+    /// Covariates rows that name no subject of the atlas.
+    pub rows_not_in_the_atlas: Vec<String>,
+    /// The design matrix and its terms.
+    pub design: fshape_stats::Design,
+    /// The contrast tested.
+    pub contrast: fshape_stats::Contrast,
+    /// Permutations, seed, tail, TFCE.
+    pub inference: fshape_stats::Inference,
+    /// The level of the counts and of the thresholded pictures.
+    pub alpha: f64,
+    /// The template's masked vertices, left out of every test.
+    #[serde(default)]
+    pub masked_vertices: usize,
+    /// Each map's test.
+    pub maps: Vec<MapRecord>,
+    /// The test on the momenta's principal scores.
+    pub multivariate: Option<ScoresRecord>,
+    /// Wall time.
+    pub seconds: f64,
+}
+
+/// One map's test in a [`StatsRecord`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapRecord {
+    /// Its name (`signal`, `signal_2`, `momentum`, …).
+    pub map: String,
+    /// What it measures.
+    pub description: String,
+    /// `t` or `F`.
+    pub statistic: String,
+    /// Degrees of freedom (numerator, denominator).
+    pub dof: (usize, usize),
+    /// The tested value (|t| when two-sided) that reaches p_FWE ≤ alpha.
+    pub critical: f64,
+    /// The vertex of the largest tested value.
+    pub peak: Peak,
+    /// What the maximum statistic's correction finds.
+    pub found: Found,
+    /// What TFCE's correction finds, when run.
+    pub tfce: Option<Found>,
+    /// Its files in the folder.
+    pub files: Vec<String>,
+}
+
+/// A map's peak.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Peak {
+    /// The template's vertex.
+    pub vertex: usize,
+    /// Its position.
+    pub position: Vec<f64>,
+    /// The statistic there.
+    pub statistic: f64,
+    /// The contrast's effect there.
+    pub effect: f64,
+    /// Its uncorrected p.
+    pub p_uncorrected: f64,
+    /// Its corrected p.
+    pub p_fwe: f64,
+}
+
+/// Where a corrected p reaches the level.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Found {
+    /// Vertices with corrected p ≤ alpha.
+    pub vertices: usize,
+    /// Their share of the tested area (length for a curve).
+    pub area_share: f64,
+    /// The smallest corrected p.
+    pub min_p_fwe: f64,
+}
+
+/// The multivariate test on the momenta's principal scores.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScoresRecord {
+    /// The statistic's name.
+    pub test: String,
+    /// Scores entered (the first ones).
+    pub modes: usize,
+    /// Its value.
+    pub statistic: f64,
+    /// Its permutation p.
+    pub p: f64,
+}
+
 /// Any record, read by its kind.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Record {
@@ -458,6 +562,8 @@ pub enum Record {
     Shoot(Box<ShootRecord>),
     /// A batch index.
     Batch(Box<BatchIndex>),
+    /// A group test.
+    Stats(Box<StatsRecord>),
 }
 
 impl Record {
@@ -469,9 +575,7 @@ impl Record {
             Kind::Atlas => Record::Atlas(Box::new(typed(path, value)?)),
             Kind::Shoot => Record::Shoot(Box::new(typed(path, value)?)),
             Kind::Batch => Record::Batch(Box::new(typed(path, value)?)),
-            Kind::Stats => {
-                return Err(RecordError::Kind { path: path.to_path_buf(), found: kind, expected: Kind::Match });
-            }
+            Kind::Stats => Record::Stats(Box::new(typed(path, value)?)),
         })
     }
 
@@ -482,6 +586,7 @@ impl Record {
             Record::Atlas(_) => Kind::Atlas,
             Record::Shoot(_) => Kind::Shoot,
             Record::Batch(_) => Kind::Batch,
+            Record::Stats(_) => Kind::Stats,
         }
     }
 }
@@ -521,6 +626,9 @@ impl RunRecord for ShootRecord {
 impl RunRecord for BatchIndex {
     const KIND: Kind = Kind::Batch;
 }
+impl RunRecord for StatsRecord {
+    const KIND: Kind = Kind::Stats;
+}
 
 /// The file's JSON and its kind (from `kind`, or from its keys), its
 /// format checked.
@@ -552,6 +660,7 @@ fn read_value(path: &Path) -> Result<(Kind, serde_json::Value), RecordError> {
             key: "kind".into(),
             message: e.to_string(),
         })?,
+        None if object.contains_key("contrast") => Kind::Stats,
         None if object.contains_key("subjects") => Kind::Atlas,
         None if object.contains_key("rows") => Kind::Batch,
         None if object.contains_key("hamiltonian_drift") => Kind::Shoot,
@@ -605,6 +714,26 @@ mod tests {
             // Written again, it reads back the same and says what it is.
             let again: serde_json::Value = serde_json::from_slice(&r.to_json()).unwrap();
             assert_eq!((again["kind"].as_str(), again["format"].as_u64()), (Some("match"), Some(0)));
+        }
+    }
+
+    #[test]
+    fn the_guides_stats_summaries_from_before_the_typed_records_still_read() {
+        for case in ["stats-spheres", "stats-digits"] {
+            let path = guide(&format!("{case}/stats_summary.json"));
+            let r = StatsRecord::read(&path).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!((r.kind, r.format, r.masked_vertices), (Kind::Stats, 0, 0), "{case}");
+            let raw: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+            assert_eq!(r.maps.len(), raw["maps"].as_array().unwrap().len(), "{case}");
+            assert_eq!(r.maps[0].peak.statistic, raw["maps"][0]["peak"]["statistic"].as_f64().unwrap(), "{case}");
+            assert_eq!(r.design.x.len(), raw["design"]["x"].as_array().unwrap().len(), "{case}");
+            assert_eq!(r.contrast.weights.len(), r.design.columns.len(), "{case}");
+            assert!(matches!(Record::read(&path).unwrap(), Record::Stats(_)), "{case}: its kind from its keys");
+            // Written again, every key the file had is there with its value.
+            let again: serde_json::Value = serde_json::from_slice(&r.to_json()).unwrap();
+            for (key, value) in raw.as_object().unwrap() {
+                assert_eq!(&again[key], value, "{case}: {key}");
+            }
         }
     }
 

@@ -1,7 +1,7 @@
 //! Group statistics on an atlas: `stats`.
 
-use fshape_mesh::FShape;
-use fshape_stats::{Covariates, Inference, Map, MeshGraph, StatKind, Tail, TfceParams};
+use fshape_match::ops::{Scores, StatsRequest, StatsRun, StatsSubject, group_stats};
+use fshape_stats::{Inference, Map, StatKind, Tail, TfceParams};
 use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
@@ -76,7 +76,7 @@ pub(crate) fn stats<'py>(
         &atlas.get_item("template").map_err(|_| err("atlas: no `template` (pass what fshape.atlas returns)"))?,
     )?;
     let subjects = atlas.get_item("subjects").map_err(|_| err("atlas: no `subjects`"))?;
-    let mut inputs: Vec<(Vec<f64>, FShape)> = Vec::new();
+    let mut inputs: Vec<StatsSubject> = Vec::new();
     for (i, s) in subjects.try_iter()?.enumerate() {
         let s = s?;
         let p0: PyReadonlyArray2<'py, f64> = s
@@ -85,59 +85,46 @@ pub(crate) fn stats<'py>(
             .map_err(|_| err(format!("atlas: subject {i}: no `p0` array")))?;
         let matched =
             shape_of(&s.get_item("matched").map_err(|_| err(format!("atlas: subject {i}: no `matched` shape")))?)?;
-        inputs.push((p0.as_slice().map_err(err)?.to_vec(), matched));
+        let names = vec![i.to_string(), format!("subject_{i:03}")];
+        inputs.push(StatsSubject { names, p0: p0.as_slice().map_err(err)?.to_vec(), matched });
     }
-    let n = inputs.len();
-    let (text, source) = covariates_text(covariates, n)?;
-    let kinds: Vec<Map> = match maps {
-        None => Map::every(&template),
-        Some(names) => names
-            .iter()
-            .map(|m| {
-                Map::from_name(m).ok_or_else(|| {
-                    err(format!("maps: `{m}` is not signal, signal_2, …, momentum, displacement or area"))
+    let (text, source) = covariates_text(covariates, inputs.len())?;
+    let maps: Option<Vec<Map>> = maps
+        .map(|names| {
+            names
+                .iter()
+                .map(|m| {
+                    Map::from_name(m).ok_or_else(|| {
+                        err(format!("maps: `{m}` is not signal, signal_2, …, momentum, displacement or area"))
+                    })
                 })
-            })
-            .collect::<PyResult<_>>()?,
-    };
+                .collect::<PyResult<_>>()
+        })
+        .transpose()?;
     let scores: Option<(Vec<f64>, usize)> = match scores {
         None => None,
-        Some(a) => {
-            let k = a.shape()[1];
-            Some((a.as_slice().map_err(err)?.to_vec(), k))
-        }
+        Some(a) => Some((a.as_slice().map_err(err)?.to_vec(), a.shape()[1])),
     };
-    let inference = Inference {
-        permutations,
-        seed,
-        tail: if one_sided { Tail::Positive } else { Tail::TwoSided },
-        tfce: tfce.then(TfceParams::default),
+    let request = StatsRequest {
+        template: &template,
+        subjects: &inputs,
+        covariates: (&text, &source),
+        columns: columns.as_deref(),
+        contrast,
+        maps: maps.as_deref(),
+        // Every column of the scores given.
+        scores: scores.as_ref().map(|(values, k)| Scores { values, available: *k, modes: Some(*k), source: "scores" }),
+        inference: Inference {
+            permutations,
+            seed,
+            tail: if one_sided { Tail::Positive } else { Tail::TwoSided },
+            tfce: tfce.then(TfceParams::default),
+        },
+        alpha,
     };
-    let run = py.detach(|| -> Result<_, fshape_stats::StatsError> {
-        let names: Vec<Vec<String>> = (0..n).map(|i| vec![i.to_string(), format!("subject_{i:03}")]).collect();
-        let (design, unused) = Covariates::parse(&text, &source)?.design(&names, columns.as_deref())?;
-        let contrast = design.contrast(contrast)?;
-        let graph = MeshGraph::new(&template);
-        let m = template.n_vertices();
-        // The template's masked vertices (a medial wall) are outside every
-        // test, as `fshape stats` leaves them.
-        let tested: Vec<bool> = template.mask().map_or_else(|| vec![true; m], |w| w.iter().map(|&w| w > 0.0).collect());
-        let mut tests = Vec::new();
-        for kind in &kinds {
-            let mut values = Vec::with_capacity(n * m);
-            for (p0, matched) in &inputs {
-                values.extend(fshape_stats::subject_map(*kind, &template, p0, matched)?);
-            }
-            let test = fshape_stats::test_maps_within(&design, &contrast, &values, &tested, Some(&graph), &inference)?;
-            tests.push((*kind, test));
-        }
-        let multivariate = match &scores {
-            Some((values, k)) => Some(fshape_stats::test_scores(&design, &contrast, values, *k, &inference)?),
-            None => None,
-        };
-        Ok((design, contrast, unused, tests, multivariate))
-    });
-    let (design, contrast, unused, tests, multivariate) = run.map_err(err)?;
+    let run = py.detach(|| group_stats(&request)).map_err(err)?;
+    let StatsRun { design, contrast, unused, maps: tests, multivariate, .. } = run;
+    let multivariate = multivariate.map(|(_, m)| m);
     let d = PyDict::new(py);
     d.set_item("design", to_py(py, &design)?)?;
     d.set_item("contrast", to_py(py, &contrast)?)?;

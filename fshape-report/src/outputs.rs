@@ -2,13 +2,14 @@
 //! written, each file written atomically: a registration's
 //! ([`write_registration`]: the geodesic's states, the momenta, renders,
 //! the matched and target surfaces, the energy plot, summary.json and
-//! report.html), an atlas's ([`write_atlas`]), and a geodesic's states as
-//! files ([`trajectory_files`], which `fshape shoot` writes too).
+//! report.html), an atlas's ([`write_atlas`]), a group test's
+//! ([`write_stats`]), and a geodesic's states as files
+//! ([`trajectory_files`], which `fshape shoot` writes too).
 
 use std::path::{Path, PathBuf};
 
-use fshape_match::ops::{AtlasLabels, AtlasRun, Labels, Registration};
-use fshape_match::record::{AtlasRecord, MatchRecord, RunRecord};
+use fshape_match::ops::{AtlasLabels, AtlasRun, Labels, Registration, StatsLabels, StatsRun};
+use fshape_match::record::{AtlasRecord, MatchRecord, RunRecord, StatsRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
@@ -346,3 +347,77 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
 /// Rows and subject pairs per row of an atlas's subjects picture.
 const GRID_ROWS: usize = 8;
 const GRID_PAIRS: usize = 4;
+
+/// Writes a group test's folder (made if missing): per map its statistic,
+/// effect, p and corrected p (and TFCE's two) as GIfTI, the statistic on
+/// the template (PLY), its picture (every vertex above, where the
+/// corrected p ≤ alpha below; TFCE's p when run), multivariate.csv and
+/// summary.json. `started` is when the run began: the record's seconds
+/// count the pictures. Returns the record and the number of files.
+pub fn write_stats(
+    run: &StatsRun,
+    labels: StatsLabels<'_>,
+    out: &Path,
+    view: (f64, f64),
+    started: std::time::Instant,
+) -> Result<(StatsRecord, usize)> {
+    let template = &run.template;
+    let mut outputs: Vec<Output> = Vec::new();
+    for (k, (map, test)) in run.maps.iter().enumerate() {
+        let name = map.name();
+        // In [`StatsRun::files`]' order: the GIfTI maps, the PLY, the PNG.
+        let files = run.files(k);
+        let arrays = run.arrays(k);
+        for ((suffix, values), file) in arrays.iter().zip(&files) {
+            let mut bytes = Vec::new();
+            io::gifti::write_arrays(
+                &mut bytes,
+                &[io::gifti::signal_array(&format!("{name} {suffix}"), values)],
+                io::gifti::WriteOptions::default(),
+            )?;
+            outputs.push((out.join(file), bytes));
+        }
+        let with_stat = template.clone().with_signal(Some(test.statistic.clone()))?;
+        let mut ply = Vec::new();
+        io::write_to(&mut ply, &with_stat, io::Format::Ply, Encoding::Binary)?;
+        outputs.push((out.join(&files[arrays.len()]), ply));
+        let significant = test.tfce_p_fwe.as_ref().unwrap_or(&test.p_fwe);
+        let png = stats_picture(template, &test.statistic, significant, run.alpha, view)?;
+        outputs.push((out.join(&files[arrays.len() + 1]), png));
+    }
+    let record = run.record(labels, started.elapsed().as_secs_f64());
+    if let Some(m) = &record.multivariate {
+        let csv = format!(
+            "test,modes,statistic,p,permutations\n{},{},{:e},{},{}\n",
+            m.test, m.modes, m.statistic, m.p, run.inference.permutations
+        );
+        outputs.push((out.join("multivariate.csv"), csv.into_bytes()));
+    }
+    outputs.push((out.join("summary.json"), serde_json::to_vec_pretty(&record).map_err(std::io::Error::from)?));
+    std::fs::create_dir_all(out).map_err(|e| io::WriteError::Io { path: out.into(), source: e })?;
+    for (path, bytes) in &outputs {
+        io::write_atomic(path, bytes, false)?;
+    }
+    Ok((record, outputs.len()))
+}
+
+/// A statistic on the template, blue (negative) to red: above, every
+/// vertex; below, only where the corrected p ≤ alpha. Surfaces in R³ are
+/// seen from the camera and from behind.
+fn stats_picture(template: &FShape, statistic: &[f64], p: &[f64], alpha: f64, view: (f64, f64)) -> Result<Vec<u8>> {
+    let (azimuth, elevation) = view;
+    let bound = statistic.iter().fold(0.0f64, |b, v| b.max(v.abs()));
+    // Masked vertices stay NaN (drawn grey) in both rows.
+    let shown: Vec<f64> =
+        statistic.iter().zip(p).map(|(t, q)| if *q <= alpha || t.is_nan() { *t } else { 0.0 }).collect();
+    let all = template.clone().with_signal(Some(statistic.to_vec()))?;
+    let thresholded = template.clone().with_signal(Some(shown))?;
+    let azimuths: &[f64] = if template.dim() == 3 { &[azimuth, azimuth + 180.0] } else { &[azimuth] };
+    let views: Vec<View> = azimuths.iter().map(|&az| View::fit(&[template], az, elevation).diverging(bound)).collect();
+    // A column per view: every vertex above, the thresholded map below.
+    let tiles: Vec<(&FShape, &View)> =
+        [&all, &thresholded].into_iter().flat_map(|s| views.iter().map(move |v| (s, v))).collect();
+    let (rgb, width, height) =
+        render::mosaic(tiles.iter().map(|(shape, view)| render::rasterise(shape, view)), views.len(), 1);
+    Ok(render::png_sized(&rgb, width, height)?)
+}

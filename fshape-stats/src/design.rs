@@ -36,7 +36,7 @@ struct Row {
 
 /// One term of a design: a numeric covariate or a factor, and the design
 /// columns it fills.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Term {
     /// The table column's name (`intercept` for the intercept).
     pub name: String,
@@ -47,7 +47,7 @@ pub struct Term {
 }
 
 /// A design matrix: one row per subject, the intercept first.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Design {
     /// Subjects (rows).
     pub n: usize,
@@ -61,7 +61,7 @@ pub struct Design {
 
 /// A contrast: r rows of weights on the design's columns (r = 1: a t
 /// test; r > 1: an F test).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Contrast {
     /// As the user wrote it.
     pub name: String,

@@ -33,7 +33,7 @@ use crate::tfce::{MeshGraph, TfceParams, tfce, tfce_signed};
 use crate::{StatsError, linalg};
 
 /// Which values of a t statistic count as evidence.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Tail {
     /// Both signs: |t| (the default).
@@ -44,7 +44,7 @@ pub enum Tail {
 }
 
 /// How a test is run.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Inference {
     /// Permutations, the identity included (p-values are multiples of
     /// 1/permutations).

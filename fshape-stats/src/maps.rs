@@ -25,7 +25,7 @@ use fshape_mesh::{CellKind, FShape};
 use crate::StatsError;
 
 /// A per-vertex map.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MapKind {
     /// f_1 − f̄.

@@ -13,7 +13,7 @@
 use fshape_mesh::FShape;
 
 /// TFCE's parameters.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TfceParams {
     /// Extent exponent E.
     pub extent: f64,
