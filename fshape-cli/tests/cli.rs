@@ -1929,6 +1929,29 @@ fn a_masked_population_goes_through_atlas_stats_and_batch_with_its_wall_left_out
     });
     let end = read(end.expect("a state PLY"));
     assert_eq!(end.mask().unwrap().iter().map(|m| *m == 0.0).collect::<Vec<_>>(), wall);
+    // The run keeps both walls (matched.ply, target.ply): a map of ones
+    // carried either way comes from outside the giving side's wall only,
+    // so the receiving wall, far from it, gets no value.
+    let ones = dir.join("ones.csv");
+    std::fs::write(&ones, column("ones", &mut std::iter::repeat_n(1.0, n))).unwrap();
+    for onto in ["target", "source"] {
+        let out = dir.join(format!("ones_on_{onto}.csv"));
+        let v = json(&fshape(&[
+            "transfer",
+            &s(batch.join("masked")),
+            &s(ones.clone()),
+            &s(out.clone()),
+            "--onto",
+            onto,
+            "--json",
+        ]));
+        assert_eq!((v["masked"].as_u64(), v["run_mask"].as_bool()), (Some(walled as u64), Some(true)), "{onto}: {v}");
+        let got = fshape_mesh::io::read_signal_for(&out, Some(n), true).unwrap().values;
+        let deep: Vec<bool> = sphere.points().chunks_exact(3).map(|p| p[2] > 0.4).collect();
+        assert!((0..n).all(|v| !deep[v] || got[v].is_nan()), "{onto}: a value deep in the wall");
+        let clear: Vec<bool> = sphere.points().chunks_exact(3).map(|p| p[2] < 0.2).collect();
+        assert!((0..n).all(|v| !clear[v] || (got[v] - 1.0).abs() < 1e-12), "{onto}: away from the wall, every value");
+    }
     let error = std::fs::read_to_string(batch.join("short/error.txt")).unwrap();
     assert!(error.contains("list.csv"), "{error}");
 }
@@ -2093,6 +2116,32 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
             "vertex {u} at z = {z}: {g}"
         );
     }
+
+    // A registration that masked its source keeps the mask in matched.ply:
+    // the masked vertices carry nothing, as with the same mask given by
+    // --mask (the same file), unless --no-run-mask (the same file as no
+    // mask at all).
+    let masked_run = tmp("transfer_masked_run");
+    std::fs::create_dir_all(&masked_run).unwrap();
+    std::fs::copy(tmp("transfer_run").join("target.ply"), masked_run.join("target.ply")).unwrap();
+    let wall: Vec<f64> = (0..n).map(|v| if source.point(v)[2] < -0.2 { 1.0 } else { 0.0 }).collect();
+    let walled = matched.clone().with_mask(Some(wall.clone())).unwrap();
+    io::write_mesh(&masked_run.join("matched.ply"), &walled, io::Encoding::Binary).unwrap();
+    let masked_run = masked_run.display().to_string();
+    let v =
+        json(&fshape(&["transfer", &masked_run, &file("transfer_map.csv"), &file("transfer_walled.csv"), "--json"]));
+    let walls = wall.iter().filter(|w| **w == 0.0).count();
+    assert_eq!((v["masked"].as_u64(), v["run_mask"].as_bool()), (Some(walls as u64), Some(true)), "{v}");
+    assert_eq!(std::fs::read(tmp("transfer_walled.csv")).unwrap(), std::fs::read(tmp("transfer_masked.csv")).unwrap());
+    let map = file("transfer_map.csv");
+    for (dir, extra, out) in
+        [(&run, None, "transfer_plain.csv"), (&masked_run, Some("--no-run-mask"), "transfer_unwalled.csv")]
+    {
+        let out = file(out);
+        let args: Vec<&str> = ["transfer", dir.as_str(), &map, &out].into_iter().chain(extra).collect();
+        assert!(fshape(&args).status.success(), "{args:?}");
+    }
+    assert_eq!(std::fs::read(tmp("transfer_unwalled.csv")).unwrap(), std::fs::read(tmp("transfer_plain.csv")).unwrap());
 
     // A limit of 0: no vertex lies exactly on the other surface.
     let v = json(&fshape(&[

@@ -41,9 +41,16 @@ pub struct Args {
     /// A mask on the surface the values come from (as `match` takes it: a
     /// .label, FILE:REGION,REGION of a parcellation, or weights in
     /// [0, 1]): its vertices under 0.5 carry no value, as if NaN (a map)
-    /// or in no region (a parcellation or a label).
+    /// or in no region (a parcellation or a label). The registration's
+    /// own mask of that surface (a medial wall, kept in matched.ply or
+    /// target.ply) applies too unless --no-run-mask.
     #[arg(long, value_name = "MASK")]
     pub mask: Option<PathBuf>,
+    /// Carry values from the vertices the registration masked as well
+    /// (by default they carry none: their values did not count in the
+    /// match, and a FreeSurfer map's 0 on the medial wall is no value).
+    #[arg(long)]
+    pub no_run_mask: bool,
     /// Print JSON for scripts.
     #[arg(long)]
     pub json: bool,
@@ -70,6 +77,12 @@ struct Summary {
     kind: &'static str,
     /// The distance limit in the meshes' units.
     max_distance: f64,
+    /// Vertices of the giving surface that carry nothing: under 0.5 in
+    /// the registration's mask (unless --no-run-mask) or in --mask.
+    masked: usize,
+    /// Whether the registration masked the giving surface and its mask
+    /// applied.
+    run_mask: bool,
     /// Vertices of the receiving surface, those beyond the limit and (a
     /// map) those whose closest cell had too few corners with a value.
     #[serde(flatten)]
@@ -252,7 +265,14 @@ pub fn run(a: Args) -> Result<()> {
     let limit = max_distance(&a.max_distance, diagonal)?;
     let n = from.n_vertices();
     let side = if a.onto == Onto::Target { "source" } else { "target" };
-    let masked = read_masked(a.mask.as_deref(), n, side)?;
+    let mut masked = read_masked(a.mask.as_deref(), n, side)?;
+    // The registration's own mask of the giving surface: its values did
+    // not count in the match (and may be a placeholder such as
+    // FreeSurfer's 0 on the medial wall).
+    let run_mask = from.mask().filter(|_| !a.no_run_mask);
+    for (m, w) in masked.iter_mut().zip(run_mask.unwrap_or(&[])) {
+        *m |= *w < 0.5;
+    }
     let input = read_input(kind, &a.input, n, side)?;
     let correspondence = Correspondence::new(from, onto).context("the closest points between the two surfaces")?;
     let unmask_keys =
@@ -288,6 +308,8 @@ pub fn run(a: Args) -> Result<()> {
         onto: a.onto,
         kind,
         max_distance: limit,
+        masked: masked.iter().filter(|m| **m).count(),
+        run_mask: run_mask.is_some(),
         carried,
         distance_median_percent: at(0.5),
         distance_p95_percent: at(0.95),
@@ -296,8 +318,13 @@ pub fn run(a: Args) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
+        let masked = match (summary.masked, summary.run_mask) {
+            (0, _) => String::new(),
+            (k, true) => format!(" ({k} {side} vertices masked, the registration's mask included)"),
+            (k, false) => format!(" ({k} {side} vertices masked)"),
+        };
         println!(
-            "{} -> {}: a {kind} onto the {}'s {} vertices; {} beyond {} ({}), {} without a value; distance to the other surface: median {:.3} %, 95th percentile {:.3} %, max {:.3} % of the target's diagonal",
+            "{} -> {}: a {kind} onto the {}'s {} vertices{masked}; {} beyond {} ({}), {} without a value; distance to the other surface: median {:.3} %, 95th percentile {:.3} %, max {:.3} % of the target's diagonal",
             summary.input,
             summary.output,
             if a.onto == Onto::Target { "target" } else { "source" },
