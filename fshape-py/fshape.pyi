@@ -3,8 +3,9 @@
 After Charon, Charlier & Trouvé, "Metamorphoses of functional shapes in
 Sobolev spaces". Arrays are numpy: float64 coordinates and signals, int64
 cells. Every function raises FShapeError with the library's message (it
-names the file, line, vertex or configuration key at fault) and releases
-the GIL while it computes.
+names the file, line, vertex or configuration key at fault), as one of its
+kinds (InputError, ConfigError, CheckpointError, DivergenceError), and
+releases the GIL while it computes.
 """
 
 from os import PathLike
@@ -40,7 +41,29 @@ Config, the TOML tables as nested dicts, or a path to a TOML file (a
 string is always a path; TOML text goes through Config.from_toml)."""
 
 class FShapeError(ValueError):
-    """Bad input or a failed computation; the message says what and where."""
+    """Bad input or a failed computation; the message says what and where.
+    Its subclasses say which kind; an error of none of them (writing a
+    file failed, a run not finished) is an FShapeError itself."""
+
+class InputError(FShapeError):
+    """A file or value given is not what it must be (a malformed file, NaN
+    where not allowed, an index out of range, mismatched lengths)."""
+
+    path: Optional[str]
+    """The file at fault, when it is a file."""
+    line: Optional[int]
+    """Its line (1-based), when it is text and the reader knows."""
+
+class ConfigError(FShapeError):
+    """The configuration: an unknown key, a value out of its range, bad TOML."""
+
+class CheckpointError(FShapeError):
+    """A checkpoint that is damaged, of another format, or of other inputs
+    or settings than the run it is given to."""
+
+class DivergenceError(FShapeError):
+    """Shooting left finite numbers, collapsed a cell or drifted from the
+    Hamiltonian it conserves: reduce the momenta or add time steps."""
 
 class FShape:
     """A functional shape: vertices (n x d, d = 2 or 3), cells (m x 2

@@ -2,12 +2,14 @@
 //!
 //! Every function takes and returns numpy arrays (`float64` coordinates
 //! and signals, `int64` cells), raises `fshape.FShapeError` with the
-//! library's own message on bad input, and releases the GIL while it
+//! library's own message (a subclass by kind: `InputError`, `ConfigError`,
+//! `CheckpointError`, `DivergenceError`; see `errors`), and releases the GIL while it
 //! computes, so other Python threads run meanwhile. The type stubs are in
 //! `fshape.pyi` beside this crate.
 
 mod config;
 mod conversions;
+mod errors;
 mod io;
 mod measures;
 mod progress;
@@ -18,24 +20,18 @@ mod shoot;
 mod stats;
 mod transfer;
 
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-pyo3::create_exception!(
-    fshape,
-    FShapeError,
-    PyValueError,
-    "Bad input or a failed computation; the message says what and where."
-);
-
-fn err(e: impl std::fmt::Display) -> PyErr {
-    FShapeError::new_err(e.to_string())
-}
+use errors::err;
 
 /// Functional shapes and their metamorphoses (Charon, Charlier & Trouvé).
 #[pymodule]
 fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("FShapeError", m.py().get_type::<FShapeError>())?;
+    m.add("FShapeError", m.py().get_type::<errors::FShapeError>())?;
+    m.add("InputError", m.py().get_type::<errors::InputError>())?;
+    m.add("ConfigError", m.py().get_type::<errors::ConfigError>())?;
+    m.add("CheckpointError", m.py().get_type::<errors::CheckpointError>())?;
+    m.add("DivergenceError", m.py().get_type::<errors::DivergenceError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<shape::PyFShape>()?;
     m.add_class::<config::PyConfig>()?;

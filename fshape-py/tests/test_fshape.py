@@ -76,15 +76,26 @@ def test_bad_input_raises_fshape_error_naming_the_problem():
         fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, -1]])
     with pytest.raises(fshape.FShapeError, match="4 columns"):
         fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2, 3]])
-    with pytest.raises(fshape.FShapeError, match=r"ply_no_magic.ply: line 1"):
+    # A bad file is an InputError that names it and, for text, its line.
+    with pytest.raises(fshape.InputError, match=r"ply_no_magic.ply: line 1") as e:
         fshape.read_mesh(ROOT / "fshape-mesh" / "tests" / "malformed" / "ply_no_magic.ply")
-    with pytest.raises(fshape.FShapeError, match="gii_truncated_zlib.shape.gii: line 3"):
+    assert e.value.path.endswith("ply_no_magic.ply") and e.value.line == 1
+    with pytest.raises(fshape.InputError, match="gii_truncated_zlib.shape.gii: line 3") as e:
         fshape.read_signal(ROOT / "fshape-mesh" / "tests" / "malformed" / "gii_truncated_zlib.shape.gii")
+    assert e.value.path.endswith("gii_truncated_zlib.shape.gii") and e.value.line == 3
+    with pytest.raises(fshape.InputError) as e:
+        fshape.FShape([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]])
+    assert (e.value.path, e.value.line) == (None, None)
+    # The configuration's errors are a ConfigError; all are FShapeError
+    # (a ValueError).
     src, tgt = sphere_pair()
-    with pytest.raises(fshape.FShapeError, match="modle: unknown field"):
+    with pytest.raises(fshape.ConfigError, match="modle: unknown field"):
         fshape.match(src, tgt, {**CONFIG, "modle": {}})
-    with pytest.raises(fshape.FShapeError, match="model.gamma_w"):
+    with pytest.raises(fshape.ConfigError, match="model.gamma_w"):
         fshape.match(src, tgt, {**CONFIG, "model": {"gamma_w": -1.0}})
+    for kind in (fshape.InputError, fshape.ConfigError, fshape.CheckpointError, fshape.DivergenceError):
+        assert issubclass(kind, fshape.FShapeError) and issubclass(kind, ValueError)
+        assert not issubclass(kind, fshape.InputError) or kind is fshape.InputError
     with pytest.raises(fshape.FShapeError, match="unknown kernel|gaussian"):
         fshape.attachment(src, tgt, "gauss:0.1", "binet")
 
@@ -380,10 +391,10 @@ def test_a_match_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(t
     assert not any(e["event"] == "iteration" for e in events)
     assert np.array_equal(again["p0"], whole["p0"])
     # A checkpoint of other inputs, or a damaged one, is refused, naming the file.
-    with pytest.raises(fshape.FShapeError, match=r"run\.ckpt: .*other inputs"):
+    with pytest.raises(fshape.CheckpointError, match=r"run\.ckpt: .*other inputs"):
         fshape.match(src, src, CONFIG, checkpoint=path)
     path.write_bytes(path.read_bytes()[:40])
-    with pytest.raises(fshape.FShapeError, match=r"run\.ckpt: the checkpoint is damaged or truncated"):
+    with pytest.raises(fshape.CheckpointError, match=r"run\.ckpt: the checkpoint is damaged or truncated"):
         fshape.match(src, tgt, CONFIG, checkpoint=path)
 
 
@@ -412,6 +423,9 @@ def test_shooting_with_zero_momenta_stays_put_and_bad_lengths_are_refused():
         fshape.shoot(src, np.zeros((11, 3)), config)
     with pytest.raises(fshape.FShapeError, match="normalize"):
         fshape.shoot(src, np.zeros((12, 3)), {"deformation": {"widths": [0.3]}})
+    # Momenta far too large for four steps: the Hamiltonian drifts.
+    with pytest.raises(fshape.DivergenceError, match="shooting diverged"):
+        fshape.shoot(src, 1e4 * np.random.default_rng(0).normal(size=(12, 3)), config)
 
 
 def test_an_atlas_of_three_subjects_brings_its_template_closer():

@@ -272,6 +272,31 @@ pub enum ReadError {
     },
 }
 
+impl ReadError {
+    /// The file it names.
+    pub fn path(&self) -> &Path {
+        match self {
+            ReadError::Io { path, .. }
+            | ReadError::UnknownFormat { path }
+            | ReadError::Parse { path, .. }
+            | ReadError::Exr { path, .. }
+            | ReadError::Shape { path, .. }
+            | ReadError::NonFinite { path, .. }
+            | ReadError::Count { path, .. }
+            | ReadError::Select { path, .. }
+            | ReadError::SignalNotFound { path, .. } => path,
+        }
+    }
+
+    /// Where in the file, when the parser knows.
+    pub fn location(&self) -> Option<Location> {
+        match self {
+            ReadError::Parse { source, .. } => Some(source.at),
+            _ => None,
+        }
+    }
+}
+
 fn list(names: &[String]) -> String {
     if names.is_empty() { "none".to_string() } else { names.join(", ") }
 }
