@@ -463,6 +463,16 @@ def read_parcellation(
     without a region, as nibabel's read_annot; GIfTI: the label key);
     regions as (key, name, (red, green, blue, alpha)) in [0, 1]."""
 
+def write_parcellation(
+    path: Union[str, "PathLike[str]"],
+    keys: npt.ArrayLike,
+    regions: Sequence[Tuple[int, str, Tuple[float, float, float, float]]],
+) -> None:
+    """Writes a parcellation as read_parcellation returns it, in the format
+    the path names: .annot (FreeSurfer: keys become the table's rows),
+    .label.gii (GIfTI: keys and table kept; vertices in no region, -1,
+    take the table's `???`) or .csv (a key per vertex)."""
+
 def read_cifti(
     path: Union[str, "PathLike[str]"], structure: str, n_vertices: int, map: Optional[str] = None
 ) -> Tuple[str, npt.NDArray[np.float64]]:

@@ -2062,6 +2062,20 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(String::from_utf8_lossy(&o.stdout).contains("a parcellation onto the"), "{o:?}");
     }
+    // As a GIfTI label file: the same regions vertex by vertex, the
+    // vertices in none as the table's `???`.
+    let o =
+        fshape(&["transfer", &run, &file("lh.transfer.annot"), &file("on_target.label.gii"), "--max-distance", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (gii, annot) = (
+        io::read_parcellation(&tmp("on_target.label.gii")).unwrap(),
+        io::read_parcellation(&tmp("lh.on_target.annot")).unwrap(),
+    );
+    assert_eq!(gii.keys.len(), annot.keys.len());
+    assert!(annot.keys.contains(&-1));
+    for (g, a) in gii.keys.iter().zip(&annot.keys) {
+        assert_eq!(gii.name(*g), Some(annot.name(*a).unwrap_or("???")));
+    }
     let back = io::read_parcellation(&tmp("lh.back.annot")).unwrap();
     assert_eq!(back.regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(), ["east", "north"]);
     let same = back.keys.iter().zip(&parcels.keys).filter(|(a, b)| a == b).count();
@@ -2179,7 +2193,10 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
             ],
             "a mask's weights are in [0, 1]",
         ),
-        (vec![run.clone(), file("lh.transfer.annot"), file("transfer_x.gii")], "written as .annot or .csv"),
+        (
+            vec![run.clone(), file("lh.transfer.annot"), file("transfer_x.gii")],
+            "written as .annot (FreeSurfer), .label.gii",
+        ),
         (vec![run.clone(), file("transfer_short.csv"), file("transfer_x.csv")], "values for a surface of"),
         (
             vec![run.clone(), file("transfer_map.csv"), file("transfer_x.csv"), "--max-distance=-1".into()],

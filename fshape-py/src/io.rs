@@ -168,6 +168,41 @@ pub(crate) fn read_parcellation<'py>(
     Ok((p.keys.into_pyarray(py), regions))
 }
 
+/// Writes a parcellation in the format the path names: `.annot`
+/// (FreeSurfer: keys become the table's rows), `.label.gii` (GIfTI: keys
+/// and table kept; vertices in no region, -1, take the table's `???`) or
+/// `.csv`. `keys` as `read_parcellation` returns them, `regions` as a list
+/// of (key, name, (red, green, blue, alpha)) with colours in [0, 1].
+#[pyfunction]
+#[expect(clippy::type_complexity, reason = "a parcellation's table, as Python gives it")]
+pub(crate) fn write_parcellation(
+    py: Python<'_>,
+    path: PathBuf,
+    keys: PyArrayLike1<'_, i64, AllowTypeChange>,
+    regions: Vec<(i64, String, (f64, f64, f64, f64))>,
+) -> PyResult<()> {
+    let key = |what: String, k: i64| i32::try_from(k).map_err(|_| err(format!("{what}: {k} is outside int32")));
+    let keys: Vec<i32> = keys
+        .as_array()
+        .iter()
+        .enumerate()
+        .map(|(v, &k)| key(format!("keys: vertex {v}"), k))
+        .collect::<PyResult<_>>()?;
+    let mut table = Vec::with_capacity(regions.len());
+    for (i, (k, name, (r, g, b, a))) in regions.into_iter().enumerate() {
+        let rgba = [r, g, b, a];
+        if let Some(c) = rgba.iter().find(|c| !(0.0..=1.0).contains(*c)) {
+            return Err(err(format!("regions: entry {i} ({name}): the colour {c} is not in [0, 1]")));
+        }
+        table.push(io::parcellation::Region { key: key(format!("regions: entry {i}"), k)?, name, rgba });
+    }
+    if let Some((v, k)) = keys.iter().enumerate().find(|(_, k)| **k != -1 && !table.iter().any(|r| r.key == **k)) {
+        return Err(err(format!("keys: vertex {v} has the key {k}, which no region has (-1: no region)")));
+    }
+    let p = io::parcellation::Parcellation { keys, regions: table };
+    py.detach(|| io::write_parcellation(&path, &p)).map_err(err)
+}
+
 /// Reads one map of a surface structure (`CORTEX_LEFT`) of a CIFTI-2
 /// dense file (.dscalar.nii, .dtseries.nii) on a surface of `n_vertices`
 /// vertices: the file's values at the structure's vertices, NaN at the

@@ -44,6 +44,7 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(io::write_label, m)?)?;
     m.add_function(wrap_pyfunction!(io::write_signal, m)?)?;
     m.add_function(wrap_pyfunction!(io::read_parcellation, m)?)?;
+    m.add_function(wrap_pyfunction!(io::write_parcellation, m)?)?;
     m.add_function(wrap_pyfunction!(io::read_cifti, m)?)?;
     m.add_function(wrap_pyfunction!(io::write_cifti, m)?)?;
     m.add_function(wrap_pyfunction!(measures::signal_norm, m)?)?;

@@ -681,7 +681,7 @@ def test_freesurfer_labels_read_and_write_as_nibabel_reads_them(tmp_path):
     assert np.array_equal(wv, vertices) and np.array_equal(ws, values)
 
 
-def test_parcellations_nibabel_writes_read_to_its_keys_and_become_masks(tmp_path):
+def test_parcellations_read_as_nibabel_writes_them_become_masks_and_write_as_it_reads_them(tmp_path):
     rng = np.random.default_rng(5)
     n = 400
     names = ["unknown", "precentral", "postcentral", "insula", "cuneus"]
@@ -708,6 +708,23 @@ def test_parcellations_nibabel_writes_read_to_its_keys_and_become_masks(tmp_path
     assert {k: name for k, name, _ in regions} == nib.load(tmp_path / "lh.visual.label.gii").labeltable.get_labels_as_dict()
     with pytest.raises(fshape.FShapeError, match="no region named `V3`"):
         fshape.read_mask(f"{tmp_path / 'lh.visual.label.gii'}:V3", n)
+    # Written by fshape, nibabel reads the label file to its keys, names
+    # and colours; the annotation's vertices in no region (-1) as `???`
+    # (key 0 is free in the annotation shifted by 100).
+    fshape.write_parcellation(tmp_path / "again.label.gii", fk, regions)
+    again = nib.load(tmp_path / "again.label.gii")
+    assert again.darrays[0].intent == nib.nifti1.intent_codes.code["NIFTI_INTENT_LABEL"]
+    assert np.array_equal(again.darrays[0].data, fk) and again.darrays[0].data.dtype == np.int32
+    assert again.labeltable.get_labels_as_dict() == {k: name for k, name, _ in regions}
+    assert all(np.allclose(label.rgba, r[2]) for label, r in zip(again.labeltable.labels, regions))
+    fk, regions = fshape.read_parcellation(tmp_path / "lh.aparc.annot")
+    shifted = [(k + 100, name, rgba) for k, name, rgba in regions]
+    fshape.write_parcellation(tmp_path / "aparc.label.gii", np.where(fk >= 0, fk + 100, -1), shifted)
+    g = nib.load(tmp_path / "aparc.label.gii")
+    assert np.array_equal(g.darrays[0].data, np.where(nk >= 0, nk + 100, 0))
+    assert g.labeltable.get_labels_as_dict() == {0: "???", **{k: name for k, name, _ in shifted}}
+    with pytest.raises(fshape.InputError, match="vertex 0 has the key 5"):
+        fshape.write_parcellation(tmp_path / "bad.label.gii", np.full(n, 5), regions)
 
 
 def test_cifti_maps_read_as_nibabel_reads_them_and_write_back_keeping_the_rest(tmp_path):

@@ -26,8 +26,8 @@ pub struct Args {
     /// Where to write it, on the receiving surface's vertices, in the
     /// format its name says: a map as a signal file (.csv, .gii, .mgh,
     /// .mgz, or a FreeSurfer name such as lh.thickness), a parcellation
-    /// as .annot or .csv (a key per vertex, −1 for none), a label as
-    /// .label.
+    /// as .annot, .label.gii (its keys and table kept) or .csv (a key per
+    /// vertex, −1 for none), a label as .label.
     pub output: PathBuf,
     /// The surface that receives the values: `target` (from the source's
     /// vertices) or `source` (from the target's).
@@ -184,8 +184,8 @@ fn check_output(kind: Kind, output: &Path) -> Result<()> {
         Kind::Label if !is_label(output) => {
             bail!("{}: a label is written as a FreeSurfer .label", output.display())
         }
-        Kind::Parcellation if !(name.ends_with(".annot") || name.ends_with(".csv")) => {
-            bail!("{}: a parcellation is written as .annot or .csv (a key per vertex)", output.display())
+        Kind::Parcellation if !(name.ends_with(".annot") || name.ends_with(".label.gii") || name.ends_with(".csv")) => {
+            Err(io::WriteError::UnknownParcellationFormat { path: output.into() }.into())
         }
         Kind::Map
             if is_label(output)
@@ -288,7 +288,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         Input::Parcellation(p) => {
             let out = Parcellation { keys: correspondence.labels(&unmask_keys(p.keys), limit)?, regions: p.regions };
-            write_parcellation(&a.output, &out)?;
+            io::write_parcellation(&a.output, &out)?;
             ("parcellation", count_beyond(&correspondence, limit))
         }
         Input::Map { name, values } => {
@@ -356,18 +356,4 @@ fn count_beyond(c: &Correspondence, limit: f64) -> Carried {
         beyond: c.distances().iter().filter(|&&d| d.is_nan() || d > limit).count(),
         missing: 0,
     }
-}
-
-/// A parcellation as .annot, or as a CSV column of keys (`check_output`
-/// allowed only these).
-fn write_parcellation(path: &Path, p: &Parcellation) -> Result<()> {
-    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    if name.ends_with(".annot") {
-        let bytes = io::freesurfer::annot_bytes(p).with_context(|| format!("writing {}", path.display()))?;
-        io::write_atomic(path, &bytes, false)?;
-    } else {
-        let values: Vec<f64> = p.keys.iter().map(|&k| f64::from(k)).collect();
-        io::csv::write_signal(path, "key", &values)?;
-    }
-    Ok(())
 }

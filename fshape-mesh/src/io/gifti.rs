@@ -919,11 +919,72 @@ pub fn signal_named(g: &Gifti, selector: Option<&str>) -> Result<(String, Vec<f6
 
 /// Writes data arrays as a GIfTI file.
 pub fn write_arrays(w: &mut impl Write, arrays: &[DataArray], opts: WriteOptions) -> io::Result<()> {
+    write_gifti(w, arrays, &[], opts)
+}
+
+/// The label file of a parcellation (`.label.gii`), as Workbench and
+/// nibabel write one: its keys as a NIFTI_INTENT_LABEL array (`INT32`)
+/// and its regions as the label table, keys kept. Vertices in no region
+/// (−1) take the key of the table's `???` region when it has one, else
+/// key 0 as a transparent `???` when 0 is free (the convention for
+/// unassigned vertices), else the largest key plus one.
+pub fn label_file(p: &Parcellation) -> (DataArray, Vec<Region>) {
+    let mut regions = p.regions.clone();
+    let none = if p.keys.contains(&-1) {
+        let key = match regions.iter().find(|r| r.name == "???") {
+            Some(r) => r.key,
+            None => {
+                let key = if regions.iter().any(|r| r.key == 0) {
+                    regions.iter().map(|r| r.key).max().unwrap_or(0).saturating_add(1)
+                } else {
+                    0
+                };
+                regions.insert(0, Region { key, name: "???".into(), rgba: [0.0; 4] });
+                key
+            }
+        };
+        Some(key)
+    } else {
+        None
+    };
+    let values = p.keys.iter().map(|&k| f64::from(if k == -1 { none.unwrap_or(k) } else { k })).collect();
+    let array = DataArray {
+        intent: intent::LABEL,
+        data_type: DataType::I32,
+        dims: vec![p.keys.len()],
+        values,
+        meta: Vec::new(),
+    };
+    (array, regions)
+}
+
+/// Writes a parcellation as a GIfTI label file ([`label_file`]).
+pub fn write_parcellation(w: &mut impl Write, p: &Parcellation, opts: WriteOptions) -> io::Result<()> {
+    let (array, regions) = label_file(p);
+    write_gifti(w, &[array], &regions, opts)
+}
+
+/// A GIfTI file of these arrays and this label table.
+fn write_gifti(w: &mut impl Write, arrays: &[DataArray], labels: &[Region], opts: WriteOptions) -> io::Result<()> {
     let mut s = String::new();
     s.push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     s.push_str("<!DOCTYPE GIFTI SYSTEM \"http://www.nitrc.org/frs/download.php/115/gifti.dtd\">\n");
     let _ = writeln!(s, "<GIFTI Version=\"1.0\" NumberOfDataArrays=\"{}\">", arrays.len());
-    s.push_str("  <MetaData/>\n  <LabelTable/>\n");
+    if labels.is_empty() {
+        s.push_str("  <MetaData/>\n  <LabelTable/>\n");
+    } else {
+        s.push_str("  <MetaData/>\n  <LabelTable>\n");
+        for r in labels {
+            let [red, green, blue, alpha] = r.rgba;
+            let _ = writeln!(
+                s,
+                "    <Label Key=\"{}\" Red=\"{red}\" Green=\"{green}\" Blue=\"{blue}\" Alpha=\"{alpha}\">{}</Label>",
+                r.key,
+                quick_xml::escape::escape(r.name.as_str())
+            );
+        }
+        s.push_str("  </LabelTable>\n");
+    }
     for a in arrays {
         let order = if opts.column_major { "ColumnMajorOrder" } else { "RowMajorOrder" };
         let endian = if opts.big_endian { "BigEndian" } else { "LittleEndian" };

@@ -331,6 +331,15 @@ pub enum WriteError {
         /// exr's error.
         source: exr::error::Error,
     },
+    /// The extension names no format a parcellation is written in.
+    #[error(
+        "{path}: a parcellation is written as .annot (FreeSurfer), .label.gii (GIfTI) or .csv (a key per vertex)",
+        path = .path.display()
+    )]
+    UnknownParcellationFormat {
+        /// The target file.
+        path: PathBuf,
+    },
 }
 
 /// The per-vertex property read as the signal unless the caller names another.
@@ -849,6 +858,28 @@ pub fn write_signal(path: &Path, name: &str, values: &[f64], faces: usize) -> Re
         SignalFormat::Mgh => freesurfer::mgh_bytes(values).map_err(io)?,
     };
     write_atomic(path, &bytes, gz)
+}
+
+/// Writes a parcellation in the format the path names, atomically:
+/// `.annot` (FreeSurfer: the keys become the table's rows,
+/// [`freesurfer::annot_bytes`]), `.label.gii` (GIfTI: the keys and their
+/// table kept, [`gifti::label_file`]) or `.csv` (a column `key`, −1 for
+/// no region).
+pub fn write_parcellation(path: &Path, p: &parcellation::Parcellation) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io { path: path.into(), source };
+    let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if name.ends_with(".annot") {
+        write_atomic(path, &freesurfer::annot_bytes(p).map_err(io)?, false)
+    } else if name.ends_with(".label.gii") {
+        let mut bytes = Vec::new();
+        gifti::write_parcellation(&mut bytes, p, gifti::WriteOptions::default()).map_err(io)?;
+        write_atomic(path, &bytes, false)
+    } else if name.ends_with(".csv") {
+        let keys: Vec<f64> = p.keys.iter().map(|&k| f64::from(k)).collect();
+        csv::write_signal(path, "key", &keys)
+    } else {
+        Err(WriteError::UnknownParcellationFormat { path: path.into() })
+    }
 }
 
 /// Writes `bytes` (gzipped when `gz`) to a temporary file beside `path`,

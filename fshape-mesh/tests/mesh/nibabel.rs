@@ -287,6 +287,38 @@ fn parcellations_from_nibabel_read_to_its_keys_and_names() {
 }
 
 #[test]
+fn parcellations_write_as_gifti_label_files_that_read_back_with_their_keys_and_table() {
+    // nibabel's label file (keys 0 `???`, 4, 7, 9) written again reads
+    // back the same.
+    let gii = io::read_parcellation(&fixture("parcels.label.gii")).unwrap();
+    let dir = std::env::temp_dir().join(format!("fshape-label-gii-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    io::write_parcellation(&dir.join("again.label.gii"), &gii).unwrap();
+    assert_eq!(io::read_parcellation(&dir.join("again.label.gii")).unwrap(), gii);
+    // An annotation's vertices in no region (−1) take a transparent `???`
+    // of key 0 when 0 is free, else the largest key plus one; names that
+    // need escaping survive.
+    let mut annot = io::read_parcellation(&fixture("lh.parcels.annot")).unwrap();
+    annot.regions[2].name = "a <b> & \"c\"".into();
+    for (shift, none) in [(1, 0), (0, 3)] {
+        let mut p = annot.clone();
+        p.keys.iter_mut().filter(|k| **k >= 0).for_each(|k| *k += shift);
+        p.regions.iter_mut().for_each(|r| r.key += shift);
+        let path = dir.join(format!("shift{shift}.label.gii"));
+        io::write_parcellation(&path, &p).unwrap();
+        let back = io::read_parcellation(&path).unwrap();
+        let want: Vec<i32> = p.keys.iter().map(|&k| if k == -1 { none } else { k }).collect();
+        assert_eq!(back.keys, want, "shift {shift}");
+        assert_eq!(back.name(none), Some("???"));
+        assert_eq!(back.regions.iter().find(|r| r.key == none).unwrap().rgba, [0.0; 4]);
+        assert_eq!(&back.regions.iter().filter(|r| r.key != none).cloned().collect::<Vec<_>>(), &p.regions);
+    }
+    let e = io::write_parcellation(&dir.join("p.gii"), &gii).unwrap_err().to_string();
+    assert!(e.contains("a parcellation is written as .annot (FreeSurfer), .label.gii (GIfTI) or .csv"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn annotations_are_written_byte_for_byte_as_nibabel_writes_them() {
     let annot = io::read_parcellation(&fixture("lh.parcels.annot")).unwrap();
     assert!(io::freesurfer::annot_bytes(&annot).unwrap() == std::fs::read(fixture("lh.parcels.annot")).unwrap());
