@@ -173,6 +173,11 @@ pub fn parse_table_column(data: &[u8], selector: &str) -> Result<SignalColumn, P
 /// let v = parse_vectors(b"p_x,p_y\n1,2\n3,4.5\n", 2)?;
 /// assert_eq!(v, [1.0, 2.0, 3.0, 4.5]);
 /// assert!(parse_vectors(b"p_x,p_y\n1,2,3\n", 2).is_err()); // three columns
+/// // A row of another count says how many each row needs.
+/// let e = parse_vectors(b"pf,pf_2,pf_3,pf_4\n1,2,3\n", 4).unwrap_err().to_string();
+/// assert!(e.contains("line 2") && e.contains("expected 4 comma-separated numbers"), "{e}");
+/// let e = parse_vectors(b"pf\n1,2\n", 1).unwrap_err().to_string();
+/// assert!(e.contains("expected 1 number"), "{e}");
 /// # Ok::<(), fshape_mesh::io::ParseError>(())
 /// ```
 pub fn parse_vectors(data: &[u8], dim: usize) -> Result<Vec<f64>, ParseError> {
@@ -206,7 +211,19 @@ pub fn parse_vectors(data: &[u8], dim: usize) -> Result<Vec<f64>, ParseError> {
             kind: ParseErrorKind::BadToken { expected, found: lossy(t.as_bytes()) },
         };
         if fields.len() != dim {
-            return Err(bad(if dim == 2 { "2 comma-separated numbers" } else { "3 comma-separated numbers" }));
+            // The count the caller reads (d coordinates, or k signal maps).
+            const COUNTS: [&str; 9] = [
+                "no numbers",
+                "1 number",
+                "2 comma-separated numbers",
+                "3 comma-separated numbers",
+                "4 comma-separated numbers",
+                "5 comma-separated numbers",
+                "6 comma-separated numbers",
+                "7 comma-separated numbers",
+                "8 comma-separated numbers",
+            ];
+            return Err(bad(COUNTS.get(dim).copied().unwrap_or("as many comma-separated numbers as the header names")));
         }
         for f in fields {
             out.push(parse_f64(f.as_bytes()).filter(|v| v.is_finite()).ok_or_else(|| bad("finite numbers"))?);
