@@ -2424,6 +2424,10 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
     // Its report: the template in a scene per map, each map's error.
     let page = std::fs::read_to_string(atlas.join("report.html")).unwrap();
     assert!(page.contains("the template, map 2 of 2") && page.contains("map 2 error"));
+    // Its pictures: the template's first map, and its second on its own.
+    let (one, two) =
+        (std::fs::read(atlas.join("template.png")).unwrap(), std::fs::read(atlas.join("template_2.png")).unwrap());
+    assert!(one != two && summary["files"].as_array().unwrap().iter().any(|f| f == "template_2.png"));
     // A subject with one map fewer: refused, naming both.
     std::fs::write(dir.join("subjects.csv"), "source.ply,source1.csv;source2.csv\ntarget.ply,target1.csv\n").unwrap();
     let o =

@@ -281,6 +281,15 @@ pub fn write_atlas(run: &AtlasRun, folder: &AtlasFolder<'_>) -> Result<Option<At
     let camera = View::fit(&all, view.0, view.1);
     push("template.png".into(), render::picture(&result.template, &camera)?);
     push("template_start.png".into(), render::picture(&run.start, &camera)?);
+    // Several maps: each after the first in a picture of its own
+    // (template_2.png, …), in its range over the subjects and templates.
+    for c in 1..result.template.n_channels() {
+        let map = |s: &FShape| s.clone().with_signal(s.channel(c));
+        let shapes: Vec<FShape> = all.iter().map(|s| map(s)).collect::<std::result::Result<_, _>>()?;
+        let refs: Vec<&FShape> = shapes.iter().collect();
+        let view = View::fit(&refs, view.0, view.1);
+        push(format!("{}.png", io::channel_name("template", c)), render::picture(&map(&result.template)?, &view)?);
+    }
     // Each subject beside its matched template at a quarter of the render
     // size, GRID_PAIRS pairs a row.
     let tiles: Vec<&FShape> = run.subjects.iter().take(GRID_ROWS * GRID_PAIRS).flat_map(|(s, m)| [s, m]).collect();
