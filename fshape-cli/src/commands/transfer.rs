@@ -318,27 +318,36 @@ pub fn run(a: Args) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
-        let masked = match (summary.masked, summary.run_mask) {
+        println!("{}", summary.line(side, &a.max_distance));
+    }
+    Ok(())
+}
+
+impl Summary {
+    /// The line printed for the user: what went where, how many vertices
+    /// got nothing, how far apart the surfaces are.
+    fn line(&self, side: &str, max_distance: &str) -> String {
+        let masked = match (self.masked, self.run_mask) {
             (0, _) => String::new(),
             (k, true) => format!(" ({k} {side} vertices masked, the registration's mask included)"),
             (k, false) => format!(" ({k} {side} vertices masked)"),
         };
-        println!(
-            "{} -> {}: a {kind} onto the {}'s {} vertices{masked}; {} beyond {} ({}), {} without a value; distance to the other surface: median {:.3} %, 95th percentile {:.3} %, max {:.3} % of the target's diagonal",
-            summary.input,
-            summary.output,
-            if a.onto == Onto::Target { "target" } else { "source" },
-            carried.vertices,
-            carried.beyond,
-            a.max_distance,
-            format_length(limit),
-            carried.missing,
-            summary.distance_median_percent,
-            summary.distance_p95_percent,
-            summary.distance_max_percent,
-        );
+        format!(
+            "{} -> {}: a {} onto the {}'s {} vertices{masked}; {} beyond {} ({}), {} without a value; distance to the other surface: median {:.3} %, 95th percentile {:.3} %, max {:.3} % of the target's diagonal",
+            self.input,
+            self.output,
+            self.kind,
+            if self.onto == Onto::Target { "target" } else { "source" },
+            self.carried.vertices,
+            self.carried.beyond,
+            max_distance,
+            format_length(self.max_distance),
+            self.carried.missing,
+            self.distance_median_percent,
+            self.distance_p95_percent,
+            self.distance_max_percent,
+        )
     }
-    Ok(())
 }
 
 fn format_length(v: f64) -> String {

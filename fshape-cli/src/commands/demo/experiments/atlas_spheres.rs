@@ -5,6 +5,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use fshape_match::ops::ModelKind;
 use fshape_match::{Config, NormKind};
+use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding, write_mesh};
 
 use super::{BUNNY_DECREASE, attachment};
@@ -21,6 +22,22 @@ pub const ATLAS_SPHERES_SUBJECTS: usize = 10;
 /// estimated template to the truth against its bound: the subjects' mean
 /// displacement (the first-order bias of any estimate from this sample)
 /// plus the atlas's residual (the subjects' mean distance after matching).
+/// The population's mean displacement from the truth, vertex by vertex:
+/// its length averaged over the vertices, as a fraction of the truth's
+/// diagonal (what an atlas of these subjects cannot tell from the truth).
+fn mean_displacement(subjects: &[FShape], truth: &FShape) -> f64 {
+    let n = truth.n_vertices();
+    let count = subjects.len() as f64;
+    let mut bias = vec![0.0; 3 * n];
+    for s in subjects {
+        for (b, (x, y)) in bias.iter_mut().zip(s.points().iter().zip(truth.points())) {
+            *b += (x - y) / count;
+        }
+    }
+    let diag = truth.bounding_box().diagonal();
+    bias.chunks_exact(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).sum::<f64>() / n as f64 / diag
+}
+
 pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<()> {
     use fshape_mesh::generate::{SplitMix64, icosphere};
     let random_vector_field = |n: usize, dim: usize, scale: f64, seed: u64| -> Vec<f64> {
@@ -76,16 +93,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
     let estimate = io::read_mesh(&run.join("template.ply"), &io::ReadOptions::default())?;
     let got = fshape_match::quality(&estimate, &truth)?;
     let before = fshape_match::quality(&sphere.clone().with_signal(Some(vec![0.0; n]))?, &truth)?;
-    let count = subjects.len() as f64;
-    let mut bias = vec![0.0; 3 * n];
-    for s in &subjects {
-        for (b, (x, y)) in bias.iter_mut().zip(s.points().iter().zip(truth.points())) {
-            *b += (x - y) / count;
-        }
-    }
-    let diag = truth.bounding_box().diagonal();
-    let bias =
-        bias.chunks_exact(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).sum::<f64>() / n as f64 / diag;
+    let bias = mean_displacement(&subjects, &truth);
     use fshape_match::record::{AtlasRecord, RunRecord};
     let residual = AtlasRecord::read(&run.join("summary.json"))?.mean_distance;
     let report = serde_json::json!({

@@ -80,20 +80,9 @@ fn gaussian_at(shape: &FShape, centre: &[f64], v: usize, width: f64) -> f64 {
     (-d2 / (2.0 * width * width)).exp()
 }
 
-pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
-    let dir = a.out.join("stats-spheres");
-    let inputs = dir.join("subjects");
-    std::fs::create_dir_all(&inputs).with_context(|| format!("creating {}", inputs.display()))?;
-    let sphere = icosphere(a.level, 0.5);
-    let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.3 * p[0], p[1], 0.75 * p[2]]).collect();
-    // 2z + x: no rotation of the ellipsoid keeps this signal, so the
-    // pre-alignment has one answer.
-    let f: Vec<f64> = pts.chunks_exact(3).map(|p| 2.0 * p[2] + p[0]).collect();
-    let truth = sphere.with_points(pts)?.with_signal(Some(f))?;
-    let n = truth.n_vertices();
-    let normals = fshape_stats::vertex_normals(&truth).context("the ellipsoid's normals")?;
-    let (geometry_vertex, signal_vertex) = (vertex_towards(&truth, GEOMETRY_AT), vertex_towards(&truth, SIGNAL_AT));
-    let (geometry_centre, signal_centre) = (truth.point(geometry_vertex).to_vec(), truth.point(signal_vertex).to_vec());
+/// The atlas's configuration: H1 metamorphosis, p_0 in the energy metric,
+/// each subject pre-aligned (rigid) to the initial template.
+fn atlas_config(a: &StatsSpheresArgs<'_>) -> Result<Config> {
     let mut config = Config::new(vec![SIGMA_V]);
     config.model.kind = ModelKind::Metamorphosis;
     config.model.norm = NormKind::H1;
@@ -105,9 +94,22 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
     config.optimizer.decrease_tolerance = 1e-3;
     config.optimizer.decrease_window = 5;
     config.prealign = Some(PrealignSection { kind: AlignKind::Rigid, ..PrealignSection::default() });
-    // Each subject: the truth with random smooth variations (the
-    // population's own), the group's effects, then a random rotation and
-    // a translation of up to 0.3.
+    Ok(config)
+}
+
+/// The effects' centres on the truth: the geometric one, the signal's.
+struct Effects {
+    geometry: Vec<f64>,
+    signal: Vec<f64>,
+}
+
+/// Writes the population into `inputs`: each subject the truth with
+/// random smooth variations (the population's own), its group's effects,
+/// then a random rotation and a translation of up to 0.3. Returns the
+/// subjects list and the covariates table's text.
+fn population(a: &StatsSpheresArgs<'_>, truth: &FShape, effects: &Effects, inputs: &Path) -> Result<(String, String)> {
+    let n = truth.n_vertices();
+    let normals = fshape_stats::vertex_normals(truth).context("the ellipsoid's normals")?;
     let mut list = String::from("# two groups of ellipsoids, each subject turned and moved at random\n");
     let mut table = String::from("subject,group\n");
     let mut rng = SplitMix64(2026);
@@ -122,12 +124,12 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
             })
             .collect();
         if effect {
-            bumps.push((geometry_centre.clone(), WIDTH, BUMP, 0.0));
-            bumps.push((signal_centre.clone(), WIDTH, 0.0, RISE));
+            bumps.push((effects.geometry.clone(), WIDTH, BUMP, 0.0));
+            bumps.push((effects.signal.clone(), WIDTH, 0.0, RISE));
         }
         for (at, width, height, rise) in &bumps {
             for v in 0..n {
-                let g = gaussian_at(&truth, at, v, *width);
+                let g = gaussian_at(truth, at, v, *width);
                 for c in 0..3 {
                     points[3 * v + c] += height * g * normals[v][c];
                 }
@@ -150,30 +152,20 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
         list.push_str(&format!("{name}.ply\n"));
         table.push_str(&format!("{name},{}\n", if effect { "effect" } else { "control" }));
     }
-    let list_path = inputs.join("subjects.csv");
-    io::write_atomic(&list_path, list.as_bytes(), false)?;
-    let table_path = dir.join("covariates.csv");
-    io::write_atomic(&table_path, table.as_bytes(), false)?;
-    let start = dir.join("template_start.ply");
-    write_mesh(&start, &truth, Encoding::Binary)?;
-    let run = dir.join("atlas");
-    std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
-    let cfg = run.join("config.toml");
-    let header = "# fshape demo stats-spheres: the atlas of two groups of ellipsoids, each subject pre-aligned\n\
-                  # (rigid) to the initial template, H1 metamorphosis, p_0 in the energy metric.\n\n";
-    io::write_atomic(&cfg, format!("{header}{}", config.to_toml()).as_bytes(), false)?;
-    eprintln!(
-        "stats-spheres: {} ellipsoids of {n} vertices in two groups, turned and moved -> {}",
-        2 * a.per_group,
-        run.display()
-    );
-    super::run_atlas(&list_path, &start, &cfg, &run, crate::args::DEFAULT_CAMERA.pair())?;
-    let stats_dir = dir.join("stats");
-    super::run_stats(&run, &table_path, "group", &stats_dir, a.permutations, crate::args::DEFAULT_CAMERA)?;
-    // Where each map found something, against the truth: vertices with
-    // corrected p ≤ 0.05 near the geometric effect, near the signal's, and
-    // away from both (there the groups do not differ: false positives).
-    let template = io::read_mesh(&run.join("template.ply"), &io::ReadOptions::default())?;
+    Ok((list, table))
+}
+
+/// Where each map found something, against the truth: vertices with
+/// corrected p ≤ 0.05 near the geometric effect (`aims.0`, a template
+/// vertex), near the signal's (`aims.1`), and away from both (there the
+/// groups do not differ: false positives).
+fn judge(
+    template: &FShape,
+    stats_dir: &Path,
+    aims: (usize, usize),
+) -> Result<serde_json::Map<String, serde_json::Value>> {
+    let (geometry_vertex, signal_vertex) = aims;
+    let n = template.n_vertices();
     let within = FOUND_WITHIN * (WIDTH * WIDTH + SIGMA_V * SIGMA_V).sqrt();
     let distance = |v: usize, c: usize| -> f64 {
         let (p, q) = (template.point(v), template.point(c));
@@ -219,20 +211,68 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
     }
     report.insert("stated_distance".into(), within.into());
     report.insert("width".into(), WIDTH.into());
-    io::write_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&report)?.as_bytes(), false)?;
-    // The true effects on the template, drawn as the maps are.
-    let bumps = |centre: &[f64]| -> Vec<f64> { (0..n).map(|v| gaussian_at(&truth, centre, v, WIDTH)).collect() };
-    for (name, values) in [("truth_geometry.png", bumps(&geometry_centre)), ("truth_signal.png", bumps(&signal_centre))]
+    Ok(report)
+}
+
+/// The true effects on the template, drawn as the maps are.
+fn truth_pictures(dir: &Path, truth: &FShape, template: &FShape, effects: &Effects) -> Result<()> {
+    let n = truth.n_vertices();
+    let bumps = |centre: &[f64]| -> Vec<f64> { (0..n).map(|v| gaussian_at(truth, centre, v, WIDTH)).collect() };
+    for (name, values) in
+        [("truth_geometry.png", bumps(&effects.geometry)), ("truth_signal.png", bumps(&effects.signal))]
     {
         let shape = template.clone().with_signal(Some(values))?;
         let (azimuth, elevation) = crate::args::DEFAULT_CAMERA.pair();
         let tiles = [azimuth, azimuth + 180.0]
-            .map(|az| render::rasterise(&shape, &View::fit(&[&template], az, elevation).diverging(1.0)));
+            .map(|az| render::rasterise(&shape, &View::fit(&[template], az, elevation).diverging(1.0)));
         let (rgb, width, height) = render::mosaic(tiles.into_iter(), 2, 1);
         io::write_atomic(&dir.join(name), &render::png_sized(&rgb, width, height)?, false)?;
     }
+    Ok(())
+}
+
+pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
+    let dir = a.out.join("stats-spheres");
+    let inputs = dir.join("subjects");
+    std::fs::create_dir_all(&inputs).with_context(|| format!("creating {}", inputs.display()))?;
+    let sphere = icosphere(a.level, 0.5);
+    let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [1.3 * p[0], p[1], 0.75 * p[2]]).collect();
+    // 2z + x: no rotation of the ellipsoid keeps this signal, so the
+    // pre-alignment has one answer.
+    let f: Vec<f64> = pts.chunks_exact(3).map(|p| 2.0 * p[2] + p[0]).collect();
+    let truth = sphere.with_points(pts)?.with_signal(Some(f))?;
+    let n = truth.n_vertices();
+    let aims = (vertex_towards(&truth, GEOMETRY_AT), vertex_towards(&truth, SIGNAL_AT));
+    let effects = Effects { geometry: truth.point(aims.0).to_vec(), signal: truth.point(aims.1).to_vec() };
+    let config = atlas_config(a)?;
+    let (list, table) = population(a, &truth, &effects, &inputs)?;
+    let list_path = inputs.join("subjects.csv");
+    io::write_atomic(&list_path, list.as_bytes(), false)?;
+    let table_path = dir.join("covariates.csv");
+    io::write_atomic(&table_path, table.as_bytes(), false)?;
+    let start = dir.join("template_start.ply");
+    write_mesh(&start, &truth, Encoding::Binary)?;
+    let run = dir.join("atlas");
+    std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
+    let cfg = run.join("config.toml");
+    let header = "# fshape demo stats-spheres: the atlas of two groups of ellipsoids, each subject pre-aligned\n\
+                  # (rigid) to the initial template, H1 metamorphosis, p_0 in the energy metric.\n\n";
+    io::write_atomic(&cfg, format!("{header}{}", config.to_toml()).as_bytes(), false)?;
+    eprintln!(
+        "stats-spheres: {} ellipsoids of {n} vertices in two groups, turned and moved -> {}",
+        2 * a.per_group,
+        run.display()
+    );
+    super::run_atlas(&list_path, &start, &cfg, &run, crate::args::DEFAULT_CAMERA.pair())?;
+    let stats_dir = dir.join("stats");
+    super::run_stats(&run, &table_path, "group", &stats_dir, a.permutations, crate::args::DEFAULT_CAMERA)?;
+    let template = io::read_mesh(&run.join("template.ply"), &io::ReadOptions::default())?;
+    let report = judge(&template, &stats_dir, aims)?;
+    io::write_atomic(&dir.join("truth.json"), serde_json::to_string_pretty(&report)?.as_bytes(), false)?;
+    truth_pictures(&dir, &truth, &template, &effects)?;
     println!(
-        "  p_FWE ≤ 0.05 (max-t | TFCE), vertices within {within:.2} of the geometry effect, of the signal effect, elsewhere:"
+        "  p_FWE ≤ 0.05 (max-t | TFCE), vertices within {:.2} of the geometry effect, of the signal effect, elsewhere:",
+        FOUND_WITHIN * (WIDTH * WIDTH + SIGMA_V * SIGMA_V).sqrt()
     );
     for (map, r) in &report {
         if let Some(r) = r.as_object() {
