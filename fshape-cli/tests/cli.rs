@@ -2329,6 +2329,12 @@ fn two_maps_per_surface_are_registered_together_and_written_per_channel() {
         page.contains("the geodesic, signal channel 1 of 2") && page.contains("the geodesic, signal channel 2 of 2")
     );
     assert!(page.contains("channel 2: signal error, rms"));
+    // Its pictures: the first map as ever, the second in its own files.
+    let files: Vec<&str> = summary["files"].as_array().unwrap().iter().filter_map(|f| f.as_str()).collect();
+    for f in ["render_000.png", "target.png", "render_000_2.png", "target_2.png"] {
+        assert!(out.join(f).exists() && files.contains(&f), "{f}");
+    }
+    assert_ne!(std::fs::read(out.join("target.png")).unwrap(), std::fs::read(out.join("target_2.png")).unwrap());
     // Its momenta shot again from its first state (both maps, the walls
     // masked) with the shoot.toml it wrote end where it ended.
     let file = |f: &str| s(&out.join(f));

@@ -144,6 +144,24 @@ pub fn write_registration(reg: &Registration, folder: &Folder<'_>) -> Result<Opt
     }
     outputs.push((out.join("target.png"), render::picture(target, &camera)?));
     files.push("target.png".into());
+    // Several maps: each after the first drawn the same way, in its own
+    // range (render_000_2.png, …, target_2.png).
+    for c in 1..template.n_channels() {
+        let map = |s: &FShape| s.clone().with_signal(s.channel(c));
+        let frames: Vec<FShape> = frames.iter().map(map).collect::<std::result::Result<_, _>>()?;
+        let target = map(target)?;
+        let mut all: Vec<&FShape> = frames.iter().collect();
+        all.push(&target);
+        let camera = View::fit(&all, view.0, view.1).with_range_of(&[&frames[0], &target]);
+        for (k, frame) in frames.iter().enumerate() {
+            let name = format!("{}.png", io::channel_name(&format!("render_{k:03}"), c));
+            outputs.push((out.join(&name), render::picture(frame, &camera)?));
+            files.push(name);
+        }
+        let name = format!("{}.png", io::channel_name("target", c));
+        outputs.push((out.join(&name), render::picture(&target, &camera)?));
+        files.push(name);
+    }
     // The source at the end of the geodesic, whatever the times asked for:
     // with target.ply, what `fshape transfer` carries values through.
     let (x, f) = traj.at(1.0);
