@@ -195,3 +195,9 @@ impl Classify for fshape_report::ReportError {
 pub(crate) fn err<E: Classify>(e: E) -> PyErr {
     e.fault().into()
 }
+
+/// `FShapeError` itself, for what is neither bad input nor a failed
+/// computation (a run the progress callback stopped).
+pub(crate) fn other(message: impl std::fmt::Display) -> PyErr {
+    Fault::new(Kind::Other, message).into()
+}

@@ -6,7 +6,7 @@ use fshape_match::{Control, Iteration, Observer, Outcome, StageRecord, StageSpec
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::err;
+use crate::errors::other;
 
 /// Calls the Python progress callback with a dict per event; a callback
 /// returning True stops the run (as scipy.optimize's callbacks), one
@@ -57,7 +57,7 @@ impl Progress {
                 Some(path) => format!("; the same call with checkpoint={} resumes it", path.display()),
                 None => String::new(),
             };
-            return Err(err(format!("stopped by the progress callback (it returned True){resume}")));
+            return Err(other(format!("stopped by the progress callback (it returned True){resume}")));
         }
         Ok(())
     }

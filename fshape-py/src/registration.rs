@@ -77,7 +77,9 @@ pub(crate) fn match_shapes<'py>(
     observer.raised()?;
     let reg = run.map_err(err)?;
     let Some(r) = reg.result else {
-        return Err(err("stopped by the progress callback before the first iteration: there is no result yet"));
+        return Err(crate::errors::other(
+            "stopped by the progress callback before the first iteration: there is no result yet",
+        ));
     };
     let (template, matched_target, used) = (reg.template, reg.target, reg.resolved);
     let d = PyDict::new(py);
