@@ -155,6 +155,12 @@ fn population(a: &StatsSpheresArgs<'_>, truth: &FShape, effects: &Effects, input
     Ok((list, table))
 }
 
+/// The stated distance in the template's units: [`FOUND_WITHIN`] effective
+/// widths √(w² + σ_V²).
+fn stated_distance() -> f64 {
+    FOUND_WITHIN * (WIDTH * WIDTH + SIGMA_V * SIGMA_V).sqrt()
+}
+
 /// Where each map found something, against the truth: vertices with
 /// corrected p ≤ 0.05 near the geometric effect (`aims.0`, a template
 /// vertex), near the signal's (`aims.1`), and away from both (there the
@@ -166,7 +172,7 @@ fn judge(
 ) -> Result<serde_json::Map<String, serde_json::Value>> {
     let (geometry_vertex, signal_vertex) = aims;
     let n = template.n_vertices();
-    let within = FOUND_WITHIN * (WIDTH * WIDTH + SIGMA_V * SIGMA_V).sqrt();
+    let within = stated_distance();
     let distance = |v: usize, c: usize| -> f64 {
         let (p, q) = (template.point(v), template.point(c));
         (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>().sqrt()
@@ -272,7 +278,7 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
     truth_pictures(&dir, &truth, &template, &effects)?;
     println!(
         "  p_FWE ≤ 0.05 (max-t | TFCE), vertices within {:.2} of the geometry effect, of the signal effect, elsewhere:",
-        FOUND_WITHIN * (WIDTH * WIDTH + SIGMA_V * SIGMA_V).sqrt()
+        stated_distance()
     );
     for (map, r) in &report {
         if let Some(r) = r.as_object() {
