@@ -11,10 +11,12 @@
 //! merged into u so far of
 //!
 //! - the squared distance to the face's plane (the geometric quadric),
-//! - the squared difference between the signal and the face's linear
-//!   signal, s − g·x − c (Hoppe 1999's attribute quadric), weighted so that
-//!   one standard deviation of the signal costs as much as a distance of
-//!   1 % of the bounding-box diagonal ([`SimplifyOptions::signal_weight`]),
+//! - for each signal channel (map), the squared difference between the
+//!   signal and the face's linear signal, s − g·x − c (Hoppe 1999's
+//!   attribute quadric), weighted so that one standard deviation of the
+//!   map costs as much as a distance of 1 % of the bounding-box diagonal
+//!   ([`SimplifyOptions::signal_weight`]); each map is weighed so, and a
+//!   constant map adds nothing,
 //! - a small isotropic term |x − x_f|² (a hundredth of the plane's), which
 //!   in flat regions prefers short edges and keeps triangles even,
 //!
@@ -176,6 +178,31 @@ fn quality(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
     if edges == 0.0 { 0.0 } else { 2.0 * 3f64.sqrt() * dot(n, n).sqrt() / edges }
 }
 
+/// A map's values scaled so that one standard deviation is `unit`, over
+/// the values there are: a masked vertex's (NaN) counts as the mean, no
+/// feature to keep; a constant map is all zeros.
+fn scaled_map(f: &[f64], unit: f64) -> Vec<f64> {
+    let valued = f.iter().filter(|v| !v.is_nan()).count().max(1) as f64;
+    let mean = f.iter().filter(|v| !v.is_nan()).sum::<f64>() / valued;
+    let sd = (f.iter().filter(|v| !v.is_nan()).map(|v| (v - mean) * (v - mean)).sum::<f64>() / valued).sqrt();
+    let scale = if sd > 0.0 { unit / sd } else { 0.0 };
+    f.iter().map(|v| if v.is_nan() { mean * scale } else { v * scale }).collect()
+}
+
+/// The attribute quadric of a face p with values s at its corners:
+/// area × (s − g·x − c)², s = g·x + c the face's linear signal, g in the
+/// face's plane.
+fn linear_signal(p: [[f64; 3]; 3], s: [f64; 3], area: f64) -> Quadric {
+    let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+    let (d1, d2) = (s[1] - s[0], s[2] - s[0]);
+    let (a11, a12, a22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
+    let det = a11 * a22 - a12 * a12;
+    let (al, be) = ((d1 * a22 - d2 * a12) / det, (d2 * a11 - d1 * a12) / det);
+    let g = [al * e1[0] + be * e2[0], al * e1[1] + be * e2[1], al * e1[2] + be * e2[2]];
+    let c = s[0] - dot(g, p[0]);
+    Quadric::plane([-g[0], -g[1], -g[2], 1.0, -c], area)
+}
+
 /// An f64 with a total order, for the queue.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Cost(f64);
@@ -204,7 +231,15 @@ struct Work {
     around: Vec<Vec<u32>>,
     alive: Vec<bool>,
     boundary: Vec<bool>,
+    /// The geometric quadric plus the first map's.
     q: Vec<Quadric>,
+    /// The other maps' values (`extra` per vertex, scaled as `s`).
+    s_more: Vec<f64>,
+    /// The other maps' quadrics (`extra` per vertex): a map's quadric
+    /// holds only its own coordinate, so each is evaluated at its own value.
+    q_more: Vec<Quadric>,
+    /// The number of maps after the first.
+    extra: usize,
     /// Bumped when a vertex's quadric changes: queue entries of older
     /// versions are stale.
     version: Vec<u32>,
@@ -214,6 +249,18 @@ impl Work {
     fn point(&self, v: u32) -> [f64; 4] {
         let x = self.x[v as usize];
         [x[0], x[1], x[2], self.s[v as usize]]
+    }
+
+    /// The error of moving u to v: u's quadrics at v's position and
+    /// values (with one map, exactly the one quadric's error).
+    fn cost(&self, u: u32, v: u32) -> f64 {
+        let mut e = self.q[u as usize].error(self.point(v));
+        let (u, v) = (u as usize, v as usize);
+        let x = self.x[v];
+        for c in 0..self.extra {
+            e += self.q_more[u * self.extra + c].error([x[0], x[1], x[2], self.s_more[v * self.extra + c]]);
+        }
+        e
     }
 
     /// The neighbours of u, sorted.
@@ -298,6 +345,11 @@ impl Work {
         }
         let qu = self.q[u as usize];
         self.q[v as usize].add(&qu);
+        let (u_at, v_at) = (u as usize * self.extra, v as usize * self.extra);
+        for c in 0..self.extra {
+            let qu = self.q_more[u_at + c];
+            self.q_more[v_at + c].add(&qu);
+        }
         self.alive[u as usize] = false;
         self.version[v as usize] += 1;
     }
@@ -340,7 +392,7 @@ impl FShape {
         let mut queue = BinaryHeap::new();
         let push = |work: &Work, queue: &mut BinaryHeap<_>, u: u32| {
             for v in work.neighbours(u) {
-                let cost = work.q[u as usize].error(work.point(v));
+                let cost = work.cost(u, v);
                 queue.push(Reverse((Cost(cost), u, v, work.version[u as usize])));
             }
         };
@@ -361,7 +413,7 @@ impl FShape {
             // now collapse into v.
             push(&work, &mut queue, v);
             for w in work.neighbours(v) {
-                let cost = work.q[w as usize].error(work.point(v));
+                let cost = work.cost(w, v);
                 queue.push(Reverse((Cost(cost), w, v, work.version[w as usize])));
             }
         }
@@ -378,24 +430,23 @@ impl FShape {
                 [p[0], p[1], if dim == 3 { p[2] } else { 0.0 }]
             })
             .collect();
-        // The signal in units where one standard deviation is signal_weight
+        // Each map in units where one standard deviation is signal_weight
         // × 1 % of the diagonal, so that its quadric adds to the plane's.
-        // With several channels the quadric weighs the first one (every
-        // channel is carried: the kept vertices keep all their values).
-        let first = self.channel(0);
-        let s: Vec<f64> = match first.as_deref() {
-            Some(f) if signal_weight > 0.0 => {
-                // Over the values there are: a masked vertex's (NaN) counts
-                // as the mean, no signal feature to keep.
-                let valued = f.iter().filter(|v| !v.is_nan()).count().max(1) as f64;
-                let mean = f.iter().filter(|v| !v.is_nan()).sum::<f64>() / valued;
-                let sd =
-                    (f.iter().filter(|v| !v.is_nan()).map(|v| (v - mean) * (v - mean)).sum::<f64>() / valued).sqrt();
-                let scale = if sd > 0.0 { signal_weight * 0.01 * self.bounding_box().diagonal() / sd } else { 0.0 };
-                f.iter().map(|v| if v.is_nan() { mean * scale } else { v * scale }).collect()
-            }
+        // The first map's quadric is summed with the geometry's (one map:
+        // one quadric, as always); the others have their own.
+        let k = self.n_channels().max(1);
+        let scaled = |c: usize| match self.channel(c) {
+            Some(f) if signal_weight > 0.0 => scaled_map(&f, signal_weight * 0.01 * self.bounding_box().diagonal()),
             _ => vec![0.0; n],
         };
+        let s = scaled(0);
+        let extra = k - 1;
+        let mut s_more = vec![0.0; n * extra];
+        for c in 1..k {
+            for (i, v) in scaled(c).into_iter().enumerate() {
+                s_more[i * extra + c - 1] = v;
+            }
+        }
         let faces: Vec<[u32; 3]> = self.cell_iter().map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect();
         let mut around = vec![Vec::new(); n];
         for (f, face) in faces.iter().enumerate() {
@@ -404,6 +455,7 @@ impl FShape {
             }
         }
         let mut q = vec![Quadric::default(); n];
+        let mut q_more = vec![Quadric::default(); n * extra];
         // Each undirected edge's faces, to find the boundary.
         let mut edges: Vec<(u32, u32, u32)> = faces
             .iter()
@@ -421,20 +473,18 @@ impl FShape {
             }
             let (area, unit) = (0.5 * twice, nrm.map(|c| c / twice));
             let plane = Quadric::plane([unit[0], unit[1], unit[2], 0.0, -dot(unit, p[0])], area);
-            // The face's linear signal s = g·x + c, g in the face's plane.
-            let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
-            let (d1, d2) = (s[t[1] as usize] - s[t[0] as usize], s[t[2] as usize] - s[t[0] as usize]);
-            let (a11, a12, a22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
-            let det = a11 * a22 - a12 * a12;
-            let (al, be) = ((d1 * a22 - d2 * a12) / det, (d2 * a11 - d1 * a12) / det);
-            let g = [al * e1[0] + be * e2[0], al * e1[1] + be * e2[1], al * e1[2] + be * e2[2]];
-            let c = s[t[0] as usize] - dot(g, p[0]);
-            let signal = Quadric::plane([-g[0], -g[1], -g[2], 1.0, -c], area);
+            let signal = linear_signal(p, t.map(|w| s[w as usize]), area);
             for &w in t {
                 let qw = &mut q[w as usize];
                 qw.add(&plane);
                 qw.add(&signal);
                 qw.add(&Quadric::point(x[w as usize], ISOTROPIC * area));
+            }
+            for c in 0..extra {
+                let signal = linear_signal(p, t.map(|w| s_more[w as usize * extra + c]), area);
+                for &w in t {
+                    q_more[w as usize * extra + c].add(&signal);
+                }
             }
         }
         let mut k = 0;
@@ -468,6 +518,9 @@ impl FShape {
             around,
             boundary,
             q,
+            s_more,
+            q_more,
+            extra,
             version: vec![0; n],
         }
     }

@@ -133,17 +133,46 @@ fn a_sphere_reaches_the_count_as_a_clean_closed_surface_near_the_original() {
     }
 }
 
+/// The rms difference between `truth` at the fine vertices and the
+/// coarse mesh's P1 map `c` there (by point location; flat meshes).
+fn p1_rms(fine: &FShape, coarse: &FShape, c: usize, truth: &[f64]) -> f64 {
+    let f = coarse.channel(c).unwrap();
+    let mut sq = 0.0;
+    for (i, truth) in truth.iter().enumerate() {
+        let q = p3(fine, i);
+        let mut best = (f64::INFINITY, 0.0);
+        for t in coarse.cell_iter() {
+            let (a, b, d) = (p3(coarse, t[0]), p3(coarse, t[1]), p3(coarse, t[2]));
+            let area = cross(sub(b, a), sub(d, a))[2];
+            let l1 = cross(sub(d, b), sub(q, b))[2] / area;
+            let l2 = cross(sub(a, d), sub(q, d))[2] / area;
+            let l0 = 1.0 - l1 - l2;
+            let outside = (-l0).max(-l1).max(-l2);
+            if outside < best.0 {
+                best = (outside, l1 * f[t[0]] + l2 * f[t[1]] + l0 * f[t[2]]);
+            }
+        }
+        sq += (best.1 - truth).powi(2);
+    }
+    (sq / fine.n_vertices() as f64).sqrt()
+}
+
+/// A disc of 1 in 0 on a flat square: a feature only the signal shows.
+fn disc_on(fine: &FShape) -> Vec<f64> {
+    (0..fine.n_vertices())
+        .map(|i| {
+            let p = fine.point(i);
+            if (p[0] - 0.2).powi(2) + (p[1] + 0.1).powi(2) < 0.25 { 1.0 } else { 0.0 }
+        })
+        .collect()
+}
+
 #[test]
 fn the_signal_weight_keeps_a_sharp_signal_where_it_changes() {
     // A flat square with a disc of signal 1 in signal 0: the disc's edge
     // is a feature only the signal shows.
     let fine = square(4000, 7);
-    let disc: Vec<f64> = (0..fine.n_vertices())
-        .map(|i| {
-            let p = fine.point(i);
-            if (p[0] - 0.2).powi(2) + (p[1] + 0.1).powi(2) < 0.25 { 1.0 } else { 0.0 }
-        })
-        .collect();
+    let disc = disc_on(&fine);
     let fine = fine.with_signal(Some(disc.clone())).unwrap();
     let error = |weight: f64| {
         let coarse = fine.simplified_with(400, &SimplifyOptions { signal_weight: weight }).unwrap().shape;
@@ -153,26 +182,7 @@ fn the_signal_weight_keeps_a_sharp_signal_where_it_changes() {
         for (q, n) in triangles(&coarse) {
             assert!(n[2] > 0.0 && q >= MIN_QUALITY.min(0.01), "quality {q}, normal {n:?}");
         }
-        // The coarse P1 signal at the fine vertices, by point location.
-        let f = coarse.signal().unwrap();
-        let mut sq = 0.0;
-        for (i, truth) in disc.iter().enumerate() {
-            let q = p3(&fine, i);
-            let mut best = (f64::INFINITY, 0.0);
-            for c in coarse.cell_iter() {
-                let (a, b, d) = (p3(&coarse, c[0]), p3(&coarse, c[1]), p3(&coarse, c[2]));
-                let area = cross(sub(b, a), sub(d, a))[2];
-                let l1 = cross(sub(d, b), sub(q, b))[2] / area;
-                let l2 = cross(sub(a, d), sub(q, d))[2] / area;
-                let l0 = 1.0 - l1 - l2;
-                let outside = (-l0).max(-l1).max(-l2);
-                if outside < best.0 {
-                    best = (outside, l1 * f[c[0]] + l2 * f[c[1]] + l0 * f[c[2]]);
-                }
-            }
-            sq += (best.1 - truth).powi(2);
-        }
-        (sq / fine.n_vertices() as f64).sqrt()
+        p1_rms(&fine, &coarse, 0, &disc)
     };
     let (with, without) = (error(1.0), error(0.0));
     assert!(with < 0.75 * without, "rms error with the signal {with}, without {without}");
@@ -180,6 +190,33 @@ fn the_signal_weight_keeps_a_sharp_signal_where_it_changes() {
     let coarse = fine.simplified(400).unwrap().shape;
     let bb = coarse.bounding_box();
     assert_eq!(bb, fine.bounding_box());
+}
+
+#[test]
+fn every_map_is_weighed_and_a_constant_one_changes_nothing() {
+    // The disc in the second of two maps is kept as well as alone.
+    let fine = square(4000, 7);
+    let disc = disc_on(&fine);
+    let n = fine.n_vertices();
+    let interleave = |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).flat_map(|(x, y)| [*x, *y]).collect() };
+    let zeros = vec![0.0; n];
+    let two = fine.clone().with_signals(Some(interleave(&zeros, &disc)), 2).unwrap();
+    let coarse = two.simplified(400).unwrap().shape;
+    assert_eq!(coarse.n_vertices(), 400);
+    assert!(sound(&coarse), "{:?}", coarse.validate());
+    let second = p1_rms(&fine, &coarse, 1, &disc);
+    // Weighing only the first (constant) map leaves the disc to chance.
+    let geometry_only = fine.clone().with_signal(Some(zeros.clone())).unwrap().simplified(400).unwrap();
+    let kept: Vec<f64> = geometry_only.kept.iter().map(|&i| disc[i]).collect();
+    let blind = geometry_only.shape.with_signal(Some(kept)).unwrap();
+    let without = p1_rms(&fine, &blind, 0, &disc);
+    assert!(second < 0.75 * without, "the second map's rms error {second}, with it ignored {without}");
+    // A constant second map adds nothing: the same vertices and cells as
+    // the first map alone.
+    let alone = fine.clone().with_signal(Some(disc.clone())).unwrap().simplified(400).unwrap();
+    let with_constant = fine.with_signals(Some(interleave(&disc, &zeros)), 2).unwrap().simplified(400).unwrap();
+    assert_eq!(alone.kept, with_constant.kept);
+    assert_eq!(alone.shape.cells(), with_constant.shape.cells());
 }
 
 #[test]
