@@ -278,7 +278,8 @@ def read_signal(
 def read_mask(path: Union[str, "PathLike[str]"], n_vertices: int) -> npt.NDArray[np.float64]:
     """Reads a mask for a surface of n_vertices vertices: a FreeSurfer .label
     (its vertices 1, the rest 0), regions of a parcellation named after it
-    ("lh.aparc.annot:precentral,postcentral", also .label.gii) or a
+    ("lh.aparc.annot:precentral,postcentral", also .label.gii, and
+    "parcels.dlabel.nii:CORTEX_LEFT:V1_ROI" of a CIFTI-2 label file) or a
     per-vertex column of weights in [0, 1]."""
 
 def write_signal(
@@ -458,10 +459,13 @@ class Correspondence:
 def read_parcellation(
     path: Union[str, "PathLike[str]"],
 ) -> Tuple[npt.NDArray[np.int32], List[Tuple[int, str, Tuple[float, float, float, float]]]]:
-    """Reads a FreeSurfer .annot or a GIfTI label array (.label.gii):
-    (keys, regions). Keys per vertex (.annot: the colour table's row, -1
-    without a region, as nibabel's read_annot; GIfTI: the label key);
-    regions as (key, name, (red, green, blue, alpha)) in [0, 1]."""
+    """Reads a FreeSurfer .annot, a GIfTI label array (.label.gii) or one
+    surface structure of a CIFTI-2 label file (FILE.dlabel.nii:CORTEX_LEFT,
+    :CORTEX_LEFT:MAP when it holds several maps): (keys, regions). Keys per
+    vertex (.annot: the colour table's row, -1 without a region, as
+    nibabel's read_annot; GIfTI and CIFTI: the label key, and CIFTI's
+    vertices off the structure the table's ??? key); regions as (key,
+    name, (red, green, blue, alpha)) in [0, 1]."""
 
 def write_parcellation(
     path: Union[str, "PathLike[str]"],

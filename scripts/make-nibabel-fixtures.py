@@ -148,6 +148,29 @@ csv("expected_cifti_left_thickness.csv", "thickness", expand(thickness, left))
 csv("expected_cifti_left_myelin.csv", "myelin", expand(myelin, left))
 csv("expected_cifti_right_myelin.csv", "myelin", expand(myelin + np.float32(1), right))
 
+# CIFTI-2 dense labels (.dlabel.nii) on the same brain models' surfaces: two
+# maps, each with its own label table (key 0 "???" as Workbench writes it);
+# the keys are stored as float32, as HCP's files store them.
+parcels_table = {0: ("???", (0.0, 0.0, 0.0, 0.0)), 4: ("precentral", (0.8, 0.1, 0.05, 1.0)),
+                 7: ("postcentral", (0.1, 0.8, 0.25, 1.0)), 9: ("insula", (1.0, 0.75, 0.125, 1.0))}
+halves_table = {0: ("???", (0.0, 0.0, 0.0, 0.0)), 1: ("front", (0.5, 0.25, 1.0, 1.0)),
+                2: ("back", (0.25, 1.0, 0.5, 1.0))}
+halves = np.where(points[:, 1] > points[:, 1].mean(), 1, 2).astype(np.int32)
+surface_brain = (ax.BrainModelAxis.from_surface(left, 12, "CortexLeft")
+                 + ax.BrainModelAxis.from_surface(right, 12, "CortexRight"))
+right_keys = gifti_keys[::-1]
+labels = np.vstack([
+    np.concatenate([gifti_keys[left], right_keys[right]]),
+    np.concatenate([halves[left], halves[right]]),
+]).astype(np.float32)
+dlabel = nib.Cifti2Image(labels, header=(ax.LabelAxis(["parcels", "halves"], [parcels_table, halves_table]),
+                                         surface_brain))
+dlabel.nifti_header.set_intent("ConnDenseLabel")
+dlabel.to_filename(os.path.join(out, "parcels.dlabel.nii"))
+off = lambda keys, where: np.where(np.isin(np.arange(12), where), keys, 0)  # noqa: E731
+csv("expected_dlabel_left_parcels.csv", "key", off(gifti_keys, left))
+csv("expected_dlabel_right_halves.csv", "key", off(halves, right))
+
 # nibabel reads every file back to the same arrays (the big-endian ones
 # included), so the fixtures are what they claim to be. nibabel writes
 # ASCII floats with six decimals ('%10.6f'): those match to 5e-7.
@@ -180,6 +203,11 @@ for name in sorted(os.listdir(out)):
     elif name == "maps.dscalar.nii":
         img = nib.load(path)
         assert np.array_equal(img.get_fdata(dtype=np.float32), maps), name
+    elif name == "parcels.dlabel.nii":
+        img = nib.load(path)
+        assert np.array_equal(img.get_fdata(dtype=np.float32), labels), name
+        label_axis = img.header.get_axis(0)
+        assert label_axis.label[1][2] == ("back", (0.25, 1.0, 0.5, 1.0)), name
     elif name.startswith("thickness.mg"):
         assert np_equal(np.asarray(nib.load(path).dataobj).ravel(), thickness), name
 print(f"wrote {len(os.listdir(out))} files to {out} with nibabel {nib.__version__}")

@@ -149,7 +149,7 @@ pub struct Signals {
     pub target_signal: Vec<PathBuf>,
     /// The source's mask: a FreeSurfer .label (its vertices count, the
     /// rest is masked), regions of a parcellation (lh.aparc.annot:insula,
-    /// also .label.gii) or a per-vertex column of weights in [0, 1]. A
+    /// also .label.gii, and parcels.dlabel.nii:CORTEX_LEFT:V1_ROI) or a per-vertex column of weights in [0, 1]. A
     /// masked vertex's signal counts nowhere; its geometry still does.
     #[arg(long)]
     pub source_mask: Option<PathBuf>,

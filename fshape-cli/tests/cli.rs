@@ -2180,10 +2180,6 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
             "a map is written as a signal file",
         ),
         (
-            vec![run.clone(), "thick.dlabel.nii:CORTEX_LEFT".into(), file("transfer_x.csv")],
-            "CIFTI-2 label file is not read",
-        ),
-        (
             vec![
                 run.clone(),
                 file("transfer_map.csv"),
@@ -2212,6 +2208,34 @@ fn transfer_carries_maps_parcellations_and_labels_onto_the_target_and_back() {
     for f in ["transfer_x.annot", "transfer_x.gii", "transfer_x.csv", "transfer_x.dscalar.nii"] {
         assert!(!tmp(f).exists(), "{f}");
     }
+}
+
+/// A structure of a CIFTI-2 label file (HCP's parcellations) is carried as
+/// a parcellation, keys and table: through a registration that ended on
+/// its target (nibabel's icosahedron onto itself) every key comes back,
+/// the medial wall's `???` included.
+#[test]
+fn transfer_carries_a_cifti_label_file_as_a_parcellation() {
+    use fshape_mesh::io;
+    let run = tmp("transfer_dlabel_run");
+    std::fs::create_dir_all(&run).unwrap();
+    let nibabel = |name: &str| repo(&format!("fshape-mesh/tests/data/nibabel/{name}"));
+    let ico = io::read_mesh(nibabel("lh.icosahedron").as_ref(), &io::ReadOptions::default()).unwrap();
+    for name in ["matched.ply", "target.ply"] {
+        io::write_mesh(&run.join(name), &ico, io::Encoding::Binary).unwrap();
+    }
+    let (run, out) = (run.display().to_string(), tmp("transfer_dlabel.label.gii").display().to_string());
+    let input = format!("{}:CORTEX_LEFT:parcels", nibabel("parcels.dlabel.nii"));
+    let v = json(&fshape(&["transfer", &run, &input, &out, "--json"]));
+    assert_eq!((v["kind"].as_str(), v["vertices"].as_u64()), (Some("parcellation"), Some(12)), "{v}");
+    let carried = io::read_parcellation(out.as_ref()).unwrap();
+    let given = io::read_parcellation(input.as_ref()).unwrap();
+    assert_eq!(carried.keys, given.keys);
+    assert_eq!(carried.regions, given.regions);
+    // Keys are never averaged: no map file is written from them.
+    let o = fshape(&["transfer", &run, &input, &tmp("transfer_dlabel_x.func.gii").display().to_string()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.contains("written as .annot (FreeSurfer), .label.gii"), "{err}");
 }
 
 /// FSHAPE_SIMD caps the kernel sums' instruction set: a registration gives

@@ -151,10 +151,12 @@ pub(crate) fn write_label(
     py.detach(|| io::label::write_label(&path, &label, subject)).map_err(err)
 }
 
-/// Reads a parcellation: a FreeSurfer .annot or a GIfTI label array
-/// (.label.gii). Returns (keys, regions): a key per vertex (for .annot the
-/// colour table's row, -1 without a region, as nibabel's `read_annot`
-/// gives them; for GIfTI the label key) and the table as a list of
+/// Reads a parcellation: a FreeSurfer .annot, a GIfTI label array
+/// (.label.gii) or a structure of a CIFTI-2 label file
+/// (`FILE.dlabel.nii:CORTEX_LEFT[:MAP]`). Returns (keys, regions): a key
+/// per vertex (for .annot the colour table's row, -1 without a region, as
+/// nibabel's `read_annot` gives them; for GIfTI and CIFTI the label key)
+/// and the table as a list of
 /// (key, name, (red, green, blue, alpha)) with colours in [0, 1].
 #[pyfunction]
 #[expect(clippy::type_complexity, reason = "a parcellation's keys and table, as Python returns them")]

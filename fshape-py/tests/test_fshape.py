@@ -761,3 +761,30 @@ def test_cifti_maps_read_as_nibabel_reads_them_and_write_back_keeping_the_rest(t
     want[0, :len(left)] = new[left].astype(np.float32)
     assert np.array_equal(out.get_fdata(dtype=np.float32), want)
     assert out.header.get_axis(0) == img.header.get_axis(0) and out.header.get_axis(1) == brain
+
+
+def test_cifti_label_files_read_as_nibabel_reads_them(tmp_path):
+    rng = np.random.default_rng(11)
+    ax = nib.cifti2.cifti2_axes
+    n = 300
+    left = np.sort(rng.choice(n, size=260, replace=False))
+    brain = ax.BrainModelAxis.from_surface(left, n, "CortexLeft")
+    tables = [{0: ("???", (0.0, 0.0, 0.0, 0.0)), 1001: ("V1_ROI", (0.5, 0.25, 1.0, 1.0)),
+               1002: ("V2_ROI", (0.25, 1.0, 0.5, 1.0))},
+              {0: ("???", (0.0, 0.0, 0.0, 0.0)), 3: ("dorsal", (1.0, 0.5, 0.0, 1.0))}]
+    keys = np.vstack([rng.choice([0, 1001, 1002], size=len(left)), rng.choice([0, 3], size=len(left))])
+    img = nib.Cifti2Image(keys.astype(np.float32), header=(ax.LabelAxis(["areas", "streams"], tables), brain))
+    img.nifti_header.set_intent("ConnDenseLabel")
+    img.to_filename(tmp_path / "parcels.dlabel.nii")
+    got, regions = fshape.read_parcellation(f"{tmp_path / 'parcels.dlabel.nii'}:CORTEX_LEFT:areas")
+    # nibabel's keys on the structure's vertices, the ??? key (0) off it.
+    label_axis = nib.load(tmp_path / "parcels.dlabel.nii").header.get_axis(0)
+    expected = np.zeros(n, dtype=np.int64)
+    expected[left] = keys[0]
+    assert np.array_equal(got, expected)
+    assert {k: (name, tuple(rgba)) for k, name, rgba in regions} == label_axis.label[0]
+    # As a mask of regions, and never as a map.
+    mask = fshape.read_mask(f"{tmp_path / 'parcels.dlabel.nii'}:CORTEX_LEFT:areas:V1_ROI", n)
+    assert np.array_equal(mask, (expected == 1001).astype(float))
+    with pytest.raises(fshape.InputError, match="holds region keys"):
+        fshape.read_signal(f"{tmp_path / 'parcels.dlabel.nii'}:CORTEX_LEFT:streams", allow_missing=True)

@@ -21,7 +21,8 @@ pub struct Args {
     /// What to carry, on the vertices of the surface it comes from: a map
     /// (CSV, GIfTI, curv, MGH, or CIFTI-2 as FILE:STRUCTURE or
     /// FILE:STRUCTURE:MAP; NaN marks vertices without a value), a
-    /// parcellation (.annot, .label.gii) or a FreeSurfer .label.
+    /// parcellation (.annot, .label.gii, or a CIFTI-2 .dlabel.nii as
+    /// FILE:STRUCTURE or FILE:STRUCTURE:MAP) or a FreeSurfer .label.
     pub input: PathBuf,
     /// Where to write it, on the receiving surface's vertices, in the
     /// format its name says: a map as a signal file (.csv, .gii, .mgh,
@@ -144,6 +145,13 @@ fn is_parcellation(path: &Path) -> bool {
     name.ends_with(".annot") || name.ends_with(".label.gii")
 }
 
+/// Whether a path names a CIFTI-2 label file, with or without its
+/// `:STRUCTURE[:MAP]`.
+fn is_dlabel(path: &Path) -> bool {
+    let (file, _) = io::split_selector(path);
+    file.file_name().is_some_and(|f| f.to_string_lossy().to_ascii_lowercase().ends_with(".dlabel.nii"))
+}
+
 /// What is carried: a map (a number per vertex, interpolated), a
 /// parcellation or a label (regions, never averaged).
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -159,17 +167,10 @@ fn kind_of(input: &Path) -> Result<Kind> {
     if is_label(input) {
         return Ok(Kind::Label);
     }
-    if is_parcellation(input) {
+    if is_parcellation(input) || is_dlabel(input) {
         return Ok(Kind::Parcellation);
     }
     let name = input.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    if name.contains(".dlabel.nii") {
-        bail!(
-            "{}: a CIFTI-2 label file is not read yet (its keys must not be averaged as a map); \
-             export the structure as a GIfTI label file (wb_command -cifti-separate … -label) and carry that",
-            input.display()
-        );
-    }
     let stem = name.strip_suffix(".gz").unwrap_or(&name);
     if stem.ends_with(".gii") && io::read_parcellation(input).is_ok() {
         return Ok(Kind::Parcellation);

@@ -13,7 +13,10 @@
 //!
 //! fshape reads one map of one surface structure and expands it to the
 //! whole surface, NaN at the vertices the structure leaves out
-//! ([`Cifti::surface`]); and writes a map of a structure back into a copy
+//! ([`Cifti::surface`]); reads a dense label file's (`.dlabel.nii`, HCP's
+//! file for parcellations: a label table per map, the keys stored as
+//! numbers) map of a structure as a parcellation ([`Cifti::parcellation`]);
+//! and writes a map of a structure back into a copy
 //! of the file, every other byte (other structures, other maps, the header
 //! and the XML) kept ([`Cifti::with_surface`]). Values come out of the
 //! file's type as `f64`, scaled by `scl_slope`/`scl_inter` when set.
@@ -23,6 +26,7 @@ use std::ops::Range;
 use quick_xml::events::Event;
 
 use super::gifti::DataType;
+use super::parcellation::{Parcellation, Region};
 use super::{Location, ParseError, ParseErrorKind};
 
 /// The NIfTI-2 header's size, which its first four bytes hold.
@@ -60,6 +64,8 @@ pub struct Cifti {
     pub maps: Vec<String>,
     /// The brain models, in file order.
     pub models: Vec<BrainModel>,
+    /// A label file's tables, one per map (`None`: a file of values).
+    pub labels: Option<Vec<Vec<Region>>>,
     bytes: Vec<u8>,
     big_endian: bool,
     data_type: DataType,
@@ -148,7 +154,8 @@ impl Cifti {
             at += size;
         };
         let xml_start = xml.start;
-        let (maps, models, brain_dim) = parse_xml(&b[xml], lens).map_err(|kind| err(xml_start, kind))?;
+        let Parsed { maps, models, brain_dim, labels } =
+            parse_xml(&b[xml], lens).map_err(|kind| err(xml_start, kind))?;
         let n = lens[0].checked_mul(lens[1]).ok_or_else(|| err(16, bad("a matrix that fits in memory", "")))?;
         super::source::check_values(n as u64, "matrix values").map_err(|k| err(16, k))?;
         let want = n.saturating_mul(data_type.size());
@@ -165,6 +172,7 @@ impl Cifti {
         Ok(Cifti {
             maps,
             models,
+            labels,
             big_endian,
             data_type,
             data: vox_offset..vox_offset + want,
@@ -235,6 +243,56 @@ impl Cifti {
     pub fn surface(&self, structure: &str, map: Option<&str>, n_vertices: usize) -> Result<Vec<f64>, ParseErrorKind> {
         let model = self.model(structure)?;
         let map = self.map_index(map)?;
+        self.check_vertices(model, n_vertices)?;
+        let mut out = vec![f64::NAN; n_vertices];
+        let size = self.data_type.size();
+        for (r, &v) in model.vertices.iter().enumerate() {
+            let at = self.element(map, model.offset + r);
+            let x = self.data_type.decode(&self.bytes[at..at + size], self.big_endian);
+            out[v] = x * self.scale.0 + self.scale.1;
+        }
+        Ok(out)
+    }
+
+    /// A label file's map of a surface structure as a parcellation of the
+    /// whole surface of `n_vertices` vertices: the file's key at each vertex
+    /// of the structure, and at the others (the medial wall) the key of the
+    /// map's `???` region (Workbench's unlabelled key, 0 in HCP's files),
+    /// or −1 (no region) when its table has none. A key that is not an
+    /// integer is refused, naming its vertex.
+    pub fn parcellation(
+        &self,
+        structure: &str,
+        map: Option<&str>,
+        n_vertices: usize,
+    ) -> Result<Parcellation, ParseErrorKind> {
+        let Some(tables) = &self.labels else {
+            return Err(ParseErrorKind::Unsupported {
+                what: "CIFTI file as a parcellation (it holds values, not labels: read it as a map)",
+                found: "a dense file without label tables".into(),
+            });
+        };
+        let model = self.model(structure)?;
+        let m = self.map_index(map)?;
+        self.check_vertices(model, n_vertices)?;
+        let regions = tables[m].clone();
+        let none = regions.iter().find(|r| r.name == "???").map_or(-1, |r| r.key);
+        let mut keys = vec![none; n_vertices];
+        let size = self.data_type.size();
+        for (r, &v) in model.vertices.iter().enumerate() {
+            let at = self.element(m, model.offset + r);
+            let x = self.data_type.decode(&self.bytes[at..at + size], self.big_endian) * self.scale.0 + self.scale.1;
+            if x.fract() != 0.0 || !(f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&x) {
+                return Err(bad("an integer label key", format!("{x} at vertex {v} of {}", model.structure)));
+            }
+            keys[v] = x as i32;
+        }
+        Ok(Parcellation { keys, regions })
+    }
+
+    /// A structure of another vertex count than the surface's is refused
+    /// (the map of another surface).
+    fn check_vertices(&self, model: &BrainModel, n_vertices: usize) -> Result<(), ParseErrorKind> {
         let n = model.surface_vertices.expect("a surface model");
         if n != n_vertices {
             return Err(ParseErrorKind::CountMismatch {
@@ -243,14 +301,7 @@ impl Cifti {
                 found: n as u64,
             });
         }
-        let mut out = vec![f64::NAN; n];
-        let size = self.data_type.size();
-        for (r, &v) in model.vertices.iter().enumerate() {
-            let at = self.element(map, model.offset + r);
-            let x = self.data_type.decode(&self.bytes[at..at + size], self.big_endian);
-            out[v] = x * self.scale.0 + self.scale.1;
-        }
-        Ok(out)
+        Ok(())
     }
 
     /// The file's bytes with one map of a surface structure replaced by
@@ -287,10 +338,16 @@ impl Cifti {
     }
 }
 
-type Parsed = (Vec<String>, Vec<BrainModel>, usize);
+/// What the CIFTI XML says.
+struct Parsed {
+    maps: Vec<String>,
+    models: Vec<BrainModel>,
+    brain_dim: usize,
+    labels: Option<Vec<Vec<Region>>>,
+}
 
-/// The map names, the brain models and the brain-model dimension of the
-/// CIFTI XML, checked against the matrix's lengths.
+/// The map names, the brain models, the brain-model dimension and a label
+/// file's tables of the CIFTI XML, checked against the matrix's lengths.
 fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
     // The extension is padded with NULs (or spaces) to a multiple of 16.
     let end = xml.iter().rposition(|&c| c != 0).map_or(0, |k| k + 1);
@@ -301,6 +358,9 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
     let mut brain_dim = None;
     let mut map_dim = None;
     let mut series = None;
+    // A label file's tables (one per NamedMap) and the label being read.
+    let mut tables: Vec<Vec<Region>> = Vec::new();
+    let mut label: Option<(i32, [f64; 4])> = None;
     // The dimension the current MatrixIndicesMap applies to, and its type.
     let mut current: Option<(Vec<usize>, String)> = None;
     let mut text = String::new();
@@ -339,6 +399,20 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
                         }
                         current = Some((dims, kind));
                     }
+                    "LabelTable" => tables.push(Vec::new()),
+                    "Label" => {
+                        let key = get("Key").ok_or(ParseErrorKind::Missing { what: "a Label's Key" })?;
+                        let key = key.parse::<i32>().map_err(|_| bad("an integer label Key", key))?;
+                        let mut rgba = [0.0, 0.0, 0.0, 1.0];
+                        for (c, name) in rgba.iter_mut().zip(["Red", "Green", "Blue", "Alpha"]) {
+                            if let Some(v) = get(name) {
+                                *c = v.parse::<f64>().ok().filter(|c| (0.0..=1.0).contains(c)).ok_or_else(|| {
+                                    bad("a colour component in [0, 1]", format!("{name}=\"{v}\" of key {key}"))
+                                })?;
+                            }
+                        }
+                        label = Some((key, rgba));
+                    }
                     "BrainModel" => {
                         let structure =
                             get("BrainStructure").ok_or(ParseErrorKind::Missing { what: "BrainStructure" })?;
@@ -371,6 +445,12 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
             Event::End(e) => {
                 match e.name().as_ref() {
                     "MapName" => maps.push(text.trim().to_string()),
+                    "Label" => {
+                        let (Some((key, rgba)), Some(table)) = (label.take(), tables.last_mut()) else {
+                            return Err(bad("a Label inside a LabelTable", "elsewhere"));
+                        };
+                        table.push(Region { key, name: text.trim().to_string(), rgba });
+                    }
                     "VertexIndices" => {
                         let Some(m) = models.last_mut().filter(|m| m.surface_vertices.is_some()) else {
                             return Err(bad("VertexIndices inside a surface BrainModel", "elsewhere"));
@@ -416,8 +496,20 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
     }
     let brain_dim = brain_dim.ok_or(ParseErrorKind::Missing { what: "a brain-model dimension (a dense file)" })?;
     let other = 1 - brain_dim;
+    let mut labels = None;
     match map_dim {
-        Some((d, _)) if d == other => {}
+        Some((d, kind)) if d == other => {
+            if kind == "CIFTI_INDEX_TYPE_LABELS" {
+                if tables.len() != maps.len() {
+                    return Err(ParseErrorKind::CountMismatch {
+                        what: "label tables against maps (a NamedMap of a label file has both)",
+                        expected: maps.len() as u64,
+                        found: tables.len() as u64,
+                    });
+                }
+                labels = Some(tables);
+            }
+        }
         Some((_, kind)) => {
             return Err(ParseErrorKind::Unsupported {
                 what: "CIFTI matrix (both dimensions the same kind?)",
@@ -465,7 +557,7 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
             found: rows as u64,
         });
     }
-    Ok((maps, models, brain_dim))
+    Ok(Parsed { maps, models, brain_dim, labels })
 }
 
 #[cfg(test)]
@@ -511,6 +603,36 @@ mod tests {
             let e = Cifti::parse(bytes).unwrap_err().to_string();
             assert!(e.contains(says), "{says}: {e}");
         }
+    }
+
+    /// nibabel's label file (tests/data/nibabel): maps `parcels` and
+    /// `halves`, each with its table, on CORTEX_LEFT and CORTEX_RIGHT.
+    const LABELS: &[u8] = include_bytes!("../../tests/data/nibabel/parcels.dlabel.nii");
+
+    #[test]
+    fn damaged_label_files_are_refused_naming_what_is_wrong() {
+        let edit = |from: &str, to: &str| {
+            assert_eq!(from.len(), to.len());
+            let at = LABELS.windows(from.len()).position(|w| w == from.as_bytes()).expect("the fixture has it");
+            let mut b = LABELS.to_vec();
+            b[at..at + from.len()].copy_from_slice(to.as_bytes());
+            b
+        };
+        for (bytes, says) in [
+            (edit("Label Key=\"4\"", "Label Key=\"x\""), "an integer label Key"),
+            (edit("Green=\"0.75\"", "Green=\"7.50\""), "Green=\"7.50\" of key 9"),
+            (edit("<LabelTable><Label Key=\"0\"", "<LabelTible><Label Key=\"0\""), "a Label inside a LabelTable"),
+        ] {
+            let e = Cifti::parse(bytes).unwrap_err().to_string();
+            assert!(e.contains(says), "{says}: {e}");
+        }
+        // A key that is no integer, named with its vertex.
+        let c = Cifti::parse(LABELS.to_vec()).unwrap();
+        let mut bytes = LABELS.to_vec();
+        let at = c.element(0, 1);
+        bytes[at..at + 4].copy_from_slice(&4.5f32.to_le_bytes());
+        let e = Cifti::parse(bytes).unwrap().parcellation("CORTEX_LEFT", Some("parcels"), 12).unwrap_err();
+        assert!(e.to_string().contains("4.5 at vertex 1 of CORTEX_LEFT"), "{e}");
     }
 
     #[test]

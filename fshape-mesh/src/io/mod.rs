@@ -645,19 +645,41 @@ pub fn split_selector(path: &Path) -> (PathBuf, Option<String>) {
     (path.into(), None)
 }
 
-/// Whether a path names a parcellation: a FreeSurfer `.annot` or a GIfTI
-/// `.label.gii`.
+/// Whether a path names a parcellation: a FreeSurfer `.annot`, a GIfTI
+/// `.label.gii` or a CIFTI-2 `.dlabel.nii`.
 fn is_parcellation(path: &Path) -> bool {
     let name = path.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     let name = name.strip_suffix(".gz").unwrap_or(&name);
-    name.ends_with(".annot") || name.ends_with(".label.gii")
+    name.ends_with(".annot") || name.ends_with(".label.gii") || is_dlabel(name)
+}
+
+/// Whether a file name (lower case) is a CIFTI-2 label file's.
+fn is_dlabel(name: &str) -> bool {
+    name.ends_with(".dlabel.nii")
 }
 
 /// Reads a parcellation: a FreeSurfer `.annot`
-/// ([`freesurfer::parse_annot`]) or a GIfTI label array with its label
-/// table ([`gifti::parcellation`]).
+/// ([`freesurfer::parse_annot`]), a GIfTI label array with its label
+/// table ([`gifti::parcellation`]), or one surface structure's map of a
+/// CIFTI-2 label file, named after the file as for a map:
+/// `parcels.dlabel.nii:CORTEX_LEFT[:MAP]` ([`cifti::Cifti::parcellation`];
+/// the vertices the structure leaves out carry its `???` key).
 pub fn read_parcellation(path: &Path) -> Result<parcellation::Parcellation, ReadError> {
+    let (file, selector) = split_selector(path);
+    let path = file.as_path();
     let data = source::open(path, Expect::Any)?.read_all(path)?;
+    if cifti::is_nifti2(&data) {
+        return read_cifti_parcellation(path, data, selector.as_deref(), None);
+    }
+    if let Some(sel) = selector {
+        return Err(ReadError::Select {
+            path: path.into(),
+            source: ParseErrorKind::Unsupported {
+                what: "selector (only a CIFTI-2 file takes FILE:STRUCTURE)",
+                found: sel,
+            },
+        });
+    }
     let parse = |source| ReadError::Parse { path: path.into(), source };
     if Format::sniff(&data) == Some(Format::Gifti) {
         gifti::parcellation(&gifti::parse_in(&data, path.parent()).map_err(parse)?).map_err(parse)
@@ -669,7 +691,8 @@ pub fn read_parcellation(path: &Path) -> Result<parcellation::Parcellation, Read
 /// A mask for a surface of `n_vertices` vertices: a FreeSurfer `.label`
 /// (its vertices 1, the rest 0; [`label::Label::mask`]), the regions of a
 /// parcellation named after the file (`lh.aparc.annot:precentral,postcentral`,
-/// also a `.label.gii`), or a per-vertex column of weights in [0, 1] in
+/// also a `.label.gii`, and after a CIFTI-2 label file's structure and map:
+/// `parcels.dlabel.nii:CORTEX_LEFT[:MAP]:V1_ROI`), or a per-vertex column of weights in [0, 1] in
 /// any format [`read_signal`] reads (the weights' range is checked when
 /// the mask joins its shape).
 pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> {
@@ -679,6 +702,31 @@ pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> 
         return label::read_label(&file)?
             .mask(n_vertices)
             .map_err(|source| ReadError::Parse { path: file.clone(), source });
+    }
+    if is_dlabel(&name) {
+        // FILE:STRUCTURE[:MAP]:REGION,REGION
+        let Some((cifti_selector, regions)) = selector.as_deref().and_then(|s| s.rsplit_once(':')) else {
+            return Err(ReadError::Select {
+                path: file,
+                source: ParseErrorKind::NotChosen {
+                    what: "structure and regions",
+                    syntax: "FILE:STRUCTURE:REGION,REGION or FILE:STRUCTURE:MAP:REGION,REGION",
+                    available: Vec::new(),
+                },
+            });
+        };
+        let data = source::open(&file, Expect::Any)?.read_all(&file)?;
+        let p = read_cifti_parcellation(&file, data, Some(cifti_selector), Some(n_vertices))?;
+        let names: Vec<&str> = regions.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
+        if names.is_empty() {
+            let source = ParseErrorKind::NotChosen {
+                what: "regions",
+                syntax: "FILE:STRUCTURE[:MAP]:REGION,REGION",
+                available: p.regions.iter().map(|r| r.name.clone()).collect(),
+            };
+            return Err(ReadError::Select { path: file, source });
+        }
+        return p.mask(&names).map_err(|source| ReadError::Select { path: file, source });
     }
     if is_parcellation(&file) {
         let p = read_parcellation(&file)?;
@@ -786,7 +834,8 @@ pub fn read_signal_for(
 
 /// One surface structure's map of a CIFTI-2 file, `selector` being
 /// `STRUCTURE[:MAP]`; without `n_vertices`, the structure's surface size
-/// (within what the file's size can stand for).
+/// (within what the file's size can stand for). A label file is refused:
+/// its keys are no values to average.
 fn read_cifti(
     path: &Path,
     input: source::Input,
@@ -795,6 +844,29 @@ fn read_cifti(
 ) -> Result<csv::SignalColumn, ReadError> {
     let c =
         cifti::Cifti::parse(input.read_all(path)?).map_err(|source| ReadError::Parse { path: path.into(), source })?;
+    let select = |source| ReadError::Select { path: path.into(), source };
+    if c.labels.is_some() {
+        return Err(select(ParseErrorKind::Unsupported {
+            what: "CIFTI file as a map: it holds region keys (a .dlabel.nii); give it as a parcellation, \
+                   a mask's regions or to fshape transfer",
+            found: "label tables".into(),
+        }));
+    }
+    let (structure, map, n) = cifti_selection(path, &c, selector, n_vertices)?;
+    let values = c.surface(structure, map, n).map_err(select)?;
+    let name = c.maps[c.map_index(map).map_err(select)?].clone();
+    Ok(csv::SignalColumn { name, values })
+}
+
+/// The structure, the map and the surface's vertex count a CIFTI
+/// `selector` (`STRUCTURE[:MAP]`) names; without `n_vertices`, the
+/// structure's surface size, within what the file's size can stand for.
+fn cifti_selection<'a>(
+    path: &Path,
+    c: &cifti::Cifti,
+    selector: Option<&'a str>,
+    n_vertices: Option<usize>,
+) -> Result<(&'a str, Option<&'a str>, usize), ReadError> {
     let select = |source| ReadError::Select { path: path.into(), source };
     let (structure, map) = match selector.map(|s| s.split_once(':').unwrap_or((s, ""))) {
         Some((s, m)) if !s.is_empty() => (s, Some(m).filter(|m| !m.is_empty())),
@@ -825,9 +897,21 @@ fn read_cifti(
             n
         }
     };
-    let values = c.surface(structure, map, n).map_err(select)?;
-    let name = c.maps[c.map_index(map).map_err(select)?].clone();
-    Ok(csv::SignalColumn { name, values })
+    Ok((structure, map, n))
+}
+
+/// A CIFTI-2 label file's (`.dlabel.nii`) map of a structure as a
+/// parcellation ([`cifti::Cifti::parcellation`]), `selector` being
+/// `STRUCTURE[:MAP]`.
+fn read_cifti_parcellation(
+    path: &Path,
+    data: Vec<u8>,
+    selector: Option<&str>,
+    n_vertices: Option<usize>,
+) -> Result<parcellation::Parcellation, ReadError> {
+    let c = cifti::Cifti::parse(data).map_err(|source| ReadError::Parse { path: path.into(), source })?;
+    let (structure, map, n) = cifti_selection(path, &c, selector, n_vertices)?;
+    c.parcellation(structure, map, n).map_err(|source| ReadError::Select { path: path.into(), source })
 }
 
 /// Reads a CIFTI-2 file whole ([`cifti::Cifti::parse`]), to read its maps

@@ -405,3 +405,42 @@ fn a_cifti_map_written_back_changes_that_map_of_that_structure_only() {
     let e = c.with_surface("CORTEX_RIGHT", Some("myelin"), &new[..11]).unwrap_err().to_string();
     assert!(e.contains("expected 12, found 11"), "{e}");
 }
+
+#[test]
+fn cifti_label_files_from_nibabel_read_as_parcellations_with_their_tables() {
+    let file = fixture("parcels.dlabel.nii").display().to_string();
+    // Each map with its own table; the medial wall (off the structure)
+    // carries the `???` key, 0, as Workbench writes it.
+    let left = io::read_parcellation(format!("{file}:CORTEX_LEFT:parcels").as_ref()).unwrap();
+    assert_eq!(left.keys, keys("expected_dlabel_left_parcels.csv"));
+    assert_eq!((left.name(7), left.name(0)), (Some("postcentral"), Some("???")));
+    assert_eq!(left.regions[3].rgba, [1.0, 0.75, 0.125, 1.0]);
+    let right = io::read_parcellation(format!("{file}:CORTEX_RIGHT:2").as_ref()).unwrap();
+    assert_eq!(right.keys, keys("expected_dlabel_right_halves.csv"));
+    let names: Vec<&str> = right.regions.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["???", "front", "back"]);
+    assert_eq!(right.regions[2].rgba, [0.25, 1.0, 0.5, 1.0]);
+    // Regions as a mask: FILE:STRUCTURE[:MAP]:REGION,REGION.
+    let want: Vec<f64> = left.keys.iter().map(|&k| f64::from(u8::from(k == 4 || k == 9))).collect();
+    let mask = io::read_mask(format!("{file}:CORTEX_LEFT:parcels:precentral,insula").as_ref(), 12).unwrap();
+    assert_eq!(mask, want);
+    for (path, says) in [
+        (format!("{file}:CORTEX_LEFT"), "name the structure and regions after the file"),
+        (format!("{file}:CORTEX_LEFT:insula"), "name the map (the file has several)"),
+        (format!("{file}:CORTEX_LEFT:parcels:"), "name the regions after the file"),
+        (format!("{file}:CORTEX_LEFT:parcels:cuneus"), "no region named `cuneus`"),
+    ] {
+        let e = io::read_mask(path.as_ref(), 12).unwrap_err().to_string();
+        assert!(e.contains(says), "{path}: {e}");
+    }
+    let e = io::read_mask(format!("{file}:CORTEX_LEFT:parcels:insula").as_ref(), 13).unwrap_err().to_string();
+    assert!(e.contains("expected 13, found 12"), "{e}");
+    // Keys are no map, and values no parcellation.
+    let e = io::read_signal_for(format!("{file}:CORTEX_LEFT:parcels").as_ref(), Some(12), true).unwrap_err();
+    assert!(e.to_string().contains("it holds region keys (a .dlabel.nii)"), "{e}");
+    let maps = fixture("maps.dscalar.nii").display().to_string();
+    let e = io::read_parcellation(format!("{maps}:CORTEX_LEFT:thickness").as_ref()).unwrap_err().to_string();
+    assert!(e.contains("it holds values, not labels"), "{e}");
+    let e = io::read_parcellation(format!("{}:CORTEX_LEFT", fixture("lh.parcels.annot").display()).as_ref());
+    assert!(e.unwrap_err().to_string().contains("only a CIFTI-2 file takes FILE:STRUCTURE"));
+}
