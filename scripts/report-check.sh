@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The HTML reports as a colleague opens them: a registration's, an atlas's
+# The HTML reports as a colleague opens them: a registration's (of one map and of two), an atlas's
 # and a batch's report.html made by the fshape program (debug build unless
 # FSHAPE_BIN names one), each opened in headless Chromium (Debian's
 # package, installed if missing) by scripts/report-check.mjs through
@@ -49,8 +49,21 @@ source.ply,missing.ply,broken
 source.ply,target.ply,<script>window.pwned=2</script>
 TABLE
 "$FSHAPE_BIN" batch "$work/batch/pairs.csv" --config "$work/batch/config.toml" --out "$work/batch/out" >/dev/null 2>&1 || true
+# A registration of two maps (the digit's signal and its opposite): a scene
+# per map, the second drawn from the first's geometry.
+for side in source target; do
+    "$FSHAPE_BIN" convert "$work/digits/$side.ply" "$work/batch/$side.ascii.ply" --ascii
+    awk '/^element vertex/ { n = $3 } /^end_header/ { h = NR; print "map" > a; print "map" > b; next }
+         h && NR <= h + n { print $NF > a; print -$NF > b }' \
+        a="$work/batch/$side.1.csv" b="$work/batch/$side.2.csv" "$work/batch/$side.ascii.ply"
+done
+"$FSHAPE_BIN" match "$work/batch/source.ply" "$work/batch/target.ply" \
+    --signal "$work/batch/source.1.csv" --signal "$work/batch/source.2.csv" \
+    --target-signal "$work/batch/target.1.csv" --target-signal "$work/batch/target.2.csv" \
+    --config "$work/batch/config.toml" --out "$work/two_maps" >/dev/null 2>&1
 node "$check/report-check.mjs" \
     "$work/digits/ratio_100/report.html" \
+    "$work/two_maps/report.html" \
     "$work/stats-spheres/atlas/report.html" \
     "$work/batch/out/report.html::x<!--<script>&\"'" \
     "$work/batch/out/report.html::<script>window.pwned=2</script>" \

@@ -131,6 +131,10 @@ pub struct Scene {
     /// What the companion is ("target", "subject").
     companion_name: String,
     range: Option<[f64; 2]>,
+    /// The mesh's and the companion's frames and cells are the scene
+    /// before's (another map of the same shapes): they are not repeated.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    same_geometry: bool,
 }
 
 /// `frames` (one mesh, the same cells) with the simplification applied,
@@ -224,12 +228,42 @@ pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Opt
         companion: companion_data,
         companion_name,
         range: (lo < hi).then_some([lo, hi]),
+        same_geometry: false,
     })
 }
 
 /// `s` with map `c` of its signal alone (to show one map of several).
 fn one_map(s: &FShape, c: usize) -> Result<FShape> {
     Ok(s.clone().with_signal(s.channel(c))?)
+}
+
+/// A scene per map of `frames` (and of the companion), named by `name(c)`,
+/// for the viewer's picker. The first holds the geometry; each other holds
+/// its map only and shares the first's frames and cells, so that k maps
+/// cost one geometry in the page.
+fn map_scenes(
+    name: impl Fn(usize) -> String,
+    frames: &[&FShape],
+    labels: &[String],
+    companion: Option<(&str, &FShape)>,
+) -> Result<Vec<Scene>> {
+    let k = frames.first().map_or(1, |f| f.n_channels().max(1));
+    (0..k)
+        .map(|c| {
+            let maps: Vec<FShape> = frames.iter().map(|f| one_map(f, c)).collect::<Result<_>>()?;
+            let maps: Vec<&FShape> = maps.iter().collect();
+            let other = companion.map(|(n, s)| Ok::<_, ReportError>((n, one_map(s, c)?))).transpose()?;
+            let mut sc = scene(&name(c), &maps, labels.to_vec(), other.as_ref().map(|(n, s)| (*n, s)))?;
+            if c > 0 {
+                sc.same_geometry = true;
+                for m in std::iter::once(&mut sc.mesh).chain(sc.companion.as_mut()) {
+                    m.cells.clear();
+                    m.frames.clear();
+                }
+            }
+            Ok(sc)
+        })
+        .collect()
 }
 
 /// HTML-escaped text.
@@ -438,17 +472,11 @@ pub fn registration_page(
     // Several signal channels: a scene per channel, chosen with the
     // viewer's scene picker.
     let k = states.first().map_or(0, |(_, s)| s.n_channels());
+    let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
     let scenes = if k > 1 {
-        (0..k)
-            .map(|c| {
-                let frames: Vec<FShape> = states.iter().map(|(_, s)| one_map(s, c)).collect::<Result<_>>()?;
-                let frames: Vec<&FShape> = frames.iter().collect();
-                let name = format!("the geodesic, signal channel {} of {k}", c + 1);
-                scene(&name, &frames, labels.clone(), Some(("target", &one_map(target, c)?)))
-            })
-            .collect::<Result<Vec<_>>>()?
+        let name = |c: usize| format!("the geodesic, signal channel {} of {k}", c + 1);
+        map_scenes(name, &frames, &labels, Some(("target", target)))?
     } else {
-        let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
         vec![scene("the geodesic", &frames, labels, Some(("target", target)))?]
     };
     let (before, after) = (summary.quality_before.as_ref(), summary.quality.as_ref());
@@ -566,12 +594,7 @@ pub fn atlas_page_of(
     let maps = template.n_channels().max(1);
     // Several maps: the template in a scene per map (the viewer's picker).
     let mut scenes = if maps > 1 {
-        (0..maps)
-            .map(|c| {
-                let (s, t) = (one_map(start, c)?, one_map(template, c)?);
-                scene(&format!("the template, map {} of {maps}", c + 1), &[&s, &t], labels(), None)
-            })
-            .collect::<Result<Vec<_>>>()?
+        map_scenes(|c| format!("the template, map {} of {maps}", c + 1), &[start, template], &labels(), None)?
     } else {
         vec![scene("the template", &[start, template], labels(), None)?]
     };
@@ -816,6 +839,35 @@ mod tests {
         let (small, none) = mesh_data_within(&[&first], 10_000).unwrap();
         assert!(none.is_none());
         assert_eq!(floats(&small.frames[0]).len(), 3 * 2562);
+    }
+
+    #[test]
+    fn each_map_has_a_scene_and_the_maps_share_one_geometry() {
+        let sphere = fshape_mesh::generate::icosphere(3, 1.0);
+        let f: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [p[0], 10.0 * p[2]]).collect();
+        let two = sphere.clone().with_signals(Some(f), 2).unwrap();
+        let grown = two.clone().with_points(sphere.points().iter().map(|x| 1.5 * x).collect()).unwrap();
+        let scenes =
+            map_scenes(|c| format!("map {c}"), &[&two, &grown], &["a".into(), "b".into()], Some(("target", &grown)))
+                .unwrap();
+        assert_eq!(scenes.len(), 2);
+        // The first holds the frames and cells; the second only its map.
+        let (first, second) = (&scenes[0], &scenes[1]);
+        assert!(!first.same_geometry && first.mesh.frames.len() == 2 && !first.mesh.cells.is_empty());
+        assert!(second.same_geometry && second.mesh.frames.is_empty() && second.mesh.cells.is_empty());
+        assert!(second.companion.as_ref().is_some_and(|c| c.frames.is_empty() && c.signals.is_some()));
+        let floats = |b64: &str| -> Vec<f32> {
+            unpack(b64).chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        };
+        // Each its own map and its own colour range.
+        let x = floats(&first.mesh.frames[0]);
+        let m2 = floats(&second.mesh.signals.as_ref().unwrap()[0]);
+        for (v, value) in m2.iter().enumerate() {
+            assert_eq!(*value, (10.0 * sphere.point(v)[2]) as f32);
+            assert_eq!(floats(&first.mesh.signals.as_ref().unwrap()[0])[v], x[3 * v]);
+        }
+        let range = |s: &Scene| s.range.unwrap();
+        assert!(range(second)[1] > 5.0 * range(first)[1], "{:?} {:?}", range(first), range(second));
     }
 
     #[test]

@@ -17,10 +17,11 @@
     const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("gzip"));
     return new Type(await new Response(stream).arrayBuffer());
   }
-  async function mesh(m) {
+  // like: a mesh whose cells and frames these are (another map of it).
+  async function mesh(m, like) {
     if (!m) return null;
-    const cells = await inflate(m.cells, Uint32Array);
-    const frames = await Promise.all(m.frames.map((f) => inflate(f, Float32Array)));
+    const cells = like ? like.cells : await inflate(m.cells, Uint32Array);
+    const frames = like ? like.frames : await Promise.all(m.frames.map((f) => inflate(f, Float32Array)));
     const signals = m.signals ? await Promise.all(m.signals.map((f) => inflate(f, Float32Array))) : null;
     // A masked vertex's signal is NaN (no value): drawn grey, through a
     // value far below the range (the fragment shader greys v < -0.5).
@@ -191,7 +192,9 @@
 
   async function load() {
     for (const s of data.scenes) {
-      const m = await mesh(s.mesh), companion = await mesh(s.companion);
+      // A scene of another map shares the scene before's geometry.
+      const prev = s.same_geometry ? scenes[scenes.length - 1] : null;
+      const m = await mesh(s.mesh, prev && prev.mesh), companion = await mesh(s.companion, prev && prev.companion);
       let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
       for (const x of m.frames.concat(companion ? companion.frames : [])) {
         for (let i = 0; i < x.length; i += 3) for (let k = 0; k < 3; k++) { lo[k] = Math.min(lo[k], x[i + k]); hi[k] = Math.max(hi[k], x[i + k]); }
