@@ -544,3 +544,45 @@ pub fn collection(entries: &[(f64, &str)]) -> String {
     pvd.push_str("  </Collection>\n</VTKFile>\n");
     pvd
 }
+
+/// The `(time, file)` entries of a ParaView collection, in file order, as
+/// [`collection`] writes them (attribute values unescaped by an XML
+/// reader, so any file name comes back as written).
+pub fn parse_collection(text: &str) -> Result<Vec<(f64, String)>, ParseErrorKind> {
+    let bad = |expected: &'static str, found: String| ParseErrorKind::BadToken { expected, found };
+    let mut reader = quick_xml::Reader::from_str(text);
+    let mut out = Vec::new();
+    loop {
+        match reader.read_event().map_err(|e| bad("a well-formed .pvd (XML)", e.to_string()))? {
+            quick_xml::events::Event::Start(e) | quick_xml::events::Event::Empty(e)
+                if e.name().as_ref() == "DataSet" =>
+            {
+                let (mut time, mut file) = (None, None);
+                for a in e.attributes() {
+                    let a = a.map_err(|e| bad("a well-formed attribute", e.to_string()))?;
+                    let value = a
+                        .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                        .map_err(|e| bad("a well-formed attribute value", e.to_string()))?;
+                    match a.key.as_ref() {
+                        "timestep" => {
+                            time =
+                                Some(value.trim().parse::<f64>().map_err(|_| bad("a number timestep", value.into()))?)
+                        }
+                        "file" => file = Some(value.into_owned()),
+                        _ => {}
+                    }
+                }
+                match (time, file) {
+                    (Some(t), Some(f)) => out.push((t, f)),
+                    _ => return Err(ParseErrorKind::Missing { what: "a DataSet's timestep and file" }),
+                }
+            }
+            quick_xml::events::Event::Eof => break,
+            _ => {}
+        }
+    }
+    if out.is_empty() {
+        return Err(ParseErrorKind::Missing { what: "a DataSet (the collection holds no state)" });
+    }
+    Ok(out)
+}
