@@ -10,8 +10,12 @@
 //! pial-to-white distance) or `conte69` (data/conte69_32k/lh.midthickness,
 //! 32 492 vertices, with its thickness; the medial wall, `nan` in the
 //! file as HCP ships it, masked: it moves with the surface and counts in
-//! the geometric attachment, its thickness counts nowhere). S1's
-//! pial-to-white distance has no missing values (its wall is not marked).
+//! the geometric attachment, its thickness counts nowhere), or
+//! `conte69-maps`: the same with two maps, thickness and HCP's T1w/T2w
+//! myelin map (data/conte69_32k/lh.t1wt2w), NaN on the same wall, each
+//! with its own signal width (1 mm and 0.5, about three of its
+//! deviations). S1's pial-to-white distance has no missing values (its
+//! wall is not marked).
 //! The target is the source moved by six 20 mm wide bumps of
 //! displacement, at most 10 mm, with four 20 mm wide bumps of ±½ standard
 //! deviation added to its signal (seed 35). The configuration
@@ -34,13 +38,13 @@ use fshape_mesh::io::{self, Encoding, ReadOptions};
 
 /// The registration the benchmark runs on a surface of `n` vertices: the
 /// cortex demo's model (H¹ metamorphosis, ℓ = 5 mm; deformation widths 20
-/// and 10 mm with τ = 1e-6; attachment gaussian:σ / gaussian:1 mm / Binet
-/// with τ = 1e-6), γ_f = 0.01, RK4 with 5 steps, p_0 in the energy
+/// and 10 mm with τ = 1e-6; attachment gaussian:σ / `kernel_signal` (gaussian:1
+/// mm for one map) / Binet with τ = 1e-6), γ_f = 0.01, RK4 with 5 steps, p_0 in the energy
 /// metric, and four stages: k_p 20, 10 and 5 mm on copies simplified to
 /// 2000, 8000 and a fifth of the vertices (at least 8000; the targets
 /// simplified alike), then k_p 2.5 mm on the surface itself, with at most
 /// 100, 100, 60 and 10 iterations.
-fn config(n: usize) -> Result<Config> {
+fn config(n: usize, kernel_signal: &str) -> Result<Config> {
     let third = (n / 5 / 1000 * 1000).max(8000);
     let text = format!(
         r#"
@@ -59,7 +63,7 @@ steps = 5
 
 [attachment]
 kernel_geom = "gaussian:5"
-kernel_signal = "gaussian:1"
+kernel_signal = "{kernel_signal}"
 kernel_grass = "binet"
 tolerance = 1e-6
 
@@ -145,19 +149,30 @@ fn main() -> Result<()> {
     let case = args.first().map(String::as_str).unwrap_or("s1");
     let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(PathBuf::from);
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
-    let (mesh, signal) = match case {
-        "s1" => ("pycortex_S1/lh.pia.ply.gz", "pycortex_S1/lh.pia_wm_distance.csv.gz"),
-        "conte69" => ("conte69_32k/lh.midthickness.ply.gz", "conte69_32k/lh.thickness.csv.gz"),
-        other => anyhow::bail!("unknown case {other}: s1 or conte69"),
+    let (mesh, signals, kernel_signal): (&str, &[&str], &str) = match case {
+        "s1" => ("pycortex_S1/lh.pia.ply.gz", &["pycortex_S1/lh.pia_wm_distance.csv.gz"], "gaussian:1"),
+        "conte69" => ("conte69_32k/lh.midthickness.ply.gz", &["conte69_32k/lh.thickness.csv.gz"], "gaussian:1"),
+        "conte69-maps" => (
+            "conte69_32k/lh.midthickness.ply.gz",
+            &["conte69_32k/lh.thickness.csv.gz", "conte69_32k/lh.t1wt2w.csv.gz"],
+            "gaussian:1,0.5",
+        ),
+        other => anyhow::bail!("unknown case {other}: s1, conte69 or conte69-maps"),
     };
+    let signal = signals.join(" and ");
     let out = flag("--out").unwrap_or_else(|| Path::new("target/native_resolution").join(case));
     std::fs::create_dir_all(&out)?;
     let clock = Instant::now();
     let shape = io::read_mesh(&data.join(mesh), &ReadOptions::default())?;
-    let column = io::csv::read_signal(&data.join(signal), true)?;
-    let missing = column.values.iter().filter(|v| v.is_nan()).count();
-    let mask = (missing > 0).then(|| column.values.iter().map(|v| if v.is_nan() { 0.0 } else { 1.0 }).collect());
-    let source = shape.with_signal_and_mask(Some(column.values), mask)?;
+    let columns =
+        signals.iter().map(|s| Ok(io::csv::read_signal(&data.join(s), true)?.values)).collect::<Result<Vec<_>>>()?;
+    let n = shape.n_vertices();
+    // A vertex missing in any map is masked (conte69's maps share their wall).
+    let missing = (0..n).filter(|&v| columns.iter().any(|c| c[v].is_nan())).count();
+    let mask =
+        (missing > 0).then(|| (0..n).map(|v| f64::from(u8::from(columns.iter().all(|c| !c[v].is_nan())))).collect());
+    let values: Vec<f64> = (0..n).flat_map(|v| columns.iter().map(move |c| c[v])).collect();
+    let source = shape.with_signals_and_mask(Some(values), columns.len(), mask)?;
     let pair = fshape_match::demo::displaced(&source, 10.0, 20.0, 35)?;
     let target = pair.target;
     println!(
@@ -168,7 +183,7 @@ fn main() -> Result<()> {
     );
     let config = match flag("--config") {
         Some(path) => Config::read(&path)?,
-        None => config(source.n_vertices())?,
+        None => config(source.n_vertices(), kernel_signal)?,
     };
     if args.iter().any(|a| a == "--profile") {
         return profile(&source, &target, &config);
@@ -184,7 +199,7 @@ fn main() -> Result<()> {
     let matched = source
         .clone()
         .with_points(result.trajectory.points(last).to_vec())?
-        .with_signal(Some(result.trajectory.signal(last).to_vec()))?;
+        .with_signals(Some(result.trajectory.signal(last).to_vec()), source.n_channels())?;
     for (name, s) in [("source.ply", &source), ("target.ply", &target), ("matched.ply", &matched)] {
         io::write_mesh(&out.join(name), s, Encoding::Binary)?;
     }
@@ -207,6 +222,14 @@ fn main() -> Result<()> {
         pct(q0.signal_rms.unwrap_or(f64::NAN)),
         pct(q.signal_rms.unwrap_or(f64::NAN))
     );
+    for (c, (a, b)) in q0.channels.iter().zip(&q.channels).enumerate().skip(1) {
+        println!(
+            "map {}: signal error {:.2} % -> {:.2} % of its range",
+            c + 1,
+            pct(a.signal_rms.unwrap_or(f64::NAN)),
+            pct(b.signal_rms.unwrap_or(f64::NAN))
+        );
+    }
     let summary = serde_json::json!({
         "case": case,
         "vertices": source.n_vertices(),

@@ -67,7 +67,8 @@ pub struct DisplacedPair {
     pub target: FShape,
     /// The displacement of each vertex (P × n).
     pub displacement: Vec<f64>,
-    /// The signal change at each vertex (P).
+    /// The signal change at each vertex, map by map (P × k, a vertex's
+    /// maps together).
     pub signal_change: Vec<f64>,
 }
 
@@ -77,7 +78,9 @@ pub struct DisplacedPair {
 /// largest displacement of a vertex is `amplitude`, and its signal changed
 /// by four Gaussian bumps of the same width and of heights ±½ the signal's
 /// standard deviation (over the vertices with a value: a masked source's
-/// mask is kept and its masked vertices stay NaN). Deterministic: the same
+/// mask is kept and its masked vertices stay NaN). With several maps each
+/// gets its own four bumps, at places drawn after the map before's (so the
+/// first map's change is the one-map change). Deterministic: the same
 /// inputs give the same bits.
 pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Result<DisplacedPair, MatchError> {
     use fshape_mesh::generate::SplitMix64;
@@ -113,22 +116,26 @@ pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Resu
         displacement.chunks_exact(dim).map(|d| d.iter().map(|v| v * v).sum::<f64>().sqrt()).fold(0.0, f64::max);
     let scale = if largest > 0.0 { amplitude / largest } else { 0.0 };
     displacement.iter_mut().for_each(|v| *v *= scale);
-    // The signal's spread over the vertices with a value (a masked vertex's
+    // Each map's spread over the vertices with a value (a masked vertex's
     // is NaN and stays so on the target).
-    let valued = signal.iter().filter(|v| !v.is_nan()).count().max(1) as f64;
-    let mean = signal.iter().filter(|v| !v.is_nan()).sum::<f64>() / valued;
-    let sd = (signal.iter().filter(|v| !v.is_nan()).map(|v| (v - mean) * (v - mean)).sum::<f64>() / valued).sqrt();
-    let mut signal_change = vec![0.0; n];
-    for k in 0..4 {
-        let c = (rng.next_u64() % n as u64) as usize;
-        let height = if k % 2 == 0 { 0.5 * sd } else { -0.5 * sd };
-        for (i, p) in x.chunks_exact(dim).enumerate() {
-            signal_change[i] += height * bump(c, p);
+    let k = source.n_channels().max(1);
+    let mut signal_change = vec![0.0; n * k];
+    for channel in 0..k {
+        let values = || signal.iter().skip(channel).step_by(k).filter(|v| !v.is_nan());
+        let valued = values().count().max(1) as f64;
+        let mean = values().sum::<f64>() / valued;
+        let sd = (values().map(|v| (v - mean) * (v - mean)).sum::<f64>() / valued).sqrt();
+        for b in 0..4 {
+            let c = (rng.next_u64() % n as u64) as usize;
+            let height = if b % 2 == 0 { 0.5 * sd } else { -0.5 * sd };
+            for (i, p) in x.chunks_exact(dim).enumerate() {
+                signal_change[i * k + channel] += height * bump(c, p);
+            }
         }
     }
     let points: Vec<f64> = x.iter().zip(&displacement).map(|(a, b)| a + b).collect();
     let target_signal: Vec<f64> = signal.iter().zip(&signal_change).map(|(a, b)| a + b).collect();
-    let target = source.clone().with_points(points)?.with_signal(Some(target_signal))?;
+    let target = source.clone().with_points(points)?.with_signals(Some(target_signal), k)?;
     Ok(DisplacedPair { target, displacement, signal_change })
 }
 
@@ -162,5 +169,31 @@ mod tests {
             let t = b.target.signal().unwrap()[v];
             assert!(if mask[v] == 0.0 { t.is_nan() } else { (t - values[v] - b.signal_change[v]).abs() < 1e-12 });
         }
+    }
+
+    /// With two maps the first changes as alone (the same bits) and the
+    /// second by its own bumps, scaled by its own spread, elsewhere.
+    #[test]
+    fn each_map_changes_by_its_own_bumps_and_the_first_as_alone() {
+        let one = perturbed_icosphere(2, 0.05, 3);
+        let n = one.n_vertices();
+        let first = one.signal().unwrap().to_vec();
+        let second: Vec<f64> = (0..n).map(|v| 100.0 * one.point(v)[0]).collect();
+        let both: Vec<f64> = first.iter().zip(&second).flat_map(|(a, b)| [*a, *b]).collect();
+        let two = one.clone().with_signals(Some(both), 2).unwrap();
+        let (a, b) = (displaced(&one, 0.2, 0.3, 7).unwrap(), displaced(&two, 0.2, 0.3, 7).unwrap());
+        assert_eq!(a.displacement, b.displacement);
+        let channel = |c: usize| -> Vec<f64> { b.signal_change.iter().skip(c).step_by(2).copied().collect() };
+        assert_eq!(channel(0), a.signal_change);
+        assert_eq!(b.target.n_channels(), 2);
+        // The second map's change is of its own size (±½ its deviation at
+        // most, four bumps) and not the first's shape.
+        let largest = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let (c0, c1) = (channel(0), channel(1));
+        let ratio = largest(&c1) / largest(&c0);
+        assert!(ratio > 10.0, "{ratio}");
+        let scaled: Vec<f64> = c0.iter().map(|x| x * ratio).collect();
+        let apart = c1.iter().zip(&scaled).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        assert!(apart > 0.1 * largest(&c1), "{apart}");
     }
 }
