@@ -1,6 +1,7 @@
 //! The page: its HTML around the viewer's data and script (run by its
 //! hash alone), escaping, and tables.
 
+use crate::render;
 use crate::scene::Scene;
 
 /// HTML-escaped text.
@@ -43,7 +44,11 @@ fn script_hash(script: &str) -> String {
 /// The page's HTML. Its one script runs by its hash (no inline script
 /// else can); the data is JSON in a non-running script element.
 pub fn html(page: &Page) -> String {
-    let data = serde_json::json!({ "scenes": page.scenes, "view": [page.view.0, page.view.1] });
+    // The colour map as the PNG pictures draw it ([`render::viridis`]), 256
+    // RGB bytes: the viewer's texture and colour bar, so that both agree.
+    let colours: Vec<u8> =
+        (0..256).flat_map(|i| render::viridis(f64::from(i) / 255.0).map(|c| (255.0 * c).round() as u8)).collect();
+    let data = serde_json::json!({ "scenes": page.scenes, "view": [page.view.0, page.view.1], "colours": colours });
     let data = script_json(&data);
     let js = concat!("\n", include_str!("viewer.js"));
     let viewer = if page.scenes.is_empty() {
@@ -120,6 +125,28 @@ mod tests {
         assert!(page.contains(&format!("script-src {};", script_hash(&page[start..end]))));
         // Known vector (FIPS 180-2): SHA-256("abc").
         assert_eq!(script_hash("abc"), "'sha256-ungWv48Bz+pBQUDeXa4iI7ADYaOWF3qctBD/YfIAFa0='");
+    }
+
+    #[test]
+    fn the_viewer_colours_as_the_pictures_do() {
+        let page = html(&Page {
+            title: "t".into(),
+            subtitle: String::new(),
+            view: (0.0, 0.0),
+            scenes: vec![],
+            sections: vec![],
+        });
+        let start = page.find("id=\"fshape-data\">").unwrap() + "id=\"fshape-data\">".len();
+        let end = start + page[start..].find("</script>").unwrap();
+        let data: serde_json::Value = serde_json::from_str(&page[start..end]).unwrap();
+        let colours: Vec<u8> = serde_json::from_value(data["colours"].clone()).unwrap();
+        assert_eq!(colours.len(), 3 * 256);
+        for (i, t) in [(0, 0.0), (128, 128.0 / 255.0), (255, 1.0)] {
+            let want = render::viridis(t).map(|c| (255.0 * c).round() as u8);
+            assert_eq!(colours[3 * i..3 * i + 3], want, "colour {i}");
+        }
+        // The viewer has no table of its own.
+        assert!(!page.contains("0.267, 0.005"), "a second colour table in the script");
     }
 
     #[test]

@@ -5,13 +5,10 @@
 "use strict";
 (function () {
   const data = JSON.parse(document.getElementById("fshape-data").textContent);
-  const VIRIDIS = [[0.267, 0.005, 0.329], [0.279, 0.175, 0.483], [0.230, 0.322, 0.546], [0.173, 0.449, 0.558],
-    [0.128, 0.567, 0.551], [0.158, 0.684, 0.502], [0.369, 0.789, 0.383], [0.678, 0.864, 0.190], [0.993, 0.906, 0.144]];
-  function viridis(t) {
-    t = Math.min(1, Math.max(0, isNaN(t) ? 0 : t)) * 8;
-    const k = Math.min(7, Math.floor(t)), u = t - k;
-    return VIRIDIS[k].map((c, i) => c * (1 - u) + VIRIDIS[k + 1][i] * u);
-  }
+  // The colour map, 256 RGB bytes, as the PNG pictures draw it (the page's
+  // data carries it): the texture and the colour bar read it.
+  const colours = data.colours;
+  const colour = (t) => { const i = 3 * Math.round(255 * Math.min(1, Math.max(0, isNaN(t) ? 0 : t))); return colours.slice(i, i + 3); };
   async function inflate(b64, Type) {
     const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
     const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("gzip"));
@@ -84,7 +81,7 @@
   const attr = { p: gl.getAttribLocation(prog, "p"), n: gl.getAttribLocation(prog, "n"), f: gl.getAttribLocation(prog, "f") };
   const tex = gl.createTexture();
   const texels = new Uint8Array(256 * 4);
-  for (let i = 0; i < 256; i++) { const c = viridis(i / 255); texels.set([...c.map((x) => Math.round(255 * x)), 255], 4 * i); }
+  for (let i = 0; i < 256; i++) texels.set([...colours.slice(3 * i, 3 * i + 3), 255], 4 * i);
   gl.bindTexture(gl.TEXTURE_2D, tex);
   gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA, 256, 1, 0, gl.RGBA, gl.UNSIGNED_BYTE, texels);
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
@@ -167,8 +164,7 @@
   function colourBar(sc) {
     const bar = document.getElementById("bar"), ctx = bar.getContext("2d");
     for (let i = 0; i < bar.width; i++) {
-      const c = viridis(i / (bar.width - 1));
-      ctx.fillStyle = `rgb(${c.map((v) => Math.round(255 * v)).join(",")})`;
+      ctx.fillStyle = `rgb(${colour(i / (bar.width - 1)).join(",")})`;
       ctx.fillRect(i, 0, 1, bar.height);
     }
     const fmt = (v) => (Math.abs(v) >= 1e4 || (Math.abs(v) < 1e-2 && v !== 0) ? v.toExponential(2) : v.toPrecision(3));
