@@ -14,8 +14,10 @@ pub use fshape_fem::Norm;
 pub use fshape_shoot::{Model, ModelKind, Trajectory};
 pub use fshape_varifold::{Distance, VarifoldKernel};
 pub use stats::{Scores, StatsLabels, StatsRequest, StatsRun, StatsSubject, group_stats};
+pub use transfer::{TransferRequest, TransferRun, TransferValues, transfer};
 
 mod stats;
+mod transfer;
 
 use fshape_shoot::ShootError;
 

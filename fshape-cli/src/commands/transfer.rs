@@ -1,11 +1,13 @@
 //! `fshape transfer`: a map, a parcellation or a label carried through a
-//! registration, from the source's vertices onto the target's or back
+//! registration, from the source's vertices onto the target's or back:
+//! the files read and written here, the work in [`ops::transfer`]
 //! ([`fshape_match::transfer`] holds the rules).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use fshape_match::transfer::{Carried, Correspondence};
+use fshape_match::ops::{self, TransferRequest, TransferValues};
+use fshape_match::transfer::Carried;
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, ReadOptions, label::Label, parcellation::Parcellation};
 use serde::Serialize;
@@ -266,42 +268,34 @@ pub fn run(a: Args) -> Result<()> {
     let limit = max_distance(&a.max_distance, diagonal)?;
     let n = from.n_vertices();
     let side = if a.onto == Onto::Target { "source" } else { "target" };
-    let mut masked = read_masked(a.mask.as_deref(), n, side)?;
-    // The registration's own mask of the giving surface: its values did
-    // not count in the match (and may be a placeholder such as
-    // FreeSurfer's 0 on the medial wall).
-    let run_mask = from.mask().filter(|_| !a.no_run_mask);
-    for (m, w) in masked.iter_mut().zip(run_mask.unwrap_or(&[])) {
-        *m |= *w < 0.5;
-    }
+    let masked = read_masked(a.mask.as_deref(), n, side)?;
     let input = read_input(kind, &a.input, n, side)?;
-    let correspondence = Correspondence::new(from, onto).context("the closest points between the two surfaces")?;
-    let unmask_keys =
-        |keys: Vec<i32>| -> Vec<i32> { keys.iter().zip(&masked).map(|(&k, &m)| if m { -1 } else { k }).collect() };
-    let (kind, carried) = match input {
-        Input::Label(keys) => {
-            let out = correspondence.labels(&unmask_keys(keys), limit)?;
+    let (values, regions, name) = match input {
+        Input::Label(keys) => (TransferValues::Keys(keys), None, None),
+        Input::Parcellation(p) => (TransferValues::Keys(p.keys), Some(p.regions), None),
+        Input::Map { name, values } => (TransferValues::Map(values), None, Some(name)),
+    };
+    let request =
+        TransferRequest { from, onto, values, masked, run_mask: !a.no_run_mask, max_distance: limit, diagonal };
+    let run = ops::transfer(request).context("carrying the values between the two surfaces")?;
+    let kind = match (run.values, kind) {
+        (TransferValues::Keys(out), Kind::Label) => {
             let vertices: Vec<usize> = (0..out.len()).filter(|&v| out[v] == 0).collect();
             let points = vertices.iter().flat_map(|&v| point3(onto, v)).collect();
             let values = vec![0.0; vertices.len()];
             io::label::write_label(&a.output, &Label { vertices, points, values }, "fshape-transfer")?;
-            ("label", count_beyond(&correspondence, limit))
+            "label"
         }
-        Input::Parcellation(p) => {
-            let out = Parcellation { keys: correspondence.labels(&unmask_keys(p.keys), limit)?, regions: p.regions };
-            io::write_parcellation(&a.output, &out)?;
-            ("parcellation", count_beyond(&correspondence, limit))
+        (TransferValues::Keys(keys), _) => {
+            io::write_parcellation(&a.output, &Parcellation { keys, regions: regions.unwrap_or_default() })?;
+            "parcellation"
         }
-        Input::Map { name, values } => {
-            let values: Vec<f64> = values.iter().zip(&masked).map(|(&v, &m)| if m { f64::NAN } else { v }).collect();
-            let (out, carried) = correspondence.map(&values, limit)?;
-            io::write_signal(&a.output, &name, &out, onto.n_cells())?;
-            ("map", carried)
+        (TransferValues::Map(out), _) => {
+            io::write_signal(&a.output, name.as_deref().unwrap_or("signal"), &out, onto.n_cells())?;
+            "map"
         }
     };
-    let mut d: Vec<f64> = correspondence.distances().iter().map(|d| 100.0 * d / diagonal).collect();
-    d.sort_by(f64::total_cmp);
-    let at = |q: f64| d.get(((d.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0.0);
+    let [median, p95, max] = run.distance_percent;
     let summary = Summary {
         run: a.run.display().to_string(),
         input: a.input.display().to_string(),
@@ -309,12 +303,12 @@ pub fn run(a: Args) -> Result<()> {
         onto: a.onto,
         kind,
         max_distance: limit,
-        masked: masked.iter().filter(|m| **m).count(),
-        run_mask: run_mask.is_some(),
-        carried,
-        distance_median_percent: at(0.5),
-        distance_p95_percent: at(0.95),
-        distance_max_percent: at(1.0),
+        masked: run.masked,
+        run_mask: run.run_mask,
+        carried: run.carried,
+        distance_median_percent: median,
+        distance_p95_percent: p95,
+        distance_max_percent: max,
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -358,12 +352,4 @@ fn format_length(v: f64) -> String {
 fn point3(shape: &FShape, v: usize) -> [f64; 3] {
     let p = shape.point(v);
     [p[0], p[1], if p.len() == 3 { p[2] } else { 0.0 }]
-}
-
-fn count_beyond(c: &Correspondence, limit: f64) -> Carried {
-    Carried {
-        vertices: c.len(),
-        beyond: c.distances().iter().filter(|&&d| d.is_nan() || d > limit).count(),
-        missing: 0,
-    }
 }
