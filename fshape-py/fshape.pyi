@@ -9,19 +9,52 @@ releases the GIL while it computes.
 """
 
 from os import PathLike
-from typing import Any, Callable, List, Literal, Mapping, Optional, Sequence, Tuple, TypedDict, Union
+from typing import Any, Callable, List, Literal, Mapping, Optional, Sequence, Tuple, TypedDict, Union, final, type_check_only
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
 
+__all__ = [
+    "FShapeError",
+    "InputError",
+    "ConfigError",
+    "CheckpointError",
+    "DivergenceError",
+    "__version__",
+    "FShape",
+    "Config",
+    "Correspondence",
+    "read_mesh",
+    "write_mesh",
+    "read_signal",
+    "read_mask",
+    "read_label",
+    "write_label",
+    "write_signal",
+    "read_parcellation",
+    "write_parcellation",
+    "read_cifti",
+    "write_cifti",
+    "signal_norm",
+    "attachment",
+    "attachment_grad",
+    "quality",
+    "shoot",
+    "match",
+    "atlas",
+    "stats",
+    "report",
+]
+
+@final
 class Config:
     """A checked configuration, as a `fshape match` TOML file holds it
     (see the README's configuration reference). Errors name the key, and
     the line or file."""
 
-    def __init__(self, tables: Mapping[str, Any]) -> None:
+    def __new__(cls, tables: Mapping[str, Any]) -> "Config":
         """From the TOML file's tables as nested dicts:
         {"deformation": {"widths": [0.4]}, "attachment": {...}}."""
     @staticmethod
@@ -65,6 +98,7 @@ class DivergenceError(FShapeError):
     """Shooting left finite numbers, collapsed a cell or drifted from the
     Hamiltonian it conserves: reduce the momenta or add time steps."""
 
+@final
 class FShape:
     """A functional shape: vertices (n x d, d = 2 or 3), cells (m x 2
     segments or m x 3 triangles), an optional signal (one value per vertex,
@@ -75,13 +109,13 @@ class FShape:
     positive, indices in range, no repeated index in a cell).
     """
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         points: npt.ArrayLike,
         cells: npt.ArrayLike,
         signal: Optional[npt.ArrayLike] = None,
         mask: Optional[npt.ArrayLike] = None,
-    ) -> None: ...
+    ) -> "FShape": ...
     @property
     def points(self) -> npt.NDArray[np.float64]:
         """The vertex coordinates, n x d (a copy)."""
@@ -122,14 +156,17 @@ class FShape:
     def total_volume(self) -> float:
         """The total area (or length) of the cells."""
 
+@type_check_only
 class Finding(TypedDict):
     code: str
     message: str
 
+@type_check_only
 class Validation(TypedDict):
     errors: list[Finding]
     warnings: list[Finding]
 
+@type_check_only
 class Distance(TypedDict):
     value: float
     """A(X, Y), a squared distance."""
@@ -137,6 +174,7 @@ class Distance(TypedDict):
     xy: float
     yy: float
 
+@type_check_only
 class Quality(TypedDict):
     """How close a shape is to a target; distances are fractions of the
     target's bounding-box diagonal, signal errors of its signal's range."""
@@ -160,6 +198,7 @@ class Quality(TypedDict):
     signal_roughness_past_boundary: Optional[float]
     signal_range: float
 
+@type_check_only
 class Energies(TypedDict):
     value: float
     """J = energy + gamma_W * A."""
@@ -167,6 +206,7 @@ class Energies(TypedDict):
     signal_energy: float
     attachment: float
 
+@type_check_only
 class Geodesic(TypedDict):
     times: npt.NDArray[np.float64]
     points: npt.NDArray[np.float64]
@@ -175,6 +215,7 @@ class Geodesic(TypedDict):
     """T x n."""
     hamiltonian: npt.NDArray[np.float64]
 
+@type_check_only
 class Alignment(TypedDict):
     """A pre-alignment ([prealign] in the configuration): T(x) = matrix (x, 1)
     from the source's frame to the target's."""
@@ -192,6 +233,7 @@ class Alignment(TypedDict):
     start: int
     starts: int
 
+@type_check_only
 class MatchResult(TypedDict):
     stopped: bool
     """True when the progress callback ended the run before its end: the
@@ -215,6 +257,7 @@ class MatchResult(TypedDict):
     `matched`, what a `Correspondence` carries values between."""
     config: dict[str, Any]
 
+@type_check_only
 class SubjectResult(TypedDict):
     p0: npt.NDArray[np.float64]
     pf: npt.NDArray[np.float64]
@@ -230,6 +273,7 @@ class SubjectResult(TypedDict):
     """The template shot onto this subject (the geodesic's end), vertex for
     vertex with the template: what `stats` compares."""
 
+@type_check_only
 class AtlasResult(TypedDict):
     template: FShape
     template_momenta: Optional[npt.NDArray[np.float64]]
@@ -349,6 +393,7 @@ def atlas(
     same k for every subject and the template."""
 
 
+@type_check_only
 class MapTest(TypedDict):
     kind: Literal["t", "F"]
     dof: Tuple[int, int]
@@ -365,6 +410,7 @@ class MapTest(TypedDict):
     critical: float
     """The tested value (|t| when two-sided) that reaches p_FWE ≤ alpha."""
 
+@type_check_only
 class StatsResult(TypedDict):
     design: dict[str, Any]
     """columns (intercept first, a factor as `column[level]`), terms, x."""
@@ -424,6 +470,7 @@ def read_label(
     """Reads a FreeSurfer label file: (vertices, points k x 3, values), as
     nibabel's read_label(path, read_scalars=True) reads the first and last."""
 
+@type_check_only
 class Carried(TypedDict):
     vertices: int
     beyond: int
@@ -432,6 +479,7 @@ class Carried(TypedDict):
     """Vertices within it whose closest cell carries under half its weight
     on corners with a value."""
 
+@final
 class Correspondence:
     """Every vertex of `onto` at its closest point on `source` (the surface
     the values come from), computed once, as `fshape transfer` does. For a
@@ -439,7 +487,7 @@ class Correspondence:
     source's maps onto the target; Correspondence(r["target"], r["matched"])
     the target's back onto the source's vertices."""
 
-    def __init__(self, source: FShape, onto: FShape) -> None: ...
+    def __new__(cls, source: FShape, onto: FShape) -> "Correspondence": ...
     def map(
         self, values: npt.ArrayLike, max_distance: float = ...
     ) -> Tuple[npt.NDArray[np.float64], Carried]:

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The Python package as a user gets it: `pip install ./fshape-py` into the
-# project's venv (scripts/python-venv.sh), then its tests (pytest) and the
+# project's venv (scripts/python-venv.sh), its stub checked against the
+# compiled module (stubtest), then its tests (pytest) and the
 # the guide's example (docs/guide/src/python.md), run as written. The tests compare with the fshape
 # program, built here in debug (cargo test's build) unless FSHAPE_BIN names one.
 set -euo pipefail
@@ -26,6 +27,8 @@ echo "== fshape-py: pip install ./fshape-py"
 # without test-support) and would rebuild every crate.
 cargo test --workspace --no-run --quiet
 export FSHAPE_BIN="${FSHAPE_BIN:-$PWD/target/debug/fshape}"
+echo "== fshape-py: the stub (fshape.pyi) against the compiled module (mypy's stubtest)"
+(cd fshape-py && "$venv/bin/python" -m mypy.stubtest fshape --allowlist stubtest-allowlist.txt --ignore-disjoint-bases)
 echo "== fshape-py: pytest"
 "$venv/bin/python" -m pytest -q fshape-py/tests
 echo "== the guide's Python example"

@@ -26,7 +26,7 @@ fn value(result: &Bound<'_, PyDict>, key: &str) -> PyResult<serde_json::Value> {
 /// quality before and after, the stages and the configuration. One file,
 /// viewable offline.
 #[pyfunction]
-#[pyo3(signature = (path, source, target, result, view = (30.0, 20.0)))]
+#[pyo3(signature = (path, source, target, result, view = (30.0, 20.0)), text_signature = "(path, source, target, result, view=(30.0, 20.0))")]
 pub(crate) fn report(
     py: Python<'_>,
     path: PathBuf,
