@@ -717,39 +717,38 @@ pub fn read_mask(path: &Path, n_vertices: usize) -> Result<Vec<f64>, ReadError> 
         };
         let data = source::open(&file, Expect::Any)?.read_all(&file)?;
         let p = read_cifti_parcellation(&file, data, Some(cifti_selector), Some(n_vertices))?;
-        let names: Vec<&str> = regions.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
-        if names.is_empty() {
-            let source = ParseErrorKind::NotChosen {
-                what: "regions",
-                syntax: "FILE:STRUCTURE[:MAP]:REGION,REGION",
-                available: p.regions.iter().map(|r| r.name.clone()).collect(),
-            };
-            return Err(ReadError::Select { path: file, source });
-        }
-        return p.mask(&names).map_err(|source| ReadError::Select { path: file, source });
+        return regions_mask(file, &p, regions, "FILE:STRUCTURE[:MAP]:REGION,REGION");
     }
     if is_parcellation(&file) {
         let p = read_parcellation(&file)?;
         if p.keys.len() != n_vertices {
             return Err(ReadError::Count { path: file, found: p.keys.len(), expected: n_vertices });
         }
-        let selector = selector.unwrap_or_default();
-        let names: Vec<&str> = selector.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
-        if names.is_empty() {
-            let source = ParseErrorKind::NotChosen {
-                what: "regions",
-                syntax: "FILE:REGION,REGION",
-                available: p.regions.iter().map(|r| r.name.clone()).collect(),
-            };
-            return Err(ReadError::Select { path: file, source });
-        }
-        return p.mask(&names).map_err(|source| ReadError::Select { path: file, source });
+        return regions_mask(file, &p, &selector.unwrap_or_default(), "FILE:REGION,REGION");
     }
     let column = read_signal_for(path, Some(n_vertices), false)?;
     if column.values.len() != n_vertices {
         return Err(ReadError::Count { path: path.into(), found: column.values.len(), expected: n_vertices });
     }
     Ok(column.values)
+}
+
+/// The mask of a parcellation's regions named in `regions` (comma
+/// separated); none named is an error listing the table's names, written
+/// as `syntax` says.
+fn regions_mask(
+    file: PathBuf,
+    p: &parcellation::Parcellation,
+    regions: &str,
+    syntax: &'static str,
+) -> Result<Vec<f64>, ReadError> {
+    let names: Vec<&str> = regions.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
+    if names.is_empty() {
+        let available = p.regions.iter().map(|r| r.name.clone()).collect();
+        let source = ParseErrorKind::NotChosen { what: "regions", syntax, available };
+        return Err(ReadError::Select { path: file, source });
+    }
+    p.mask(&names).map_err(|source| ReadError::Select { path: file, source })
 }
 
 /// [`read_signal`] for a mesh of `n_vertices` vertices: a CSV column is
