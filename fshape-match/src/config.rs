@@ -31,7 +31,7 @@
 //! tolerance = 1e-6                  # truncation of k_p (default: exact)
 //! masked_geometry = true            # a masked region's geometry counts (default true)
 //!
-//! [optimizer]                       # matching only; every key optional
+//! [optimizer]                       # matching and atlases; every key optional
 //! method = "lbfgs"                  # lbfgs | gradient-descent          (default lbfgs)
 //! memory = 10                       # L-BFGS correction pairs           (default 10)
 //! block_scaling = true              # L-BFGS: own scale for p_0 and p^f (default true)
@@ -52,6 +52,16 @@
 //! decrease_window = [10, 10, 3]              # per stage (default [optimizer]'s)
 //! vertices = [2000, 10000]                   # each stage's template but the last (default: the source)
 //! coarse_targets = true                      # with vertices: the target simplified alike (default true)
+//!
+//! # or the same schedule, a table per stage (each key as above, for its
+//! # stage; one left out takes [integrator]'s or [optimizer]'s):
+//! # [[stage]]
+//! # kernel_geom = "gaussian:0.2"
+//! # scheme = "midpoint"
+//! # max_iterations = 200
+//! # vertices = 2000
+//! # [[stage]]
+//! # ...
 //!
 //! [atlas]                           # fshape atlas only
 //! template = "free"                 # free | hypertemplate              (default free)
@@ -133,6 +143,10 @@ pub struct Config {
     /// `[schedule]` (matching).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub schedule: Option<ScheduleSection>,
+    /// `[[stage]]`: the schedule as one table per stage (not with
+    /// `[schedule]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage: Option<Vec<StageTable>>,
     /// `[atlas]` (atlas estimation only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub atlas: Option<AtlasSection>,
@@ -575,6 +589,41 @@ impl ScheduleSection {
     }
 }
 
+/// `[[stage]]`. The schedule written as one table per stage, coarse to
+/// fine, instead of `[schedule]`'s arrays (not both): each stage's keys
+/// together, so no array can have one value too few. A key a stage leaves
+/// out takes `[integrator]`'s or `[optimizer]`'s value; errors name the
+/// stage (`stage[1].vertices`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageTable {
+    /// The stage's position kernel.
+    pub kernel_geom: PositionKernel,
+    /// Its integrator (the last stage's must be `[integrator]`'s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scheme: Option<Integrator>,
+    /// Its time steps (the last stage's must be `[integrator]`'s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<usize>,
+    /// Its iteration limit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_iterations: Option<usize>,
+    /// Its relative-decrease tolerance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decrease_tolerance: Option<f64>,
+    /// The window of its decrease test.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decrease_window: Option<usize>,
+    /// The vertex count of its template: every stage before the last has
+    /// one, or none does; the last runs on the source.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertices: Option<usize>,
+    /// With `vertices`: whether it matches the target simplified alike
+    /// (default true; the same in every stage that says).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_target: Option<bool>,
+}
+
 /// One stage of the schedule: what it is called in reports and its data
 /// attachment kernel.
 #[derive(Clone, Debug)]
@@ -626,7 +675,11 @@ impl Config {
     /// before the plan is checked: what a caller counts stage templates
     /// against.
     pub fn stage_count(&self) -> usize {
-        self.schedule.as_ref().map_or(1, |s| s.kernel_geom.len())
+        match (&self.schedule, &self.stage) {
+            (_, Some(tables)) => tables.len(),
+            (Some(s), None) => s.kernel_geom.len(),
+            (None, None) => 1,
+        }
     }
 
     /// A configuration with the deformation kernel's widths and every
@@ -639,6 +692,7 @@ impl Config {
             attachment: None,
             optimizer: OptimizerSection::default(),
             schedule: None,
+            stage: None,
             atlas: None,
             prealign: None,
         }
@@ -771,7 +825,21 @@ impl Config {
     /// The stages of the coarse-to-fine schedule (`[schedule] kernel_geom`
     /// with the rest of `[attachment]`), or the single `[attachment]` stage.
     pub fn schedule(&self) -> Result<Vec<StageSpec>, MatchError> {
-        match &self.schedule {
+        let from_tables;
+        let schedule = match (&self.schedule, &self.stage) {
+            (Some(_), Some(_)) => {
+                return Err(bad(
+                    "stage",
+                    "the schedule is given twice: as [schedule]'s arrays and as [[stage]] tables; keep one",
+                ));
+            }
+            (None, Some(tables)) => {
+                from_tables = self.tables_as_schedule(tables)?;
+                Some(&from_tables)
+            }
+            (schedule, None) => schedule.as_ref(),
+        };
+        match schedule {
             None => {
                 let geom = &self.attachment_section()?.kernel_geom;
                 let integrator = (self.integrator.scheme, self.integrator.steps);
@@ -789,6 +857,10 @@ impl Config {
             Some(s) if s.kernel_geom.is_empty() => Err(bad("schedule.kernel_geom", "needs at least one kernel")),
             Some(s) => {
                 let n = s.kernel_geom.len();
+                // A stage's key as the file wrote it.
+                let key = |name: &str, i: usize| {
+                    if self.stage.is_some() { format!("stage[{i}].{name}") } else { format!("schedule.{name}[{i}]") }
+                };
                 let per_stage = |key: &str, len: Option<usize>| match len {
                     Some(len) if len != n => Err(bad(
                         format!("schedule.{key}"),
@@ -806,7 +878,7 @@ impl Config {
                 let window = |i: usize| s.decrease_window.as_ref().map_or(self.optimizer.decrease_window, |v| v[i]);
                 if let Some(i) = (0..n).find(|&i| !(tolerance(i) >= 0.0 && tolerance(i).is_finite())) {
                     return Err(bad(
-                        format!("schedule.decrease_tolerance[{i}]"),
+                        key("decrease_tolerance", i),
                         format!("must be finite and at least 0, got {}", tolerance(i)),
                     ));
                 }
@@ -814,13 +886,14 @@ impl Config {
                 let scheme = |i: usize| s.scheme.as_ref().map_or(self.integrator.scheme, |v| v[i]);
                 let steps = |i: usize| s.steps.as_ref().map_or(self.integrator.steps, |v| v[i]);
                 if scheme(n - 1) != self.integrator.scheme || steps(n - 1) != self.integrator.steps {
+                    let last = if self.stage.is_some() { format!("stage[{}]", n - 1) } else { "schedule".into() };
                     return Err(bad(
-                        "schedule",
+                        last,
                         "the last stage must use [integrator]'s scheme and steps (the model asked for; coarser ones are for the stages before)",
                     ));
                 }
                 if let Some(i) = (0..n).find(|&i| steps(i) == 0) {
-                    return Err(bad(format!("schedule.steps[{i}]"), "must be at least 1"));
+                    return Err(bad(key("steps", i), "must be at least 1"));
                 }
                 if let Some(v) = &s.vertices {
                     if v.len() + 1 != n {
@@ -834,7 +907,7 @@ impl Config {
                     }
                     if let Some(i) = v.iter().position(|&c| c < 4) {
                         return Err(bad(
-                            format!("schedule.vertices[{i}]"),
+                            key("vertices", i),
                             format!("a surface needs at least 4 vertices, got {}", v[i]),
                         ));
                     }
@@ -847,7 +920,7 @@ impl Config {
                 (0..n)
                     .map(|i| {
                         let g = &s.kernel_geom[i];
-                        let kernel = self.attachment_with(g, &format!("schedule.kernel_geom[{i}]"))?;
+                        let kernel = self.attachment_with(g, &key("kernel_geom", i))?;
                         Ok(StageSpec {
                             label: g.text().to_string(),
                             kernel,
@@ -861,6 +934,62 @@ impl Config {
                     .collect()
             }
         }
+    }
+
+    /// `[[stage]]` tables as `[schedule]`'s arrays: a key some stages give
+    /// takes, in the others, `[integrator]`'s or `[optimizer]`'s value.
+    /// What arrays cannot say wrongly but tables can is refused here,
+    /// naming the stage.
+    fn tables_as_schedule(&self, tables: &[StageTable]) -> Result<ScheduleSection, MatchError> {
+        let n = tables.len();
+        if n == 0 {
+            return Err(bad("stage", "needs at least one [[stage]]"));
+        }
+        fn column<T: Copy>(
+            tables: &[StageTable],
+            get: impl Fn(&StageTable) -> Option<T>,
+            default: T,
+        ) -> Option<Vec<T>> {
+            tables.iter().any(|t| get(t).is_some()).then(|| tables.iter().map(|t| get(t).unwrap_or(default)).collect())
+        }
+        if tables[n - 1].vertices.is_some() {
+            return Err(bad(format!("stage[{}].vertices", n - 1), "the last stage runs on the source: no vertices"));
+        }
+        let with_vertices = tables.iter().filter(|t| t.vertices.is_some()).count();
+        if with_vertices != 0 && with_vertices != n - 1 {
+            let i = tables.iter().position(|t| t.vertices.is_none()).expect("one without");
+            return Err(bad(
+                format!("stage[{i}].vertices"),
+                "every stage before the last gives its template's vertex count, or none does",
+            ));
+        }
+        let mut coarse = tables.iter().enumerate().filter_map(|(i, t)| t.coarse_target.map(|c| (i, c)));
+        let coarse_targets = match coarse.next() {
+            None => None,
+            Some((i, _)) if with_vertices == 0 => {
+                return Err(bad(format!("stage[{i}].coarse_target"), "needs vertices"));
+            }
+            Some((_, c)) => {
+                if let Some((j, _)) = coarse.find(|&(_, d)| d != c) {
+                    return Err(bad(
+                        format!("stage[{j}].coarse_target"),
+                        "must be the same in every stage that gives it (the schedule has one setting)",
+                    ));
+                }
+                Some(c)
+            }
+        };
+        let (i, o) = (&self.integrator, &self.optimizer);
+        Ok(ScheduleSection {
+            kernel_geom: tables.iter().map(|t| t.kernel_geom.clone()).collect(),
+            scheme: column(tables, |t| t.scheme, i.scheme),
+            steps: column(tables, |t| t.steps, i.steps),
+            max_iterations: column(tables, |t| t.max_iterations, o.max_iterations),
+            decrease_tolerance: column(tables, |t| t.decrease_tolerance, o.decrease_tolerance),
+            decrease_window: column(tables, |t| t.decrease_window, o.decrease_window),
+            vertices: (with_vertices > 0).then(|| tables[..n - 1].iter().filter_map(|t| t.vertices).collect()),
+            coarse_targets,
+        })
     }
 
     /// The optimiser settings and the metrics of the unknowns.

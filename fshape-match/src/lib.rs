@@ -55,7 +55,7 @@ pub use atlas::{Atlas, AtlasResult, Cluster, Local, SubjectResult};
 pub use config::{
     AtlasSection, AttachmentSection, Config, DeformationSection, GrassKernelSpec, IntegratorSection, MethodKind,
     ModelSection, NormKind, OptimizerSection, Plan, PositionKernel, Scales, ScheduleSection, SignalKernelSpec,
-    StageSpec, TemplateKind,
+    StageSpec, StageTable, TemplateKind,
 };
 pub use prealign::{AlignKind, Alignment, Moving, PrealignSection};
 pub use quality::{ChannelQuality, Quality, quality};

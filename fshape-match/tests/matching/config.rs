@@ -152,3 +152,85 @@ fn the_config_fuzz_corpus_keeps_its_round_trip() {
     }
     assert!(parsed >= 3, "the seeds parse");
 }
+
+/// A stage as a schedule says it: label, integrator, iteration limit,
+/// decrease test, template vertices, coarse target.
+type Stage = (String, (Integrator, usize), usize, (f64, usize), Option<usize>, bool);
+
+/// What a schedule of stages says, comparable.
+fn stages(c: &Config) -> Vec<Stage> {
+    c.schedule()
+        .unwrap()
+        .into_iter()
+        .map(|s| (s.label, s.integrator, s.max_iterations, s.decrease, s.vertices, s.coarse_target))
+        .collect()
+}
+
+#[test]
+fn a_schedule_of_stage_tables_is_the_schedule_of_its_arrays() {
+    let base = "[deformation]\nwidths = [0.2]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n\
+                [optimizer]\nmax_iterations = 40\ndecrease_window = 7\n";
+    let arrays = format!(
+        "{base}[schedule]\nkernel_geom = [\"gaussian:0.4\", \"gaussian:0.2\", \"gaussian:0.1\"]\n\
+         max_iterations = [100, 40, 10]\nscheme = [\"midpoint\", \"rk4\", \"rk4\"]\n\
+         vertices = [500, 2000]\ncoarse_targets = false\n"
+    );
+    let tables = format!(
+        "{base}[[stage]]\nkernel_geom = \"gaussian:0.4\"\nmax_iterations = 100\nscheme = \"midpoint\"\n\
+         vertices = 500\ncoarse_target = false\n\n\
+         [[stage]]\nkernel_geom = \"gaussian:0.2\"\nvertices = 2000\n\n\
+         [[stage]]\nkernel_geom = \"gaussian:0.1\"\nmax_iterations = 10\n"
+    );
+    let (a, t) = (Config::parse(&arrays).unwrap(), Config::parse(&tables).unwrap());
+    assert_eq!(stages(&t), stages(&a));
+    assert_eq!((t.stage_count(), a.stage_count()), (3, 3));
+    assert_eq!(stages(&t)[1], ("gaussian:0.2".into(), (Integrator::Rk4, 10), 40, (1e-6, 7), Some(2000), false));
+    // Written and read back as tables.
+    let text = t.to_toml();
+    assert!(text.contains("[[stage]]"), "{text}");
+    assert_eq!(Config::parse(&text).unwrap(), t);
+    // What tables could say wrongly is refused, naming the stage.
+    let stage = |body: &str| format!("{base}{body}");
+    let last = "[[stage]]\nkernel_geom = \"gaussian:0.1\"\n";
+    for (text, says) in [
+        (format!("{arrays}{last}"), "the schedule is given twice"),
+        (
+            stage(&format!("[[stage]]\nkernel_geom = \"gaussian:0.4\"\n{last}vertices = 900\n")),
+            "stage[1].vertices: the last stage runs on the source",
+        ),
+        (
+            stage(&format!(
+                "[[stage]]\nkernel_geom = \"gaussian:0.4\"\nvertices = 500\n[[stage]]\nkernel_geom = \"gaussian:0.2\"\n{last}"
+            )),
+            "stage[1].vertices: every stage before the last",
+        ),
+        (
+            stage(&format!(
+                "[[stage]]\nkernel_geom = \"gaussian:0.4\"\nvertices = 500\ncoarse_target = true\n[[stage]]\nkernel_geom = \"gaussian:0.2\"\nvertices = 900\ncoarse_target = false\n{last}"
+            )),
+            "stage[1].coarse_target: must be the same",
+        ),
+        (
+            stage(&format!("[[stage]]\nkernel_geom = \"gaussian:0.4\"\ncoarse_target = true\n{last}")),
+            "stage[0].coarse_target: needs vertices",
+        ),
+        (
+            stage(&format!("[[stage]]\nkernel_geom = \"gaussian:0.4\"\nsteps = 0\n{last}")),
+            "stage[0].steps: must be at least 1",
+        ),
+        (
+            stage(&format!("[[stage]]\nkernel_geom = \"gaussian:0.4\"\n{last}scheme = \"euler\"\n")),
+            "stage[1]: the last stage must use",
+        ),
+        (
+            stage(&format!("[[stage]]\nkernel_geom = \"gaussian:0.4\"\ndecrease_tolerance = -1\n{last}")),
+            "stage[0].decrease_tolerance",
+        ),
+    ] {
+        let e = Config::parse(&text).and_then(|c| c.schedule()).unwrap_err().to_string();
+        assert!(e.contains(says), "{says}: {e}");
+    }
+    let e = Config::parse(&stage(&format!("{last}[[stage]]\nkernel_geom = \"gaussian:0.1\"\nmax_iteration = 3\n")))
+        .unwrap_err();
+    assert!(e.to_string().contains("stage") && e.to_string().contains("max_iteration"), "{e}");
+}

@@ -9,13 +9,14 @@
 use fshape_match::{AtlasSection, Config, PrealignSection};
 
 /// The sections, in the order of a file: TOML table, struct, source file.
-const SECTIONS: [(&str, &str, &str); 8] = [
+const SECTIONS: [(&str, &str, &str); 9] = [
     ("model", "ModelSection", "config.rs"),
     ("deformation", "DeformationSection", "config.rs"),
     ("integrator", "IntegratorSection", "config.rs"),
     ("attachment", "AttachmentSection", "config.rs"),
     ("optimizer", "OptimizerSection", "config.rs"),
     ("schedule", "ScheduleSection", "config.rs"),
+    ("[stage]", "StageTable", "config.rs"),
     ("atlas", "AtlasSection", "config.rs"),
     ("prealign", "PrealignSection", "prealign.rs"),
 ];
@@ -153,11 +154,23 @@ fn the_fields_read_from_the_source_are_the_keys_the_types_write() {
     )
     .unwrap();
     let written: toml::Table = toml::from_str(&toml::to_string(&full).unwrap()).unwrap();
+    // The schedule as stage tables, every key of a stage set (the last
+    // stage's vertices are refused only when the plan is checked).
+    let staged = Config::parse(
+        "[deformation]\nwidths = [1.0]\n[[stage]]\nkernel_geom = \"gaussian:1\"\nscheme = \"rk4\"\nsteps = 10\n\
+         max_iterations = 5\ndecrease_tolerance = 1e-3\ndecrease_window = 5\nvertices = 100\ncoarse_target = true\n",
+    )
+    .unwrap();
+    let staged: toml::Table = toml::from_str(&toml::to_string(&staged).unwrap()).unwrap();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     for (table, name, file) in SECTIONS {
         let source = std::fs::read_to_string(dir.join(file)).unwrap();
         let mut listed: Vec<String> = fields(&source, name).1.into_iter().map(|f| f.key).collect();
-        let mut keys: Vec<String> = written[table].as_table().unwrap().keys().cloned().collect();
+        let section = match table.strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+            Some(array) => &staged[array].as_array().unwrap()[0],
+            None => &written[table],
+        };
+        let mut keys: Vec<String> = section.as_table().unwrap().keys().cloned().collect();
         listed.sort();
         keys.sort();
         assert_eq!(listed, keys, "[{table}]");
