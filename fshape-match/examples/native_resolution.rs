@@ -167,6 +167,9 @@ fn main() -> Result<()> {
     let columns =
         signals.iter().map(|s| Ok(io::csv::read_signal(&data.join(s), true)?.values)).collect::<Result<Vec<_>>>()?;
     let n = shape.n_vertices();
+    if let Some((s, c)) = signals.iter().zip(&columns).find(|(_, c)| c.len() != n) {
+        anyhow::bail!("{s}: {} values for a mesh of {n} vertices", c.len());
+    }
     // A vertex missing in any map is masked (conte69's maps share their wall).
     let missing = (0..n).filter(|&v| columns.iter().any(|c| c[v].is_nan())).count();
     let mask =

@@ -56,29 +56,42 @@ pub struct Scene {
     same_geometry: bool,
 }
 
-/// `frames` (one mesh, the same cells) with the simplification applied,
-/// if any: the kept vertices of the first frame and its coarse cells.
-fn mesh_data(frames: &[&FShape]) -> Result<(MeshData, Option<usize>)> {
-    mesh_data_within(frames, DISPLAY_VERTICES)
+/// The vertices and cells a mesh is shown with: all of them, or, above
+/// the display limit, the first frame simplified (every map weighed).
+struct Shown {
+    cells: Vec<usize>,
+    /// The kept vertices, in order (`None`: every vertex).
+    kept: Option<Vec<usize>>,
 }
 
-/// [`mesh_data`] with the display limit given.
+fn shown(first: &FShape, limit: usize) -> Result<Shown> {
+    Ok(if first.n_vertices() > limit && first.kind() == CellKind::Triangle {
+        let s = first.simplified(limit)?;
+        Shown { cells: s.shape.cells().iter().map(|&c| s.kept[c]).collect(), kept: Some(s.kept) }
+    } else {
+        Shown { cells: first.cells().to_vec(), kept: None }
+    })
+}
+
+/// `frames` (one mesh, the same cells) with the simplification applied,
+/// if any: the kept vertices of the first frame and its coarse cells.
+#[cfg(test)]
 fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Option<usize>)> {
+    let s = shown(frames[0], limit)?;
+    Ok((mesh_data_shown(frames, 0, &s), s.kept.map(|k| k.len())))
+}
+
+/// `frames` at the vertices and cells `shown` says, with their map
+/// `channel`.
+fn mesh_data_shown(frames: &[&FShape], channel: usize, shown: &Shown) -> MeshData {
     let first = frames[0];
-    let (cells, kept): (Vec<usize>, Option<Vec<usize>>) =
-        if first.n_vertices() > limit && first.kind() == CellKind::Triangle {
-            let s = first.simplified(limit)?;
-            (s.shape.cells().iter().map(|&c| s.kept[c]).collect(), Some(s.kept))
-        } else {
-            (first.cells().to_vec(), None)
-        };
     // Renumber to the kept vertices (all of them when not simplified).
-    let order: Vec<usize> = kept.clone().unwrap_or_else(|| (0..first.n_vertices()).collect());
+    let order: Vec<usize> = shown.kept.clone().unwrap_or_else(|| (0..first.n_vertices()).collect());
     let mut index = vec![u32::MAX; first.n_vertices()];
     for (k, &v) in order.iter().enumerate() {
         index[v] = k as u32;
     }
-    let cell_bytes: Vec<u8> = cells.iter().flat_map(|&v| index[v].to_le_bytes()).collect();
+    let cell_bytes: Vec<u8> = shown.cells.iter().flat_map(|&v| index[v].to_le_bytes()).collect();
     let d = first.dim();
     let mut positions = Vec::new();
     let mut signals = Vec::new();
@@ -87,59 +100,67 @@ fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Optio
             let p = f.point(v);
             [p[0], p[1], if d == 3 { p[2] } else { 0.0 }]
         })));
-        // Several channels: the first is shown.
-        if let Some(s) = f.channel(0) {
+        if let Some(s) = f.channel(channel) {
             signals.push(packed_f32(order.iter().map(|&v| s[v])));
         }
     }
-    let data = MeshData {
+    MeshData {
         kind: if first.kind() == CellKind::Triangle { "triangle" } else { "segment" },
         planar: d == 2,
         cells: gzip_base64(&cell_bytes),
         frames: positions,
         signals: (signals.len() == frames.len()).then_some(signals),
-    };
-    Ok((data, kept.map(|k| k.len())))
+    }
 }
 
 /// A scene: `frames` under the slider (labelled), `companion` (named, as
 /// "target") beside. The colour range spans the first frame's and the
 /// companion's signals.
 pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Option<(&str, &FShape)>) -> Result<Scene> {
+    let first = frames.first().ok_or_else(|| ReportError::NoFrames { scene: name.to_string() })?;
+    let mesh = shown(first, DISPLAY_VERTICES)?;
+    let other = companion.map(|(_, c)| shown(c, DISPLAY_VERTICES)).transpose()?;
+    Ok(scene_shown(name, frames, labels, companion, 0, (&mesh, other.as_ref()), false))
+}
+
+/// [`scene`] of map `channel`, shown as `shown` says (the mesh's and the
+/// companion's); `per_map`: one of a scene per map (no note that only
+/// the first map is shown).
+fn scene_shown(
+    name: &str,
+    frames: &[&FShape],
+    labels: Vec<String>,
+    companion: Option<(&str, &FShape)>,
+    channel: usize,
+    shown: (&Shown, Option<&Shown>),
+    per_map: bool,
+) -> Scene {
     let (companion_name, companion) = match companion {
         Some((n, c)) => (n.to_string(), Some(c)),
         None => (String::new(), None),
     };
-    if frames.is_empty() {
-        return Err(ReportError::NoFrames { scene: name.to_string() });
-    }
-    let (mesh, simplified) = mesh_data(frames)?;
-    let (companion_data, companion_simplified) = match companion {
-        Some(c) => {
-            let (m, s) = mesh_data(&[c])?;
-            (Some(m), s)
-        }
-        None => (None, None),
-    };
+    let mesh = mesh_data_shown(frames, channel, shown.0);
+    let companion_data = companion.zip(shown.1).map(|(c, s)| mesh_data_shown(&[c], channel, s));
     let mut notes = Vec::new();
-    if let Some(k) = simplified {
+    if let Some(k) = &shown.0.kept {
         notes.push(format!(
-            "shown simplified from {} to {k} vertices (the files hold every vertex)",
-            frames[0].n_vertices()
+            "shown simplified from {} to {} vertices (the files hold every vertex)",
+            frames[0].n_vertices(),
+            k.len()
         ));
     }
-    if let (Some(k), Some(c)) = (companion_simplified, companion) {
-        notes.push(format!("the {companion_name} is shown simplified from {} to {k} vertices", c.n_vertices()));
+    if let (Some(k), Some(c)) = (shown.1.and_then(|s| s.kept.as_ref()), companion) {
+        notes.push(format!("the {companion_name} is shown simplified from {} to {} vertices", c.n_vertices(), k.len()));
     }
-    if frames[0].n_channels() > 1 {
+    if frames[0].n_channels() > 1 && !per_map {
         notes.push(format!(
             "the colours show the first of its {} signal channels (the files hold each)",
             frames[0].n_channels()
         ));
     }
-    let values = frames[0].channel(0).into_iter().chain(companion.and_then(|c| c.channel(0))).flatten();
+    let values = frames[0].channel(channel).into_iter().chain(companion.and_then(|c| c.channel(channel))).flatten();
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    Ok(Scene {
+    Scene {
         name: name.to_string(),
         labels,
         note: (!notes.is_empty()).then(|| format!("{}.", notes.join("; "))),
@@ -148,31 +169,38 @@ pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Opt
         companion_name,
         range: (lo < hi).then_some([lo, hi]),
         same_geometry: false,
-    })
-}
-
-/// `s` with map `c` of its signal alone (to show one map of several).
-fn one_map(s: &FShape, c: usize) -> Result<FShape> {
-    Ok(s.clone().with_signal(s.channel(c))?)
+    }
 }
 
 /// A scene per map of `frames` (and of the companion), named by `name(c)`,
 /// for the viewer's picker. The first holds the geometry; each other holds
-/// its map only and shares the first's frames and cells, so that k maps
-/// cost one geometry in the page.
+/// its map only, at the same vertices, and shares the first's frames and
+/// cells, so that k maps cost one geometry in the page.
 pub(crate) fn map_scenes(
     name: impl Fn(usize) -> String,
     frames: &[&FShape],
     labels: &[String],
     companion: Option<(&str, &FShape)>,
 ) -> Result<Vec<Scene>> {
-    let k = frames.first().map_or(1, |f| f.n_channels().max(1));
-    (0..k)
+    map_scenes_within(name, frames, labels, companion, DISPLAY_VERTICES)
+}
+
+/// [`map_scenes`] with the display limit given: one simplification for
+/// every map (the first frame's, weighing them all).
+fn map_scenes_within(
+    name: impl Fn(usize) -> String,
+    frames: &[&FShape],
+    labels: &[String],
+    companion: Option<(&str, &FShape)>,
+    limit: usize,
+) -> Result<Vec<Scene>> {
+    let first = frames.first().ok_or_else(|| ReportError::NoFrames { scene: name(0) })?;
+    let k = first.n_channels().max(1);
+    let mesh = shown(first, limit)?;
+    let other = companion.map(|(_, c)| shown(c, limit)).transpose()?;
+    Ok((0..k)
         .map(|c| {
-            let maps: Vec<FShape> = frames.iter().map(|f| one_map(f, c)).collect::<Result<_>>()?;
-            let maps: Vec<&FShape> = maps.iter().collect();
-            let other = companion.map(|(n, s)| Ok::<_, ReportError>((n, one_map(s, c)?))).transpose()?;
-            let mut sc = scene(&name(c), &maps, labels.to_vec(), other.as_ref().map(|(n, s)| (*n, s)))?;
+            let mut sc = scene_shown(&name(c), frames, labels.to_vec(), companion, c, (&mesh, other.as_ref()), true);
             if c > 0 {
                 sc.same_geometry = true;
                 for m in std::iter::once(&mut sc.mesh).chain(sc.companion.as_mut()) {
@@ -180,9 +208,9 @@ pub(crate) fn map_scenes(
                     m.frames.clear();
                 }
             }
-            Ok(sc)
+            sc
         })
-        .collect()
+        .collect())
 }
 
 #[cfg(test)]
@@ -257,5 +285,16 @@ mod tests {
         }
         let range = |s: &Scene| s.range.unwrap();
         assert!(range(second)[1] > 5.0 * range(first)[1], "{:?} {:?}", range(first), range(second));
+        // Simplified for display: every map at the same kept vertices (the
+        // second map's values are those of its own vertices there).
+        let scenes = map_scenes_within(|c| format!("map {c}"), &[&two], &["a".into()], None, 500).unwrap();
+        let kept = shown(&two, 500).unwrap().kept.expect("simplified");
+        assert_eq!(floats(&scenes[0].mesh.frames[0]).len(), 3 * kept.len());
+        for (c, sc) in scenes.iter().enumerate() {
+            let values = floats(&sc.mesh.signals.as_ref().unwrap()[0]);
+            let want: Vec<f32> = kept.iter().map(|&v| two.channel(c).unwrap()[v] as f32).collect();
+            assert_eq!(values, want, "map {c}");
+        }
+        assert!(scenes[1].note.as_deref().is_some_and(|n| n.contains("simplified") && !n.contains("first of its")));
     }
 }

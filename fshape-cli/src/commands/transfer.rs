@@ -151,7 +151,8 @@ fn is_parcellation(path: &Path) -> bool {
 /// `:STRUCTURE[:MAP]`.
 fn is_dlabel(path: &Path) -> bool {
     let (file, _) = io::split_selector(path);
-    file.file_name().is_some_and(|f| f.to_string_lossy().to_ascii_lowercase().ends_with(".dlabel.nii"))
+    let name = file.file_name().map(|f| f.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    name.strip_suffix(".gz").unwrap_or(&name).ends_with(".dlabel.nii")
 }
 
 /// What is carried: a map (a number per vertex, interpolated), a

@@ -63,6 +63,13 @@ pub struct TransferRun {
 pub fn transfer(request: TransferRequest<'_>) -> Result<TransferRun, MatchError> {
     let TransferRequest { from, onto, values, mut masked, run_mask, max_distance, diagonal } = request;
     let n = from.n_vertices();
+    let given = match &values {
+        TransferValues::Map(v) => v.len(),
+        TransferValues::Keys(k) => k.len(),
+    };
+    if given != n {
+        return Err(MatchError::InvalidInput(format!("a transfer of {given} values from a surface of {n} vertices")));
+    }
     if masked.len() != n {
         return Err(MatchError::InvalidInput(format!(
             "a transfer's mask has {} entries for a surface of {n} vertices",
@@ -145,8 +152,11 @@ mod tests {
         let want: Vec<i32> = (0..n).map(|v| if v % 5 == 0 { -1 } else { keys[v] }).collect();
         assert_eq!(run.values, TransferValues::Keys(want));
         assert!(!run.run_mask);
-        let mut wrong = request(TransferValues::Map(map), true);
+        let mut wrong = request(TransferValues::Map(map.clone()), true);
         wrong.masked.pop();
         assert!(transfer(wrong).unwrap_err().to_string().contains("mask has"));
+        let long: Vec<f64> = map.iter().chain([1.0].iter()).copied().collect();
+        let e = transfer(request(TransferValues::Map(long), true)).unwrap_err().to_string();
+        assert!(e.contains(&format!("{} values from a surface of {n} vertices", n + 1)), "{e}");
     }
 }

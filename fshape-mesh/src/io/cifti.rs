@@ -361,6 +361,7 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
     // A label file's tables (one per NamedMap) and the label being read.
     let mut tables: Vec<Vec<Region>> = Vec::new();
     let mut label: Option<(i32, [f64; 4])> = None;
+    let mut in_table = false;
     // The dimension the current MatrixIndicesMap applies to, and its type.
     let mut current: Option<(Vec<usize>, String)> = None;
     let mut text = String::new();
@@ -368,6 +369,7 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
         let event = reader.read_event().map_err(|e| bad("well-formed CIFTI XML", e))?;
         match event {
             Event::Start(ref e) | Event::Empty(ref e) => {
+                let empty = matches!(event, Event::Empty(_));
                 let mut attrs = Vec::new();
                 for a in e.attributes() {
                     let a = a.map_err(|e| bad("a well-formed attribute", e))?;
@@ -399,8 +401,14 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
                         }
                         current = Some((dims, kind));
                     }
-                    "LabelTable" => tables.push(Vec::new()),
+                    "LabelTable" => {
+                        tables.push(Vec::new());
+                        in_table = !empty;
+                    }
                     "Label" => {
+                        if !in_table {
+                            return Err(bad("a Label inside a LabelTable", "elsewhere"));
+                        }
                         let key = get("Key").ok_or(ParseErrorKind::Missing { what: "a Label's Key" })?;
                         let key = key.parse::<i32>().map_err(|_| bad("an integer label Key", key))?;
                         let mut rgba = [0.0, 0.0, 0.0, 1.0];
@@ -411,7 +419,12 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
                                 })?;
                             }
                         }
-                        label = Some((key, rgba));
+                        if empty {
+                            // <Label Key="3" .../>: a region without a name.
+                            tables.last_mut().expect("inside a table").push(Region { key, name: String::new(), rgba });
+                        } else {
+                            label = Some((key, rgba));
+                        }
                     }
                     "BrainModel" => {
                         let structure =
@@ -451,6 +464,7 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
                         };
                         table.push(Region { key, name: text.trim().to_string(), rgba });
                     }
+                    "LabelTable" => in_table = false,
                     "VertexIndices" => {
                         let Some(m) = models.last_mut().filter(|m| m.surface_vertices.is_some()) else {
                             return Err(bad("VertexIndices inside a surface BrainModel", "elsewhere"));
@@ -500,6 +514,12 @@ fn parse_xml(xml: &[u8], lens: [usize; 2]) -> Result<Parsed, ParseErrorKind> {
     match map_dim {
         Some((d, kind)) if d == other => {
             if kind == "CIFTI_INDEX_TYPE_LABELS" {
+                if series.is_some() {
+                    return Err(ParseErrorKind::Unsupported {
+                        what: "CIFTI label file with a series as well",
+                        found: "CIFTI_INDEX_TYPE_SERIES".into(),
+                    });
+                }
                 if tables.len() != maps.len() {
                     return Err(ParseErrorKind::CountMismatch {
                         what: "label tables against maps (a NamedMap of a label file has both)",
@@ -626,6 +646,11 @@ mod tests {
             let e = Cifti::parse(bytes).unwrap_err().to_string();
             assert!(e.contains(says), "{says}: {e}");
         }
+        // A self-closing label is a region without a name, not dropped.
+        let c = Cifti::parse(edit("Alpha=\"0\">???</Label>", "Alpha=\"0\"/>          ")).unwrap();
+        let p = c.parcellation("CORTEX_LEFT", Some("parcels"), 12).unwrap();
+        let keys: Vec<(i32, &str)> = p.regions.iter().map(|r| (r.key, r.name.as_str())).collect();
+        assert_eq!(keys, [(0, ""), (4, "precentral"), (7, "postcentral"), (9, "insula")]);
         // A key that is no integer, named with its vertex.
         let c = Cifti::parse(LABELS.to_vec()).unwrap();
         let mut bytes = LABELS.to_vec();

@@ -653,9 +653,10 @@ fn is_parcellation(path: &Path) -> bool {
     name.ends_with(".annot") || name.ends_with(".label.gii") || is_dlabel(name)
 }
 
-/// Whether a file name (lower case) is a CIFTI-2 label file's.
+/// Whether a file name (lower case) is a CIFTI-2 label file's (gzipped
+/// or not).
 fn is_dlabel(name: &str) -> bool {
-    name.ends_with(".dlabel.nii")
+    name.strip_suffix(".gz").unwrap_or(name).ends_with(".dlabel.nii")
 }
 
 /// Reads a parcellation: a FreeSurfer `.annot`

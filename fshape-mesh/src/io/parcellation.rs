@@ -1,6 +1,7 @@
 //! Parcellations: a region key per vertex and the table that names the
-//! keys, as FreeSurfer's `.annot` files ([`super::freesurfer::parse_annot`])
-//! and GIfTI label arrays ([`super::gifti::parcellation`]) hold them.
+//! keys, as FreeSurfer's `.annot` files ([`super::freesurfer::parse_annot`]),
+//! GIfTI label arrays ([`super::gifti::parcellation`]) and CIFTI-2 label
+//! files ([`super::cifti::Cifti::parcellation`]) hold them.
 //! fshape takes a parcellation as a mask (the vertices of chosen regions)
 //! or carries it, key by key, from one surface to another.
 
@@ -21,7 +22,9 @@ pub struct Region {
 ///
 /// For a FreeSurfer `.annot` a key is the row of the colour table (as
 /// nibabel's `read_annot` gives it) and −1 marks a vertex without a region;
-/// for a GIfTI label array a key is the file's label key.
+/// for a GIfTI label array or a CIFTI-2 label file a key is the file's
+/// label key (a CIFTI structure's left-out vertices carry its `???` key,
+/// or −1).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Parcellation {
     /// The key of each vertex.

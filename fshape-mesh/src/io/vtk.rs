@@ -538,7 +538,15 @@ pub fn collection(entries: &[(f64, &str)]) -> String {
     let mut pvd =
         String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
     for (t, file) in entries {
-        let file = file.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;");
+        // Escaped so that an XML reader gives the name back as written
+        // (a raw tab or line end in an attribute would read as a space).
+        let file = file
+            .replace('&', "&amp;")
+            .replace('"', "&quot;")
+            .replace('<', "&lt;")
+            .replace('\t', "&#9;")
+            .replace('\n', "&#10;")
+            .replace('\r', "&#13;");
         pvd.push_str(&format!("    <DataSet timestep=\"{t}\" part=\"0\" file=\"{file}\"/>\n"));
     }
     pvd.push_str("  </Collection>\n</VTKFile>\n");

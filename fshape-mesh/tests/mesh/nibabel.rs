@@ -435,6 +435,16 @@ fn cifti_label_files_from_nibabel_read_as_parcellations_with_their_tables() {
     }
     let e = io::read_mask(format!("{file}:CORTEX_LEFT:parcels:insula").as_ref(), 13).unwrap_err().to_string();
     assert!(e.contains("expected 13, found 12"), "{e}");
+    // Gzipped, as such files are often kept.
+    let dir = std::env::temp_dir().join(format!("fshape-dlabel-gz-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let gz = dir.join("parcels.dlabel.nii.gz");
+    let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    std::io::Write::write_all(&mut z, &std::fs::read(fixture("parcels.dlabel.nii")).unwrap()).unwrap();
+    std::fs::write(&gz, z.finish().unwrap()).unwrap();
+    let packed = io::read_mask(format!("{}:CORTEX_LEFT:parcels:precentral,insula", gz.display()).as_ref(), 12);
+    assert_eq!(packed.unwrap(), want);
+    std::fs::remove_dir_all(&dir).unwrap();
     // Keys are no map, and values no parcellation.
     let e = io::read_signal_for(format!("{file}:CORTEX_LEFT:parcels").as_ref(), Some(12), true).unwrap_err();
     assert!(e.to_string().contains("it holds region keys (a .dlabel.nii)"), "{e}");

@@ -340,7 +340,7 @@ fn vtkio_reads_our_point_fields_and_our_csv_reader_reads_our_vector_csv() {
     let pvd = fshape_mesh::io::vtk::collection(&[(0.0, "state_000.vtk"), (0.5, "a&b.vtk")]);
     assert!(pvd.contains("timestep=\"0.5\" part=\"0\" file=\"a&amp;b.vtk\""), "{pvd}");
     // Read back as written, whatever the names hold.
-    let names = ["state_000.vtk", "a&b \"<c>\".vtk"];
+    let names = ["state_000.vtk", "a&b \"<c>\"\tline\nend.vtk"];
     let pvd = fshape_mesh::io::vtk::collection(&[(0.0, names[0]), (0.25, names[1])]);
     let back = fshape_mesh::io::vtk::parse_collection(&pvd).unwrap();
     assert_eq!(back, [(0.0, names[0].to_string()), (0.25, names[1].to_string())]);
