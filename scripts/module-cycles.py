@@ -16,11 +16,7 @@ import re
 import sys
 
 # Circles not yet taken apart, by crate: the modules of each.
-KNOWN = {
-    # FShape::new validates through `validate`, which reads shapes and
-    # their topology's facets.
-    "fshape-mesh": [["shape", "topology", "validate"]],
-}
+KNOWN = {}
 
 
 def modules(src):

@@ -37,6 +37,8 @@
 //! assert!(sphere.validate().is_clean());
 //! ```
 
+mod cell;
+mod check;
 mod coarsen;
 mod geometry;
 mod shape;

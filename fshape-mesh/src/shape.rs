@@ -1,38 +1,7 @@
 //! The discrete functional shape: vertices, cells and an optional signal.
 
-use crate::validate::{self, Finding, Validation};
-
-/// The kind of cell an fshape is made of.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum CellKind {
-    /// Segments (d = 1): polygonal curves in R² or R³.
-    Segment,
-    /// Triangles (d = 2): surfaces in R³ or flat triangulated domains in R².
-    Triangle,
-}
-
-impl CellKind {
-    /// Number of vertices of one cell, d + 1.
-    pub fn n_corners(self) -> usize {
-        match self {
-            CellKind::Segment => 2,
-            CellKind::Triangle => 3,
-        }
-    }
-
-    /// Intrinsic dimension d of the cells.
-    pub fn dim(self) -> usize {
-        self.n_corners() - 1
-    }
-
-    /// A lower-case name (`"segment"`, `"triangle"`), used in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            CellKind::Segment => "segment",
-            CellKind::Triangle => "triangle",
-        }
-    }
-}
+pub use crate::cell::CellKind;
+use crate::validate::{self, Finding};
 
 /// Why an [`FShape`] could not be built.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -335,10 +304,5 @@ impl FShape {
     /// the signal is flat: read [`FShape::n_channels`] first).
     pub fn into_parts(self) -> (usize, CellKind, Vec<f64>, Vec<usize>, Option<Vec<f64>>) {
         (self.dim, self.kind, self.points, self.cells, self.signal)
-    }
-
-    /// Every problem of the shape, blocking or not (see [`Validation`]).
-    pub fn validate(&self) -> Validation {
-        validate::validate(self)
     }
 }

@@ -3,9 +3,7 @@
 
 use crate::shape::{CellKind, FShape};
 
-/// A facet: an edge `[a, b]` of a triangle mesh, or a vertex `[v, v]` of a
-/// curve (both entries equal).
-pub type Facet = [usize; 2];
+pub use crate::cell::Facet;
 
 /// The connectivity summary of an fshape, from [`FShape::topology`].
 #[derive(Clone, Debug, Default, PartialEq)]
