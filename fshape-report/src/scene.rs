@@ -78,12 +78,12 @@ fn shown(first: &FShape, limit: usize) -> Result<Shown> {
 #[cfg(test)]
 fn mesh_data_within(frames: &[&FShape], limit: usize) -> Result<(MeshData, Option<usize>)> {
     let s = shown(frames[0], limit)?;
-    Ok((mesh_data_shown(frames, 0, &s), s.kept.map(|k| k.len())))
+    Ok((mesh_data_shown(frames, 0, &s, true), s.kept.map(|k| k.len())))
 }
 
 /// `frames` at the vertices and cells `shown` says, with their map
-/// `channel`.
-fn mesh_data_shown(frames: &[&FShape], channel: usize, shown: &Shown) -> MeshData {
+/// `channel`; without `geometry`, the map alone (no cells, no positions).
+fn mesh_data_shown(frames: &[&FShape], channel: usize, shown: &Shown, geometry: bool) -> MeshData {
     let first = frames[0];
     // Renumber to the kept vertices (all of them when not simplified).
     let order: Vec<usize> = shown.kept.clone().unwrap_or_else(|| (0..first.n_vertices()).collect());
@@ -91,15 +91,21 @@ fn mesh_data_shown(frames: &[&FShape], channel: usize, shown: &Shown) -> MeshDat
     for (k, &v) in order.iter().enumerate() {
         index[v] = k as u32;
     }
-    let cell_bytes: Vec<u8> = shown.cells.iter().flat_map(|&v| index[v].to_le_bytes()).collect();
     let d = first.dim();
+    let cells = if geometry {
+        gzip_base64(&shown.cells.iter().flat_map(|&v| index[v].to_le_bytes()).collect::<Vec<u8>>())
+    } else {
+        String::new()
+    };
     let mut positions = Vec::new();
     let mut signals = Vec::new();
     for f in frames {
-        positions.push(packed_f32(order.iter().flat_map(|&v| {
-            let p = f.point(v);
-            [p[0], p[1], if d == 3 { p[2] } else { 0.0 }]
-        })));
+        if geometry {
+            positions.push(packed_f32(order.iter().flat_map(|&v| {
+                let p = f.point(v);
+                [p[0], p[1], if d == 3 { p[2] } else { 0.0 }]
+            })));
+        }
         if let Some(s) = f.channel(channel) {
             signals.push(packed_f32(order.iter().map(|&v| s[v])));
         }
@@ -107,7 +113,7 @@ fn mesh_data_shown(frames: &[&FShape], channel: usize, shown: &Shown) -> MeshDat
     MeshData {
         kind: if first.kind() == CellKind::Triangle { "triangle" } else { "segment" },
         planar: d == 2,
-        cells: gzip_base64(&cell_bytes),
+        cells,
         frames: positions,
         signals: (signals.len() == frames.len()).then_some(signals),
     }
@@ -120,12 +126,22 @@ pub fn scene(name: &str, frames: &[&FShape], labels: Vec<String>, companion: Opt
     let first = frames.first().ok_or_else(|| ReportError::NoFrames { scene: name.to_string() })?;
     let mesh = shown(first, DISPLAY_VERTICES)?;
     let other = companion.map(|(_, c)| shown(c, DISPLAY_VERTICES)).transpose()?;
-    Ok(scene_shown(name, frames, labels, companion, 0, (&mesh, other.as_ref()), false))
+    Ok(scene_shown(name, frames, labels, companion, 0, (&mesh, other.as_ref()), Role::Only))
+}
+
+/// A scene's place among the scenes of several maps.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Role {
+    /// The one scene of a shape (its first map shown).
+    Only,
+    /// The first of a scene per map: it holds the geometry.
+    First,
+    /// A later one: its map only, the first's frames and cells shared.
+    Other,
 }
 
 /// [`scene`] of map `channel`, shown as `shown` says (the mesh's and the
-/// companion's); `per_map`: one of a scene per map (no note that only
-/// the first map is shown).
+/// companion's), in its `role`.
 fn scene_shown(
     name: &str,
     frames: &[&FShape],
@@ -133,14 +149,15 @@ fn scene_shown(
     companion: Option<(&str, &FShape)>,
     channel: usize,
     shown: (&Shown, Option<&Shown>),
-    per_map: bool,
+    role: Role,
 ) -> Scene {
     let (companion_name, companion) = match companion {
         Some((n, c)) => (n.to_string(), Some(c)),
         None => (String::new(), None),
     };
-    let mesh = mesh_data_shown(frames, channel, shown.0);
-    let companion_data = companion.zip(shown.1).map(|(c, s)| mesh_data_shown(&[c], channel, s));
+    let geometry = role != Role::Other;
+    let mesh = mesh_data_shown(frames, channel, shown.0, geometry);
+    let companion_data = companion.zip(shown.1).map(|(c, s)| mesh_data_shown(&[c], channel, s, geometry));
     let mut notes = Vec::new();
     if let Some(k) = &shown.0.kept {
         notes.push(format!(
@@ -152,7 +169,7 @@ fn scene_shown(
     if let (Some(k), Some(c)) = (shown.1.and_then(|s| s.kept.as_ref()), companion) {
         notes.push(format!("the {companion_name} is shown simplified from {} to {} vertices", c.n_vertices(), k.len()));
     }
-    if frames[0].n_channels() > 1 && !per_map {
+    if frames[0].n_channels() > 1 && role == Role::Only {
         notes.push(format!(
             "the colours show the first of its {} signal channels (the files hold each)",
             frames[0].n_channels()
@@ -168,7 +185,7 @@ fn scene_shown(
         companion: companion_data,
         companion_name,
         range: (lo < hi).then_some([lo, hi]),
-        same_geometry: false,
+        same_geometry: role == Role::Other,
     }
 }
 
@@ -200,15 +217,8 @@ fn map_scenes_within(
     let other = companion.map(|(_, c)| shown(c, limit)).transpose()?;
     Ok((0..k)
         .map(|c| {
-            let mut sc = scene_shown(&name(c), frames, labels.to_vec(), companion, c, (&mesh, other.as_ref()), true);
-            if c > 0 {
-                sc.same_geometry = true;
-                for m in std::iter::once(&mut sc.mesh).chain(sc.companion.as_mut()) {
-                    m.cells.clear();
-                    m.frames.clear();
-                }
-            }
-            sc
+            let role = if c == 0 { Role::First } else { Role::Other };
+            scene_shown(&name(c), frames, labels.to_vec(), companion, c, (&mesh, other.as_ref()), role)
         })
         .collect())
 }
