@@ -188,6 +188,21 @@ pub fn open_file(path: &Path) -> io::Result<(File, Option<u64>)> {
             return Err(io::Error::other("is a device or socket, not a file"));
         }
     }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+        if kind.is_fifo() {
+            // A FIFO with no writer would block open(2) until one comes:
+            // open without waiting, then let reads wait for data as usual.
+            // With no writer the first read is the end of the data, at once.
+            use rustix::fs::OFlags;
+            let file =
+                std::fs::OpenOptions::new().read(true).custom_flags(OFlags::NONBLOCK.bits() as i32).open(path)?;
+            let flags = rustix::fs::fcntl_getfl(&file)?;
+            rustix::fs::fcntl_setfl(&file, flags - OFlags::NONBLOCK)?;
+            return Ok((file, None));
+        }
+    }
     let file = File::open(path)?;
     Ok((file, kind.is_file().then_some(meta.len())))
 }
