@@ -156,6 +156,21 @@ pub enum MatchError {
     /// An argument out of its domain (which, and its value, in the message).
     #[error("invalid input: {0}")]
     InvalidInput(String),
+    /// A table the user wrote (a batch's pairs) that cannot be used: the
+    /// file, the line (from 1) when one is at fault, and why.
+    #[error("{}{}: {message}", path.display(), line.map_or(String::new(), |l| format!(":{l}")))]
+    Table {
+        /// The table.
+        path: PathBuf,
+        /// The line at fault.
+        line: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
+    /// A file could not be read (its path, and the line or byte at fault,
+    /// in the message).
+    #[error(transparent)]
+    Read(#[from] fshape_mesh::io::ReadError),
     /// [`Session::result`] before every stage has run.
     #[error("the registration has not finished: run the session to its end first")]
     NotFinished,

@@ -3,7 +3,9 @@
 //! its commands' work in `cargo::ops` the same way). The callers read
 //! their inputs and report; the operation sets up, runs and collects.
 //! Files are not written here: fshape-report's `outputs` writes a
-//! registration's folder from a [`Registration`].
+//! registration's folder from a [`Registration`]. A [`batch`] is the one
+//! exception: its rows' folders are its state, so it makes them and writes
+//! a failed row's error file.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -16,6 +18,7 @@ pub use fshape_varifold::{Distance, VarifoldKernel};
 pub use stats::{Scores, StatsLabels, StatsRequest, StatsRun, StatsSubject, group_stats};
 pub use transfer::{TransferRequest, TransferRun, TransferValues, transfer};
 
+pub mod batch;
 mod stats;
 mod transfer;
 

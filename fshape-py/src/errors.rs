@@ -170,6 +170,8 @@ impl Classify for MatchError {
                 if fault.kind == Kind::Input && fault.path.is_none() { fault.at(path, None) } else { fault }
             }
             MatchError::File { path, .. } => Fault::new(Kind::Input, self).at(path, None),
+            MatchError::Table { path, line, .. } => Fault::new(Kind::Input, self).at(path, *line),
+            MatchError::Read(e) => e.fault(),
             MatchError::NotFinished | MatchError::Gather { .. } | MatchError::Remote { .. } => {
                 Fault::new(Kind::Other, self)
             }

@@ -3,13 +3,13 @@
 //! ([`write_registration`]: the geodesic's states, the momenta, renders,
 //! the matched and target surfaces, the energy plot, summary.json and
 //! report.html), an atlas's ([`write_atlas`]), a group test's
-//! ([`write_stats`]), and a geodesic's states as files
+//! ([`write_stats`]), a batch's index ([`write_batch_index`]), and a geodesic's states as files
 //! ([`trajectory_files`], which `fshape shoot` writes too).
 
 use std::path::{Path, PathBuf};
 
 use fshape_match::ops::{AtlasLabels, AtlasRun, Labels, Registration, StatsLabels, StatsRun};
-use fshape_match::record::{AtlasRecord, MatchRecord, RunRecord, StatsRecord};
+use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, RunRecord, StatsRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
@@ -447,4 +447,41 @@ fn stats_picture(template: &FShape, statistic: &[f64], p: &[f64], alpha: f64, vi
     let (rgb, width, height) =
         render::mosaic(tiles.iter().map(|(shape, view)| render::rasterise(shape, view)), views.len(), 1);
     Ok(render::png_sized(&rgb, width, height)?)
+}
+
+/// Writes a batch's index into `out`: index.csv (a row per pair, cells a
+/// spreadsheet would run as formulas shown as text, since names and errors
+/// come from users' files), index.json (the record) and report.html (the
+/// page of every row).
+pub fn write_batch_index(out: &Path, index: &BatchIndex, view: (f64, f64)) -> Result<()> {
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:e}"));
+    let header = "row,line,name,source,target,status,value,attachment,mean_distance,p95_distance,target_within_1pct,\
+                  signal_rms,iterations,seconds,error";
+    let mut table = vec![header.split(',').map(str::to_string).collect::<Vec<_>>()];
+    for e in &index.rows {
+        table.push(vec![
+            e.row.to_string(),
+            e.line.to_string(),
+            e.name.clone(),
+            e.source.clone(),
+            e.target.clone(),
+            e.status.name().to_string(),
+            opt(e.value),
+            opt(e.attachment),
+            opt(e.mean_distance),
+            opt(e.p95_distance),
+            opt(e.target_within_1pct),
+            opt(e.signal_rms),
+            e.iterations.map_or(String::new(), |i| i.to_string()),
+            e.seconds.map_or(String::new(), |s| format!("{s:.3}")),
+            e.error.clone().unwrap_or_default(),
+        ]);
+    }
+    let csv = io::table::table_text(&table, true);
+    std::fs::create_dir_all(out).map_err(|e| io::WriteError::Io { path: out.into(), source: e })?;
+    io::write_atomic(&out.join("index.csv"), csv.as_bytes(), false)?;
+    io::write_atomic(&out.join("index.json"), &index.to_json(), false)?;
+    let page = crate::batch_page_of(out, index, view)?;
+    io::write_atomic(&out.join("report.html"), crate::html(&page).as_bytes(), false)?;
+    Ok(())
 }
