@@ -4,8 +4,10 @@
 //! and signals, `int64` cells), raises `fshape.FShapeError` with the
 //! library's own message (a subclass by kind: `InputError`, `ConfigError`,
 //! `CheckpointError`, `DivergenceError`; see `errors`), and releases the GIL while it
-//! computes, so other Python threads run meanwhile. The type stubs are in
-//! `fshape.pyi` beside this crate.
+//! computes, so other Python threads run meanwhile. This crate is the
+//! compiled module `fshape._fshape`; the package around it
+//! (`python/fshape/__init__.py`) re-exports it with the annotations'
+//! aliases, and its stub is `python/fshape/__init__.pyi`.
 
 mod config;
 mod conversions;
@@ -15,6 +17,7 @@ mod measures;
 mod progress;
 mod registration;
 mod report;
+mod results;
 mod shape;
 mod shoot;
 mod stats;
@@ -26,6 +29,7 @@ use errors::err;
 
 /// Functional shapes and their metamorphoses (Charon, Charlier & Trouvé).
 #[pymodule]
+#[pyo3(name = "_fshape")]
 fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FShapeError", m.py().get_type::<errors::FShapeError>())?;
     m.add("InputError", m.py().get_type::<errors::InputError>())?;
@@ -36,6 +40,7 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<shape::PyFShape>()?;
     m.add_class::<config::PyConfig>()?;
     m.add_class::<transfer::PyCorrespondence>()?;
+    results::add(m)?;
     m.add_function(wrap_pyfunction!(io::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(io::write_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(io::read_signal, m)?)?;

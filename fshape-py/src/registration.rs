@@ -3,16 +3,17 @@
 use std::path::PathBuf;
 
 use fshape_match::MatchError;
-use fshape_match::ops::{self, AtlasRequest, Checkpointing, MatchRequest};
+use fshape_match::ops::{self, AtlasRequest, Checkpointing, Labels, MatchRequest};
 use fshape_mesh::FShape;
 use numpy::PyArray1;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::PyList;
 
 use crate::config::config_of;
 use crate::conversions::{rows, to_py};
 use crate::err;
 use crate::progress::Progress;
+use crate::results::{AtlasResult, MatchResult, SubjectResult};
 use crate::shape::PyFShape;
 use crate::shape::shape_of;
 use crate::shoot::{geodesic, node_times};
@@ -37,7 +38,7 @@ pub(crate) fn stage_templates(list: Option<Vec<Bound<'_, PyAny>>>) -> PyResult<O
 /// Ctrl-C or a kill; on a finished run it returns the result without
 /// iterating. A checkpoint of other inputs or configuration is refused.
 ///
-/// Returns a dict: `stopped` (whether the callback ended the run before
+/// Returns a `MatchResult`: `stopped` (whether the callback ended the run before
 /// its end), `p0` (n × d), `pf` (n), `energies`, `quality` and
 /// `initial_quality` (how close the matched shape and the template are to
 /// the target), `alignment` (with `[prealign]`: the map T as a homogeneous
@@ -60,7 +61,7 @@ pub(crate) fn match_shapes<'py>(
     stage_templates: Option<Vec<Bound<'py, PyAny>>>,
     times: Option<Vec<f64>>,
     checkpoint: Option<PathBuf>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Bound<'py, MatchResult>> {
     let (x, y) = (shape_of(source)?, shape_of(target)?);
     let config = config_of(config)?;
     let templates = self::stage_templates(stage_templates)?;
@@ -76,33 +77,45 @@ pub(crate) fn match_shapes<'py>(
     let run = py.detach(|| ops::register(&request, templates, &checkpointing, &mut observer));
     observer.raised()?;
     let reg = run.map_err(err)?;
+    let labels = Labels { source: "source", target: "target", config: "" };
+    let Some(record) = reg.record(&labels, reg.result.as_ref().map_or(0.0, |r| r.seconds), Vec::new()) else {
+        return Err(crate::errors::other(
+            "stopped by the progress callback before the first iteration: there is no result yet",
+        ));
+    };
     let Some(r) = reg.result else {
         return Err(crate::errors::other(
             "stopped by the progress callback before the first iteration: there is no result yet",
         ));
     };
     let (template, matched_target, used) = (reg.template, reg.target, reg.resolved);
-    let d = PyDict::new(py);
-    d.set_item("stopped", !r.finished)?;
     let dim = template.dim();
-    d.set_item("p0", rows(py, r.p0.clone(), dim))?;
     let channels = template.n_channels().max(1);
-    d.set_item("pf", signal_momentum(py, &r.pf, channels)?)?;
-    d.set_item("energies", to_py(py, &r.energies)?)?;
-    d.set_item("quality", to_py(py, &r.quality)?)?;
-    d.set_item("initial_quality", to_py(py, &r.initial_quality)?)?;
-    d.set_item("alignment", r.alignment.as_ref().map(|a| to_py(py, a)).transpose()?)?;
-    d.set_item("stages", to_py(py, &r.stages)?)?;
-    d.set_item("iterations", r.iterations)?;
-    d.set_item("evaluations", r.evaluations)?;
-    d.set_item("seconds", r.seconds)?;
-    d.set_item("geodesic", geodesic(py, &r.trajectory, dim, &times)?)?;
     let (x1, f1) = r.trajectory.at(1.0);
     let matched = template.with_points(x1).and_then(|s| s.with_signals(Some(f1), channels)).map_err(err)?;
-    d.set_item("matched", PyFShape { inner: matched })?;
-    d.set_item("target", PyFShape { inner: matched_target })?;
-    d.set_item("config", to_py(py, &used)?)?;
-    Ok(d)
+    let any = |v: Bound<'py, PyAny>| v.unbind();
+    Bound::new(
+        py,
+        MatchResult {
+            stopped: any((!r.finished).into_pyobject(py)?.to_owned().into_any()),
+            p0: any(rows(py, r.p0.clone(), dim).into_any()),
+            pf: any(signal_momentum(py, &r.pf, channels)?),
+            energies: any(to_py(py, &r.energies)?),
+            quality: any(to_py(py, &r.quality)?),
+            initial_quality: any(to_py(py, &r.initial_quality)?),
+            alignment: any(to_py(py, &r.alignment)?),
+            stages: any(to_py(py, &r.stages)?),
+            iterations: any(r.iterations.into_pyobject(py)?.into_any()),
+            evaluations: any(r.evaluations.into_pyobject(py)?.into_any()),
+            seconds: any(r.seconds.into_pyobject(py)?.into_any()),
+            geodesic: any(geodesic(py, &r.trajectory, dim, &times)?.into_any()),
+            matched: any(Bound::new(py, PyFShape { inner: matched })?.into_any()),
+            target: any(Bound::new(py, PyFShape { inner: matched_target })?.into_any()),
+            config: any(to_py(py, &used)?),
+            record,
+            config_text: used.to_toml(),
+        },
+    )
 }
 
 /// A signal momentum as Python sees it: n values, or n × k with several
@@ -116,7 +129,7 @@ fn signal_momentum<'py>(py: Python<'py>, pf: &[f64], channels: usize) -> PyResul
 /// subject; without a signal it takes the subjects' mean), `config` a
 /// dict, TOML path or text, `progress` and `checkpoint` as for `match`.
 ///
-/// Returns a dict: `template` (the estimated FShape), `template_momenta`
+/// Returns an `AtlasResult`: `template` (the estimated FShape), `template_momenta`
 /// (hypertemplate model, else None), `subjects` (per subject: `p0`, `pf`,
 /// `energies`, `quality`, `template_quality`, `initial_attachment`,
 /// `alignment`, `geodesic`, `matched`: the template shot onto it),
@@ -132,7 +145,7 @@ pub(crate) fn atlas<'py>(
     progress: Option<Py<PyAny>>,
     stage_templates: Option<Vec<Bound<'py, PyAny>>>,
     checkpoint: Option<PathBuf>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Bound<'py, AtlasResult>> {
     let subjects: Vec<FShape> = subjects.iter().map(shape_of).collect::<PyResult<_>>()?;
     if subjects.is_empty() {
         return Err(err("atlas: no subjects"));
@@ -157,28 +170,38 @@ pub(crate) fn atlas<'py>(
         return Err(err("the atlas ended without a result"));
     };
     let (dim, channels) = (r.template.dim(), r.template.n_channels().max(1));
-    let d = PyDict::new(py);
-    d.set_item("template", PyFShape { inner: r.template.clone() })?;
-    d.set_item("template_momenta", r.template_momenta.as_ref().map(|p| rows(py, p.clone(), dim)))?;
-    let list = PyList::empty(py);
+    let any = |v: Bound<'py, PyAny>| v.unbind();
+    let mut list = Vec::with_capacity(r.subjects.len());
     for (s, (_, matched)) in r.subjects.iter().zip(&run.subjects) {
-        let e = PyDict::new(py);
-        e.set_item("p0", rows(py, s.p0.clone(), dim))?;
-        e.set_item("pf", signal_momentum(py, &s.pf, channels)?)?;
-        e.set_item("energies", to_py(py, &s.energies)?)?;
-        e.set_item("quality", to_py(py, &s.quality)?)?;
-        e.set_item("template_quality", to_py(py, &s.template_quality)?)?;
-        e.set_item("initial_attachment", s.initial_attachment)?;
-        e.set_item("alignment", s.alignment.as_ref().map(|a| to_py(py, a)).transpose()?)?;
-        e.set_item("geodesic", geodesic(py, &s.trajectory, dim, &node_times(steps))?)?;
-        e.set_item("matched", PyFShape { inner: matched.clone() })?;
-        list.append(e)?;
+        let subject = SubjectResult {
+            p0: any(rows(py, s.p0.clone(), dim).into_any()),
+            pf: any(signal_momentum(py, &s.pf, channels)?),
+            energies: any(to_py(py, &s.energies)?),
+            quality: any(to_py(py, &s.quality)?),
+            template_quality: any(to_py(py, &s.template_quality)?),
+            initial_attachment: any(s.initial_attachment.into_pyobject(py)?.into_any()),
+            alignment: any(to_py(py, &s.alignment)?),
+            geodesic: any(geodesic(py, &s.trajectory, dim, &node_times(steps))?.into_any()),
+            matched: any(Bound::new(py, PyFShape { inner: matched.clone() })?.into_any()),
+        };
+        list.push(Bound::new(py, subject)?);
     }
-    d.set_item("subjects", list)?;
-    d.set_item("energies", to_py(py, &r.energies)?)?;
-    d.set_item("stages", to_py(py, &r.stages)?)?;
-    d.set_item("iterations", r.iterations)?;
-    d.set_item("evaluations", r.evaluations)?;
-    d.set_item("seconds", r.seconds)?;
-    Ok(d)
+    Bound::new(
+        py,
+        AtlasResult {
+            template: any(Bound::new(py, PyFShape { inner: r.template.clone() })?.into_any()),
+            template_momenta: any(r
+                .template_momenta
+                .as_ref()
+                .map(|p| rows(py, p.clone(), dim))
+                .into_pyobject(py)?
+                .into_any()),
+            subjects: any(PyList::new(py, list)?.into_any()),
+            energies: any(to_py(py, &r.energies)?),
+            stages: any(to_py(py, &r.stages)?),
+            iterations: any(r.iterations.into_pyobject(py)?.into_any()),
+            evaluations: any(r.evaluations.into_pyobject(py)?.into_any()),
+            seconds: any(r.seconds.into_pyobject(py)?.into_any()),
+        },
+    )
 }

@@ -3,10 +3,10 @@
 use numpy::ndarray::{Array2, Array3};
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLike2};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 
 use crate::config::config_of;
 use crate::err;
+use crate::results::Geodesic;
 use crate::shape::shape_of;
 
 /// The geodesic as arrays: points (T × n × d), signals (T × n, or T × n × k
@@ -16,7 +16,7 @@ pub(crate) fn geodesic<'py>(
     traj: &fshape_shoot::Trajectory,
     dim: usize,
     times: &[f64],
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Bound<'py, Geodesic>> {
     let mut points = Vec::new();
     let mut signals = Vec::new();
     let (mut n, mut k) = (0, 1);
@@ -27,17 +27,25 @@ pub(crate) fn geodesic<'py>(
         points.extend(x);
         signals.extend(f);
     }
-    let d = PyDict::new(py);
-    d.set_item("times", PyArray1::from_slice(py, times))?;
-    d.set_item("points", Array3::from_shape_vec((times.len(), n, dim), points).map_err(err)?.into_pyarray(py))?;
     // T × n, or T × n × k with several signal channels.
-    if k == 1 {
-        d.set_item("signals", Array2::from_shape_vec((times.len(), n), signals).map_err(err)?.into_pyarray(py))?;
+    let signals = if k == 1 {
+        Array2::from_shape_vec((times.len(), n), signals).map_err(err)?.into_pyarray(py).into_any()
     } else {
-        d.set_item("signals", Array3::from_shape_vec((times.len(), n, k), signals).map_err(err)?.into_pyarray(py))?;
-    }
-    d.set_item("hamiltonian", PyArray1::from_slice(py, &traj.hamiltonian))?;
-    Ok(d)
+        Array3::from_shape_vec((times.len(), n, k), signals).map_err(err)?.into_pyarray(py).into_any()
+    };
+    Bound::new(
+        py,
+        Geodesic {
+            times: PyArray1::from_slice(py, times).into_any().unbind(),
+            points: Array3::from_shape_vec((times.len(), n, dim), points)
+                .map_err(err)?
+                .into_pyarray(py)
+                .into_any()
+                .unbind(),
+            signals: signals.unbind(),
+            hamiltonian: PyArray1::from_slice(py, &traj.hamiltonian).into_any().unbind(),
+        },
+    )
 }
 
 pub(crate) fn node_times(steps: usize) -> Vec<f64> {
@@ -56,7 +64,7 @@ pub(crate) fn shoot<'py>(
     p0: PyArrayLike2<'py, f64, AllowTypeChange>,
     config: &Bound<'py, PyAny>,
     pf: Option<numpy::PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Bound<'py, Geodesic>> {
     let s = shape_of(shape)?;
     let config = config_of(config)?;
     if config.model.normalize {

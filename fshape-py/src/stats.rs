@@ -3,11 +3,13 @@
 use fshape_match::ops::{Scores, StatsRequest, StatsRun, StatsSubject, group_stats};
 use fshape_stats::{Inference, Map, StatKind, Tail, TfceParams};
 use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::BoundObject;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
 use crate::conversions::to_py;
 use crate::err;
+use crate::results::{MapTest, StatsResult};
 use crate::shape::shape_of;
 
 /// The covariates as a table's text: a path's contents, or a mapping
@@ -71,7 +73,7 @@ pub(crate) fn stats<'py>(
     one_sided: bool,
     scores: Option<PyReadonlyArray2<'py, f64>>,
     alpha: f64,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Bound<'py, StatsResult>> {
     let template = shape_of(
         &atlas.get_item("template").map_err(|_| err("atlas: no `template` (pass what fshape.atlas returns)"))?,
     )?;
@@ -125,25 +127,32 @@ pub(crate) fn stats<'py>(
     let run = py.detach(|| group_stats(&request)).map_err(err)?;
     let StatsRun { design, contrast, unused, maps: tests, multivariate, .. } = run;
     let multivariate = multivariate.map(|(_, m)| m);
-    let d = PyDict::new(py);
-    d.set_item("design", to_py(py, &design)?)?;
-    d.set_item("contrast", to_py(py, &contrast)?)?;
-    d.set_item("rows_not_in_the_atlas", unused)?;
+    fn any<'py, T: IntoPyObject<'py>>(py: Python<'py>, v: T) -> PyResult<Py<PyAny>> {
+        Ok(v.into_pyobject(py).map_err(Into::into)?.into_any().unbind())
+    }
     let out = PyDict::new(py);
     for (kind, t) in &tests {
-        let e = PyDict::new(py);
-        e.set_item("kind", PyString::new(py, if t.kind == StatKind::T { "t" } else { "F" }))?;
-        e.set_item("dof", t.dof)?;
-        e.set_item("statistic", PyArray1::from_slice(py, &t.statistic))?;
-        e.set_item("effect", PyArray1::from_slice(py, &t.effect))?;
-        e.set_item("p", PyArray1::from_slice(py, &t.p_uncorrected))?;
-        e.set_item("p_fwe", PyArray1::from_slice(py, &t.p_fwe))?;
-        e.set_item("tfce", t.tfce.as_deref().map(|v| PyArray1::from_slice(py, v)))?;
-        e.set_item("tfce_p_fwe", t.tfce_p_fwe.as_deref().map(|v| PyArray1::from_slice(py, v)))?;
-        e.set_item("critical", t.critical(alpha))?;
-        out.set_item(kind.name(), e)?;
+        let test = MapTest {
+            kind: any(py, PyString::new(py, if t.kind == StatKind::T { "t" } else { "F" }))?,
+            dof: any(py, t.dof)?,
+            statistic: any(py, PyArray1::from_slice(py, &t.statistic))?,
+            effect: any(py, PyArray1::from_slice(py, &t.effect))?,
+            p: any(py, PyArray1::from_slice(py, &t.p_uncorrected))?,
+            p_fwe: any(py, PyArray1::from_slice(py, &t.p_fwe))?,
+            tfce: any(py, t.tfce.as_deref().map(|v| PyArray1::from_slice(py, v)))?,
+            tfce_p_fwe: any(py, t.tfce_p_fwe.as_deref().map(|v| PyArray1::from_slice(py, v)))?,
+            critical: any(py, t.critical(alpha))?,
+        };
+        out.set_item(kind.name(), Bound::new(py, test)?)?;
     }
-    d.set_item("maps", out)?;
-    d.set_item("multivariate", multivariate.as_ref().map(|m| to_py(py, m)).transpose()?)?;
-    Ok(d)
+    Bound::new(
+        py,
+        StatsResult {
+            design: to_py(py, &design)?.unbind(),
+            contrast: to_py(py, &contrast)?.unbind(),
+            rows_not_in_the_atlas: any(py, unused)?,
+            maps: out.into_any().unbind(),
+            multivariate: to_py(py, &multivariate)?.unbind(),
+        },
+    )
 }

@@ -196,15 +196,15 @@ def test_several_maps_per_vertex_are_n_by_k_arrays_compared_with_a_width_each(tm
     two_tgt = tgt.with_signal(np.column_stack([tgt.signal, tgt.points[:, 0] + 0.2]))
     widths = {**CONFIG, "attachment": {"kernel_geom": "gaussian:0.1", "kernel_signal": "gaussian:0.5,0.5"}}
     r = fshape.match(two, two_tgt, widths)
-    assert r["matched"].n_channels == 2 and r["pf"].shape == (12, 2)
-    assert r["geodesic"]["signals"].shape[1:] == (12, 2)
+    assert r.matched.n_channels == 2 and r.pf.shape == (12, 2)
+    assert r.geodesic["signals"].shape[1:] == (12, 2)
     for c in range(2):
-        assert r["quality"]["channels"][c]["signal_rms"] < r["initial_quality"]["channels"][c]["signal_rms"]
+        assert r.quality["channels"][c]["signal_rms"] < r.initial_quality["channels"][c]["signal_rms"]
     # Its momenta shot again with the weights it used end where it ended.
-    shot = fshape.shoot(two, r["p0"], r["config"], pf=r["pf"])
-    assert np.allclose(shot["signals"][-1], r["geodesic"]["signals"][-1], rtol=1e-9, atol=1e-12)
+    shot = fshape.shoot(two, r.p0, r.config, pf=r.pf)
+    assert np.allclose(shot.signals[-1], r.geodesic["signals"][-1], rtol=1e-9, atol=1e-12)
     with pytest.raises(fshape.FShapeError, match=r"pf: shape \[12\]"):
-        fshape.shoot(two, r["p0"], r["config"], pf=np.zeros(12))
+        fshape.shoot(two, r.p0, r.config, pf=np.zeros(12))
     # Its report: a scene per map, each map's error.
     fshape.report(tmp_path / "report.html", two, two_tgt, r)
     page = (tmp_path / "report.html").read_text()
@@ -241,22 +241,22 @@ def test_a_small_match_equals_the_cli_on_the_same_inputs_and_config(tmp_path):
     # The same optimisation: the same momenta to the last bit, the same end.
     p0 = np.loadtxt(tmp_path / "run" / "p0.csv", delimiter=",", skiprows=1)
     pf = np.loadtxt(tmp_path / "run" / "pf.csv", delimiter=",", skiprows=1)
-    assert np.array_equal(result["p0"], p0) and np.array_equal(result["pf"], pf)
+    assert np.array_equal(result.p0, p0) and np.array_equal(result.pf, pf)
     end = fshape.read_mesh(tmp_path / "run" / "state_004.ply")
-    assert np.array_equal(result["matched"].points, end.points)
-    assert np.array_equal(result["geodesic"]["points"][-1], end.points)
+    assert np.array_equal(result.matched.points, end.points)
+    assert np.array_equal(result.geodesic["points"][-1], end.points)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert result["energies"]["value"] == summary["final_value"]
-    assert result["quality"]["mean_distance"] == summary["quality"]["mean_distance"]
-    assert result["quality"]["mean_distance"] < result["initial_quality"]["mean_distance"]
+    assert result.energies["value"] == summary["final_value"]
+    assert result.quality["mean_distance"] == summary["quality"]["mean_distance"]
+    assert result.quality["mean_distance"] < result.initial_quality["mean_distance"]
     # The progress callback saw both stages and every iteration.
     assert [e["stage"] for e in events if e["event"] == "stage"] == [0, 1]
-    assert sum(e["event"] == "iteration" for e in events) == result["iterations"]
-    g = result["geodesic"]
-    assert g["points"].shape == (5, 12, 3) and g["signals"].shape == (5, 12)
+    assert sum(e["event"] == "iteration" for e in events) == result.iterations
+    g = result.geodesic
+    assert g.points.shape == (5, 12, 3) and g.signals.shape == (5, 12)
     # The weights it used shoot the momenta to the same end.
-    shot = fshape.shoot(src, result["p0"], result["config"], pf=result["pf"])
-    assert np.array_equal(shot["points"][-1], end.points)
+    shot = fshape.shoot(src, result.p0, result.config, pf=result.pf)
+    assert np.array_equal(shot.points[-1], end.points)
 
 
 def test_a_correspondence_follows_the_stated_rules_and_carries_as_the_cli_transfers(tmp_path):
@@ -296,7 +296,7 @@ def test_a_correspondence_follows_the_stated_rules_and_carries_as_the_cli_transf
     thickness[src.points[:, 2] > 0.4] = np.nan
     fshape.write_signal(tmp_path / "thickness.csv", thickness, name="thickness")
     cli("transfer", tmp_path / "run", tmp_path / "thickness.csv", tmp_path / "on_target.csv", "--max-distance", "1")
-    on_target, _ = fshape.Correspondence(result["matched"], result["target"]).map(thickness, max_distance=1.0)
+    on_target, _ = fshape.Correspondence(result.matched, result.target).map(thickness, max_distance=1.0)
     cli_values = np.genfromtxt(tmp_path / "on_target.csv", delimiter=",", skip_header=1)
     assert np.allclose(on_target, cli_values, rtol=0, atol=1e-12, equal_nan=True)
     assert np.isnan(on_target).any() and np.isfinite(on_target).sum() > 6
@@ -321,7 +321,7 @@ def test_prealignment_brings_a_turned_shifted_copy_back_and_agrees_with_the_cli(
         "prealign": {"kind": "rigid"},
     }
     result = fshape.match(moved, bunny, config)
-    al = result["alignment"]
+    al = result.alignment
     assert al["kind"] == "rigid" and al["moving"] == "source"
     t = np.array(al["matrix"])
     # T undoes the motion: T(R x + b) = x, so T's linear part is R^T.
@@ -341,16 +341,16 @@ def test_prealignment_brings_a_turned_shifted_copy_back_and_agrees_with_the_cli(
 def test_the_callback_ends_a_run_with_its_result_so_far_and_its_exceptions_propagate():
     src, tgt = sphere_pair()
     whole = fshape.match(src, tgt, CONFIG)
-    assert whole["stopped"] is False
+    assert whole.stopped is False
     # True at the third iteration: the run ends there and returns where it got.
     early = fshape.match(src, tgt, CONFIG, progress=stop_at(3))
-    assert early["stopped"] is True and early["iterations"] == 3
-    assert early["p0"].shape == whole["p0"].shape and early["matched"].points.shape == src.points.shape
-    assert early["energies"]["value"] > whole["energies"]["value"]
+    assert early.stopped is True and early.iterations == 3
+    assert early.p0.shape == whole.p0.shape and early.matched.points.shape == src.points.shape
+    assert early.energies["value"] > whole.energies["value"]
     # True at the first event: the start, zero momenta.
     start = fshape.match(src, tgt, CONFIG, progress=lambda e: True)
-    assert start["stopped"] is True and start["iterations"] == 0
-    assert not start["p0"].any() and np.array_equal(start["matched"].points, src.points)
+    assert start.stopped is True and start.iterations == 0
+    assert not start.p0.any() and np.array_equal(start.matched.points, src.points)
 
     def boom(event):
         raise RuntimeError("from the callback")
@@ -373,23 +373,23 @@ def stop_at(n):
 def test_a_match_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(tmp_path):
     src, tgt = sphere_pair()
     whole = fshape.match(src, tgt, CONFIG)
-    assert whole["iterations"] > 4
+    assert whole.iterations > 4
     path = tmp_path / "run.ckpt"
     stopped = fshape.match(src, tgt, CONFIG, progress=stop_at(4), checkpoint=path)
-    assert stopped["stopped"] is True and stopped["iterations"] == 4
+    assert stopped.stopped is True and stopped.iterations == 4
     assert path.exists()
     events = []
     resumed = fshape.match(src, tgt, CONFIG, progress=events.append, checkpoint=path)
     # It went on from the fourth iteration, not from the start.
-    assert sum(e["event"] == "iteration" for e in events) == whole["iterations"] - 4
-    assert resumed["iterations"] == whole["iterations"]
-    assert np.array_equal(resumed["p0"], whole["p0"]) and np.array_equal(resumed["pf"], whole["pf"])
-    assert np.array_equal(resumed["matched"].points, whole["matched"].points)
+    assert sum(e["event"] == "iteration" for e in events) == whole.iterations - 4
+    assert resumed.iterations == whole.iterations
+    assert np.array_equal(resumed.p0, whole.p0) and np.array_equal(resumed.pf, whole.pf)
+    assert np.array_equal(resumed.matched.points, whole.matched.points)
     # Once finished, the same call returns the result without iterating.
     events.clear()
     again = fshape.match(src, tgt, CONFIG, progress=events.append, checkpoint=path)
     assert not any(e["event"] == "iteration" for e in events)
-    assert np.array_equal(again["p0"], whole["p0"])
+    assert np.array_equal(again.p0, whole.p0)
     # A checkpoint of other inputs, or a damaged one, is refused, naming the file.
     with pytest.raises(fshape.CheckpointError, match=r"run\.ckpt: .*other inputs"):
         fshape.match(src, src, CONFIG, checkpoint=path)
@@ -417,8 +417,8 @@ def test_shooting_with_zero_momenta_stays_put_and_bad_lengths_are_refused():
     src, _ = sphere_pair()
     config = {"model": {"normalize": False}, "deformation": {"widths": [0.3]}, "integrator": {"steps": 4}}
     g = fshape.shoot(src, np.zeros((12, 3)), config)
-    assert g["points"].shape == (5, 12, 3)
-    assert np.array_equal(g["points"][-1], src.points)
+    assert g.points.shape == (5, 12, 3)
+    assert np.array_equal(g.points[-1], src.points)
     with pytest.raises(fshape.FShapeError, match="p0: shape"):
         fshape.shoot(src, np.zeros((11, 3)), config)
     with pytest.raises(fshape.FShapeError, match="normalize"):
@@ -435,11 +435,11 @@ def test_an_atlas_of_three_subjects_brings_its_template_closer():
     del config["schedule"]
     far = fshape.FShape(src.points * [0.8, 1.1, 1.2], src.cells, src.signal - 0.3)
     r = fshape.atlas([src, tgt, far], config, template=mid)
-    assert isinstance(r["template"], fshape.FShape) and len(r["subjects"]) == 3
-    assert r["stages"][0]["iterations"][-1]["value"] < r["stages"][0]["initial"]["value"]
-    assert all(s["p0"].shape == (12, 3) for s in r["subjects"])
-    after = sum(s["energies"]["attachment"] for s in r["subjects"])
-    before = sum(s["initial_attachment"] for s in r["subjects"])
+    assert isinstance(r.template, fshape.FShape) and len(r.subjects) == 3
+    assert r.stages[0]["iterations"][-1]["value"] < r.stages[0]["initial"]["value"]
+    assert all(s.p0.shape == (12, 3) for s in r.subjects)
+    after = sum(s.energies["attachment"] for s in r.subjects)
+    before = sum(s.initial_attachment for s in r.subjects)
     assert 0 < after < 0.5 * before
 
 
@@ -450,21 +450,21 @@ def test_an_atlas_of_subjects_with_two_maps_gives_a_template_of_two_maps():
               "optimizer": {"max_iterations": 6}}
     del config["schedule"]
     r = fshape.atlas(two, config)
-    assert r["template"].n_channels == 2 and r["template"].signal.shape == (12, 2)
-    for s in r["subjects"]:
-        assert s["pf"].shape == (12, 2) and s["matched"].n_channels == 2
-        assert s["geodesic"]["signals"].shape[1:] == (12, 2)
-        assert len(s["quality"]["channels"]) == 2
+    assert r.template.n_channels == 2 and r.template.signal.shape == (12, 2)
+    for s in r.subjects:
+        assert s.pf.shape == (12, 2) and s.matched.n_channels == 2
+        assert s.geodesic["signals"].shape[1:] == (12, 2)
+        assert len(s.quality["channels"]) == 2
     with pytest.raises(fshape.FShapeError, match="and subject 1 carries 1"):
         fshape.atlas([two[0], tgt], config)
     # Stats test each map: `signal_2` beside `signal`, by name too.
     four = two + [s.with_signal(s.signal + [0.1, 0.3]) for s in two]
     r4 = fshape.atlas(four, {**config, "optimizer": {"max_iterations": 2}})
     st = fshape.stats(r4, {"group": ["a", "a", "b", "b"]}, "group", permutations=24)
-    assert {"signal", "signal_2", "area"} <= set(st["maps"])
+    assert {"signal", "signal_2", "area"} <= set(st.maps)
     one = fshape.stats(r4, {"group": ["a", "a", "b", "b"]}, "group", maps=["signal_2"], permutations=24)
-    assert list(one["maps"]) == ["signal_2"]
-    assert np.array_equal(one["maps"]["signal_2"]["statistic"], st["maps"]["signal_2"]["statistic"])
+    assert list(one.maps) == ["signal_2"]
+    assert np.array_equal(one.maps["signal_2"]["statistic"], st.maps["signal_2"]["statistic"])
 
 
 def test_an_atlas_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(tmp_path):
@@ -477,9 +477,9 @@ def test_an_atlas_stopped_anywhere_resumes_from_its_checkpoint_to_the_same_bits(
     # A stop asked for is no bad input: the base class itself.
     assert type(e.value) is fshape.FShapeError
     resumed = fshape.atlas([src, tgt], config, checkpoint=path)
-    assert resumed["iterations"] == whole["iterations"] > 3
-    assert np.array_equal(resumed["template"].points, whole["template"].points)
-    assert np.array_equal(resumed["template"].signal, whole["template"].signal)
+    assert resumed.iterations == whole.iterations > 3
+    assert np.array_equal(resumed.template.points, whole.template.points)
+    assert np.array_equal(resumed.template.signal, whole.template.signal)
     assert all(np.array_equal(a["p0"], b["p0"]) for a, b in zip(resumed["subjects"], whole["subjects"]))
 
 
@@ -625,6 +625,32 @@ def test_report_writes_one_self_contained_page_of_the_registration(tmp_path):
     assert "How close it came" in page
     with pytest.raises(fshape.FShapeError, match="geodesic has 12 vertices"):
         fshape.report(path, fshape.FShape(src.points[:4], [[0, 1, 2], [1, 2, 3]]), tgt, r)
+    # The report reads the result's typed record, not its attributes: a
+    # dict with the same keys is refused.
+    with pytest.raises(TypeError, match="MatchResult"):
+        fshape.report(path, src, tgt, {key: r[key] for key in r.keys()})
+
+
+def test_results_are_read_only_classes_that_still_index_by_their_keys():
+    src, tgt = sphere_pair()
+    r = fshape.match(src, tgt, {**CONFIG, "optimizer": {"max_iterations": 2}})
+    assert type(r) is fshape.MatchResult and type(r.geodesic) is fshape.Geodesic
+    assert r.keys()[:3] == ["stopped", "p0", "pf"] and "matched" in r and "p1" not in r
+    assert r["matched"] is r.matched and r.geodesic["points"] is r.geodesic.points
+    with pytest.raises(KeyError, match="p1.*a MatchResult has stopped, p0"):
+        r["p1"]
+    with pytest.raises(AttributeError):
+        r.p0 = None
+    assert repr(r).startswith("MatchResult(stopped, p0, pf,")
+    shot = fshape.shoot(src, r.p0, r.config, pf=r.pf)
+    assert type(shot) is fshape.Geodesic and shot.points.shape == (6, 12, 3)
+    config = {key: value for key, value in CONFIG.items() if key != "schedule"}
+    config["optimizer"] = {"max_iterations": 1}
+    atlas = fshape.atlas([src, tgt, src], config)
+    assert type(atlas) is fshape.AtlasResult and all(type(s) is fshape.SubjectResult for s in atlas.subjects)
+    st = fshape.stats(atlas, {"group": ["a", "b", "a"]}, "group", maps=["area"], permutations=4)
+    assert type(st) is fshape.StatsResult and type(st.maps["area"]) is fshape.MapTest
+    assert st.maps["area"].statistic.shape == (12,) and st.maps["area"].kind == "t"
 
 
 def test_a_mask_travels_with_the_shape_and_a_masked_match_reads_no_masked_value(tmp_path):

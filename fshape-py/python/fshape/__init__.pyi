@@ -25,6 +25,14 @@ __all__ = [
     "__version__",
     "FShape",
     "Config",
+    "Geodesic",
+    "MatchResult",
+    "SubjectResult",
+    "AtlasResult",
+    "MapTest",
+    "StatsResult",
+    "ConfigLike",
+    "Progress",
     "Correspondence",
     "read_mesh",
     "write_mesh",
@@ -206,14 +214,26 @@ class Energies(TypedDict):
     signal_energy: float
     attachment: float
 
-@type_check_only
-class Geodesic(TypedDict):
-    times: npt.NDArray[np.float64]
-    points: npt.NDArray[np.float64]
-    """T x n x d."""
-    signals: npt.NDArray[np.float64]
-    """T x n."""
-    hamiltonian: npt.NDArray[np.float64]
+@final
+class Geodesic:
+    """A geodesic at some times (what `shoot` returns, and each result's `geodesic`)."""
+
+    @property
+    def times(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def points(self) -> npt.NDArray[np.float64]:
+        """T x n x d."""
+    @property
+    def signals(self) -> npt.NDArray[np.float64]:
+        """T x n, or T x n x k with k maps."""
+    @property
+    def hamiltonian(self) -> npt.NDArray[np.float64]:
+        """H at every integrator node."""
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key (the results were dicts; their keys still read)."""
+    def __contains__(self, key: str, /) -> bool: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
 
 @type_check_only
 class Alignment(TypedDict):
@@ -233,56 +253,120 @@ class Alignment(TypedDict):
     start: int
     starts: int
 
-@type_check_only
-class MatchResult(TypedDict):
-    stopped: bool
-    """True when the progress callback ended the run before its end: the
-    rest is the result so far (the current momenta carried to the source
-    and shot)."""
-    p0: npt.NDArray[np.float64]
-    pf: npt.NDArray[np.float64]
-    """n, or n x k when the shapes carry k maps."""
-    energies: Energies
-    quality: Quality
-    initial_quality: Quality
-    alignment: Optional[Alignment]
-    stages: list[dict[str, Any]]
-    iterations: int
-    evaluations: int
-    seconds: float
-    geodesic: Geodesic
-    matched: FShape
-    target: FShape
-    """The target as matched (moved when [prealign] moves the target): with
-    `matched`, what a `Correspondence` carries values between."""
-    config: dict[str, Any]
+@final
+class MatchResult:
+    """What `match` returns."""
 
-@type_check_only
-class SubjectResult(TypedDict):
-    p0: npt.NDArray[np.float64]
-    pf: npt.NDArray[np.float64]
-    """n, or n x k when the shapes carry k maps."""
-    energies: Energies
-    quality: Quality
-    template_quality: Quality
-    initial_attachment: float
-    alignment: Optional[Alignment]
-    """The pre-alignment that moved this subject onto the initial template."""
-    geodesic: Geodesic
-    matched: FShape
-    """The template shot onto this subject (the geodesic's end), vertex for
-    vertex with the template: what `stats` compares."""
+    @property
+    def stopped(self) -> bool:
+        """True when the progress callback ended the run before its end: the
+        rest is the result so far (the current momenta carried to the source
+        and shot)."""
+    @property
+    def p0(self) -> npt.NDArray[np.float64]:
+        """n x d."""
+    @property
+    def pf(self) -> npt.NDArray[np.float64]:
+        """n, or n x k when the shapes carry k maps."""
+    @property
+    def energies(self) -> Energies: ...
+    @property
+    def quality(self) -> Quality:
+        """How close the matched shape is to the target."""
+    @property
+    def initial_quality(self) -> Quality:
+        """How close the template was."""
+    @property
+    def alignment(self) -> Optional[Alignment]:
+        """With [prealign]: the map T; else None."""
+    @property
+    def stages(self) -> list[dict[str, Any]]:
+        """Every stage's iterations (J at each)."""
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def evaluations(self) -> int: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def geodesic(self) -> Geodesic:
+        """At the `times` given to `match`."""
+    @property
+    def matched(self) -> FShape:
+        """The template shot to t = 1."""
+    @property
+    def target(self) -> FShape:
+        """The target as matched (moved when [prealign] moves the target): with
+        `matched`, what a `Correspondence` carries values between."""
+    @property
+    def config(self) -> dict[str, Any]:
+        """The configuration with the weights used (for `shoot`)."""
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key (the results were dicts; their keys still read)."""
+    def __contains__(self, key: str, /) -> bool: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
 
-@type_check_only
-class AtlasResult(TypedDict):
-    template: FShape
-    template_momenta: Optional[npt.NDArray[np.float64]]
-    subjects: list[SubjectResult]
-    energies: Energies
-    stages: list[dict[str, Any]]
-    iterations: int
-    evaluations: int
-    seconds: float
+@final
+class SubjectResult:
+    """One subject of an `AtlasResult`."""
+
+    @property
+    def p0(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def pf(self) -> npt.NDArray[np.float64]:
+        """n, or n x k when the shapes carry k maps."""
+    @property
+    def energies(self) -> Energies: ...
+    @property
+    def quality(self) -> Quality: ...
+    @property
+    def template_quality(self) -> Quality: ...
+    @property
+    def initial_attachment(self) -> float: ...
+    @property
+    def alignment(self) -> Optional[Alignment]:
+        """The pre-alignment that moved this subject onto the initial template."""
+    @property
+    def geodesic(self) -> Geodesic: ...
+    @property
+    def matched(self) -> FShape:
+        """The template shot onto this subject (the geodesic's end), vertex for
+        vertex with the template: what `stats` compares."""
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key (the results were dicts; their keys still read)."""
+    def __contains__(self, key: str, /) -> bool: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
+
+@final
+class AtlasResult:
+    """What `atlas` returns."""
+
+    @property
+    def template(self) -> FShape:
+        """The estimated template."""
+    @property
+    def template_momenta(self) -> Optional[npt.NDArray[np.float64]]:
+        """Hypertemplate model, else None."""
+    @property
+    def subjects(self) -> list[SubjectResult]: ...
+    @property
+    def energies(self) -> Energies:
+        """Means over the subjects."""
+    @property
+    def stages(self) -> list[dict[str, Any]]: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def evaluations(self) -> int: ...
+    @property
+    def seconds(self) -> float: ...
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key (the results were dicts; their keys still read)."""
+    def __contains__(self, key: str, /) -> bool: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
 
 Progress = Callable[[dict[str, Any]], Optional[bool]]
 """Called with {"event": "stage" | "iteration" | "stage_finished", ...};
@@ -393,34 +477,62 @@ def atlas(
     same k for every subject and the template."""
 
 
-@type_check_only
-class MapTest(TypedDict):
-    kind: Literal["t", "F"]
-    dof: Tuple[int, int]
-    """The contrast's rank and n − p."""
-    statistic: npt.NDArray[np.float64]
-    effect: npt.NDArray[np.float64]
-    """t tests: the contrast's estimate per vertex (in the map's unit); F: its norm."""
-    p: npt.NDArray[np.float64]
-    """Uncorrected permutation p per vertex."""
-    p_fwe: npt.NDArray[np.float64]
-    """Family-wise error corrected p (maximum statistic)."""
-    tfce: Optional[npt.NDArray[np.float64]]
-    tfce_p_fwe: Optional[npt.NDArray[np.float64]]
-    critical: float
-    """The tested value (|t| when two-sided) that reaches p_FWE ≤ alpha."""
+@final
+class MapTest:
+    """One map's test in a `StatsResult`."""
 
-@type_check_only
-class StatsResult(TypedDict):
-    design: dict[str, Any]
-    """columns (intercept first, a factor as `column[level]`), terms, x."""
-    contrast: dict[str, Any]
-    rows_not_in_the_atlas: list[str]
-    maps: dict[str, MapTest]
-    """By map: "signal" ("signal_2", … for a template of several maps),
-    "momentum", "displacement", "area"."""
-    multivariate: Optional[dict[str, Any]]
-    """With `scores`: statistic (Hotelling T² for a one-row contrast), p."""
+    @property
+    def kind(self) -> Literal["t", "F"]: ...
+    @property
+    def dof(self) -> Tuple[int, int]:
+        """The contrast's rank and n - p."""
+    @property
+    def statistic(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def effect(self) -> npt.NDArray[np.float64]:
+        """t tests: the contrast's estimate per vertex (in the map's unit); F: its norm."""
+    @property
+    def p(self) -> npt.NDArray[np.float64]:
+        """Uncorrected permutation p per vertex."""
+    @property
+    def p_fwe(self) -> npt.NDArray[np.float64]:
+        """Family-wise error corrected p (maximum statistic)."""
+    @property
+    def tfce(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def tfce_p_fwe(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def critical(self) -> float:
+        """The tested value (|t| when two-sided) that reaches p_FWE <= alpha."""
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key (the results were dicts; their keys still read)."""
+    def __contains__(self, key: str, /) -> bool: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
+
+@final
+class StatsResult:
+    """What `stats` returns."""
+
+    @property
+    def design(self) -> dict[str, Any]:
+        """columns (intercept first, a factor as `column[level]`), terms, x."""
+    @property
+    def contrast(self) -> dict[str, Any]: ...
+    @property
+    def rows_not_in_the_atlas(self) -> list[str]: ...
+    @property
+    def maps(self) -> dict[str, MapTest]:
+        """By map: "signal" ("signal_2", ... for a template of several maps),
+        "momentum", "displacement", "area"."""
+    @property
+    def multivariate(self) -> Optional[dict[str, Any]]:
+        """With `scores`: statistic (Hotelling T^2 for a one-row contrast), p."""
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key (the results were dicts; their keys still read)."""
+    def __contains__(self, key: str, /) -> bool: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
 
 def stats(
     atlas: AtlasResult,
@@ -483,8 +595,8 @@ class Carried(TypedDict):
 class Correspondence:
     """Every vertex of `onto` at its closest point on `source` (the surface
     the values come from), computed once, as `fshape transfer` does. For a
-    match result r, Correspondence(r["matched"], r["target"]) carries the
-    source's maps onto the target; Correspondence(r["target"], r["matched"])
+    match result r, Correspondence(r.matched, r.target) carries the
+    source's maps onto the target; Correspondence(r.target, r.matched)
     the target's back onto the source's vertices."""
 
     def __new__(cls, source: FShape, onto: FShape) -> "Correspondence": ...
