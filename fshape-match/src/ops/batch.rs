@@ -340,7 +340,10 @@ mod tests {
                 assert!(folder.is_dir() && folder.ends_with(&row.name));
                 match row.index {
                     0 => Err(format!("{} cannot be read", row.source.display())),
-                    1 => Ok(std::fs::write(folder.join("checkpoint.bin"), b"state").unwrap()),
+                    1 => {
+                        std::fs::write(folder.join("checkpoint.bin"), b"state").unwrap();
+                        Ok(())
+                    }
                     _ => Ok(()),
                 }
             };

@@ -10,14 +10,14 @@ use fshape_match::{AtlasSection, Config, PrealignSection};
 
 /// The sections, in the order of a file: TOML table, struct, source file.
 const SECTIONS: [(&str, &str, &str); 9] = [
-    ("model", "ModelSection", "config.rs"),
-    ("deformation", "DeformationSection", "config.rs"),
-    ("integrator", "IntegratorSection", "config.rs"),
-    ("attachment", "AttachmentSection", "config.rs"),
-    ("optimizer", "OptimizerSection", "config.rs"),
-    ("schedule", "ScheduleSection", "config.rs"),
-    ("[stage]", "StageTable", "config.rs"),
-    ("atlas", "AtlasSection", "config.rs"),
+    ("model", "ModelSection", "config/sections.rs"),
+    ("deformation", "DeformationSection", "config/sections.rs"),
+    ("integrator", "IntegratorSection", "config/sections.rs"),
+    ("attachment", "AttachmentSection", "config/sections.rs"),
+    ("optimizer", "OptimizerSection", "config/sections.rs"),
+    ("schedule", "ScheduleSection", "config/schedule.rs"),
+    ("[stage]", "StageTable", "config/schedule.rs"),
+    ("atlas", "AtlasSection", "config/sections.rs"),
     ("prealign", "PrealignSection", "prealign.rs"),
 ];
 
@@ -92,7 +92,7 @@ fn reference() -> String {
          date.\n",
     );
     // The module's explanation of the weights, as its documentation says it.
-    let module = std::fs::read_to_string(dir.join("config.rs")).unwrap();
+    let module = std::fs::read_to_string(dir.join("config/mod.rs")).unwrap();
     let docs: Vec<&str> = module.lines().take_while(|l| l.starts_with("//!")).map(|l| l[3..].trim_start()).collect();
     let docs = docs.join("\n");
     let start = docs.find("**Scale-free weights**").unwrap();
