@@ -21,7 +21,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use fshape_kernels::Kernel;
-use fshape_match::prealign::{AlignKind, Moving, PrealignSection, prealign, rotation};
+use fshape_match::prealign::{AlignKind, DMat3, DVec3, Moving, PrealignSection, prealign, rotation};
 use fshape_match::{Config, Session};
 use fshape_mesh::FShape;
 use fshape_mesh::generate::SplitMix64;
@@ -33,23 +33,23 @@ fn data(path: &str) -> Result<FShape> {
 }
 
 /// `shape` moved by x ↦ s R x + t.
-fn moved(shape: &FShape, r: &[f64], s: f64, t: &[f64]) -> Result<FShape> {
+fn moved(shape: &FShape, r: &DMat3, s: f64, t: &[f64]) -> Result<FShape> {
     let pts = shape
         .points()
         .chunks_exact(3)
-        .flat_map(|x| (0..3).map(move |i| s * (0..3).map(|j| r[i * 3 + j] * x[j]).sum::<f64>() + t[i]))
+        .flat_map(|x| (0..3).map(move |i| s * (0..3).map(|j| r.col(j)[i] * x[j]).sum::<f64>() + t[i]))
         .collect();
     Ok(shape.clone().with_points(pts)?)
 }
 
 /// A rotation with a uniform axis and an angle uniform in [0°, 180°].
-fn random_rotation(rng: &mut SplitMix64) -> Vec<f64> {
+fn random_rotation(rng: &mut SplitMix64) -> DMat3 {
     loop {
         let v: Vec<f64> = (0..3).map(|_| rng.range(-1.0, 1.0)).collect();
         let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
         if n > 0.1 && n <= 1.0 {
             let theta = rng.range(0.0, std::f64::consts::PI);
-            return rotation(&v.iter().map(|a| a / n * theta).collect::<Vec<_>>(), 3);
+            return rotation(&v.iter().map(|a| a / n * theta).collect::<Vec<_>>());
         }
     }
 }
@@ -78,11 +78,10 @@ fn recovery(name: &str, shape: &FShape, cases: usize, seed: u64) -> Result<()> {
             .fold(0.0, f64::max);
         let (m, _) = a.linear_and_offset();
         // T's linear part times s R is the identity when T undoes the motion.
-        let u: Vec<f64> =
-            (0..9).map(|k| s * (0..3).map(|l| m[(k / 3) * 3 + l] * r[l * 3 + k % 3]).sum::<f64>()).collect();
+        let u = m * r * s;
         // Its angle from the skew part and the trace (accurate near 0).
-        let skew = ((u[7] - u[5]).powi(2) + (u[2] - u[6]).powi(2) + (u[3] - u[1]).powi(2)).sqrt();
-        let degrees = (0.5 * skew).atan2(0.5 * (u[0] + u[4] + u[8] - 1.0)).to_degrees();
+        let skew = DVec3::new(u.y_axis.z - u.z_axis.y, u.z_axis.x - u.x_axis.z, u.x_axis.y - u.y_axis.x).length();
+        let degrees = (0.5 * skew).atan2(0.5 * (u.x_axis.x + u.y_axis.y + u.z_axis.z - 1.0)).to_degrees();
         worst_degrees = worst_degrees.max(degrees);
         worst_distance = worst_distance.max(distance / diagonal);
     }

@@ -22,6 +22,10 @@
 
 use fshape_mesh::FShape;
 use fshape_varifold::{Attachment, VarifoldKernel};
+/// The 3 × 3 matrices and 3-vectors of the maps (f64 glam, already the
+/// kernels' geometry crate): a plane's map is one of space leaving z
+/// alone, so one type serves both dimensions.
+pub use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::MatchError;
@@ -158,89 +162,69 @@ impl Alignment {
         )
     }
 
-    /// The linear part M and the translation b of T(x) = M x + b.
-    pub fn linear_and_offset(&self) -> (Vec<f64>, Vec<f64>) {
+    /// The linear part M and the translation b of T(x) = M x + b (in the
+    /// plane: in the first two rows and columns, the third those of the
+    /// identity).
+    pub fn linear_and_offset(&self) -> (DMat3, DVec3) {
         let d = self.matrix.len() - 1;
-        let m = (0..d).flat_map(|i| self.matrix[i][..d].to_vec()).collect();
-        let b = (0..d).map(|i| self.matrix[i][d]).collect();
+        let at = |i: usize, j: usize| if i < d && j < d { self.matrix[i][j] } else { f64::from(u8::from(i == j)) };
+        let m = DMat3::from_cols_array_2d(&[0, 1, 2].map(|j| [0, 1, 2].map(|i| at(i, j))));
+        let b = DVec3::from_array([0, 1, 2].map(|i| if i < d { self.matrix[i][d] } else { 0.0 }));
         (m, b)
     }
 
     /// `shape` moved by T.
     pub fn apply(&self, shape: &FShape) -> Result<FShape, MatchError> {
         let (m, b) = self.linear_and_offset();
-        Ok(shape.clone().with_points(transform(shape.points(), shape.dim(), &m, &b))?)
+        Ok(shape.clone().with_points(transform(shape.points(), shape.dim(), &m, b))?)
     }
 
     /// `shape` moved by T⁻¹ (for results in the source's frame).
     pub fn apply_inverse(&self, shape: &FShape) -> Result<FShape, MatchError> {
         let (m, b) = self.linear_and_offset();
-        let d = shape.dim();
-        let inv = inverse(&m, d).ok_or_else(|| MatchError::Degenerate("the pre-alignment's map is singular".into()))?;
-        let nb: Vec<f64> = (0..d).map(|i| -(0..d).map(|j| inv[i * d + j] * b[j]).sum::<f64>()).collect();
-        Ok(shape.clone().with_points(transform(shape.points(), d, &inv, &nb))?)
-    }
-}
-
-/// Points moved by x ↦ m x + b (m row-major d × d).
-fn transform(points: &[f64], d: usize, m: &[f64], b: &[f64]) -> Vec<f64> {
-    points
-        .chunks_exact(d)
-        .flat_map(|x| (0..d).map(move |i| (0..d).map(|j| m[i * d + j] * x[j]).sum::<f64>() + b[i]))
-        .collect()
-}
-
-/// The inverse of a 2 × 2 or 3 × 3 matrix, `None` when singular.
-fn inverse(m: &[f64], d: usize) -> Option<Vec<f64>> {
-    let det = determinant(m, d);
-    if det == 0.0 || !det.is_finite() {
-        return None;
-    }
-    Some(if d == 2 {
-        vec![m[3] / det, -m[1] / det, -m[2] / det, m[0] / det]
-    } else {
-        let c = |i: usize, j: usize| m[i * 3 + j];
-        let mut out = vec![0.0; 9];
-        for i in 0..3 {
-            for j in 0..3 {
-                // The cofactor of (j, i), over the determinant.
-                let (a, b) = ((j + 1) % 3, (j + 2) % 3);
-                let (p, q) = ((i + 1) % 3, (i + 2) % 3);
-                out[i * 3 + j] = (c(a, p) * c(b, q) - c(a, q) * c(b, p)) / det;
-            }
+        let det = m.determinant();
+        if det == 0.0 || !det.is_finite() {
+            return Err(MatchError::Degenerate("the pre-alignment's map is singular".into()));
         }
-        out
-    })
-}
-
-fn determinant(m: &[f64], d: usize) -> f64 {
-    if d == 2 {
-        m[0] * m[3] - m[1] * m[2]
-    } else {
-        m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6])
+        let inv = m.inverse();
+        Ok(shape.clone().with_points(transform(shape.points(), shape.dim(), &inv, -(inv * b)))?)
     }
 }
 
-fn matmul(a: &[f64], b: &[f64], d: usize) -> Vec<f64> {
-    (0..d * d).map(|k| (0..d).map(|l| a[(k / d) * d + l] * b[l * d + k % d]).sum()).collect()
+/// A point of the plane or of space as a 3-vector (z = 0 in the plane).
+fn point(x: &[f64]) -> DVec3 {
+    DVec3::new(x[0], x[1], x.get(2).copied().unwrap_or(0.0))
 }
 
-fn transpose(a: &[f64], d: usize) -> Vec<f64> {
-    (0..d * d).map(|k| a[(k % d) * d + k / d]).collect()
+/// Points of dimension `d` moved by x ↦ m x + b.
+fn transform(points: &[f64], d: usize, m: &DMat3, b: DVec3) -> Vec<f64> {
+    points.chunks_exact(d).flat_map(|x| (*m * point(x) + b).to_array().into_iter().take(d)).collect()
+}
+
+/// M's entries row by row, d × d (the affine fit's unknowns' order).
+fn rows_of(m: &DMat3, d: usize) -> impl Iterator<Item = f64> + '_ {
+    (0..d).flat_map(move |i| (0..d).map(move |j| m.col(j)[i]))
 }
 
 /// ω̂, the cross-product matrix of ω.
-fn hat(w: &[f64]) -> [f64; 9] {
-    [0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0]
+fn hat(w: DVec3) -> DMat3 {
+    DMat3::from_cols(DVec3::new(0.0, w.z, -w.y), DVec3::new(-w.z, 0.0, w.x), DVec3::new(w.y, -w.x, 0.0))
 }
 
-/// Exp(ω) on SO(3) (Rodrigues), or the plane rotation by the angle `w[0]`.
-pub fn rotation(w: &[f64], d: usize) -> Vec<f64> {
-    if d == 2 {
-        let (s, c) = w[0].sin_cos();
-        return vec![c, -s, s, c];
+/// The rotation vector of the unknowns `w`: ω in space, (0, 0, θ) in the
+/// plane (a rotation about the axis the plane leaves out).
+fn rotation_vector(w: &[f64]) -> DVec3 {
+    if w.len() == 1 { DVec3::new(0.0, 0.0, w[0]) } else { DVec3::new(w[0], w[1], w[2]) }
+}
+
+/// Exp(ω) on SO(3) (Rodrigues) of a rotation vector `w` (3 entries), or
+/// the plane's rotation by the angle `w[0]` (1 entry: about z).
+pub fn rotation(w: &[f64]) -> DMat3 {
+    if w.len() == 1 {
+        return DMat3::from_rotation_z(w[0]);
     }
-    let theta2: f64 = w.iter().map(|v| v * v).sum();
+    let w = rotation_vector(w);
+    let theta2 = w.length_squared();
     let theta = theta2.sqrt();
     // sin θ/θ and (1 − cos θ)/θ², by their series near 0.
     let (a, b) = if theta < 1e-4 {
@@ -249,13 +233,12 @@ pub fn rotation(w: &[f64], d: usize) -> Vec<f64> {
         (theta.sin() / theta, (1.0 - theta.cos()) / theta2)
     };
     let h = hat(w);
-    let h2 = matmul(&h, &h, 3);
-    (0..9).map(|k| if k % 4 == 0 { 1.0 } else { 0.0 } + a * h[k] + b * h2[k]).collect()
+    DMat3::IDENTITY + h * a + (h * h) * b
 }
 
 /// SO(3)'s right Jacobian J_r(ω): Exp(ω + δ) ≈ Exp(ω) Exp(J_r(ω) δ).
-fn right_jacobian(w: &[f64]) -> Vec<f64> {
-    let theta2: f64 = w.iter().map(|v| v * v).sum();
+fn right_jacobian(w: DVec3) -> DMat3 {
+    let theta2 = w.length_squared();
     let theta = theta2.sqrt();
     // (1 − cos θ)/θ² and (θ − sin θ)/θ³.
     let (a, b) = if theta < 1e-4 {
@@ -264,30 +247,46 @@ fn right_jacobian(w: &[f64]) -> Vec<f64> {
         ((1.0 - theta.cos()) / theta2, (theta - theta.sin()) / (theta2 * theta))
     };
     let h = hat(w);
-    let h2 = matmul(&h, &h, 3);
-    (0..9).map(|k| if k % 4 == 0 { 1.0 } else { 0.0 } - a * h[k] + b * h2[k]).collect()
+    DMat3::IDENTITY - h * a + (h * h) * b
 }
 
 /// Where a fit starts: T₀(x) = s₀ R₀ (x − c) + c + t₀.
 #[derive(Clone, Debug)]
 struct Start {
-    rotation: Vec<f64>,
+    rotation: DMat3,
     scale: f64,
-    translation: Vec<f64>,
+    translation: DVec3,
 }
 
 /// The fit's unknowns: τ (d), the rotation (3 in 3-D, 1 in the plane),
 /// the log-scale σ (similarity and affine), and B (affine: M = M₀ + B,
-/// d²), read against a start.
+/// d², row by row), read against a start.
 pub struct Fit<'a> {
     attachment: &'a Attachment,
     source: &'a FShape,
     kind: AlignKind,
-    centre: Vec<f64>,
+    centre: DVec3,
     length: f64,
     start: Start,
     /// The affine refinement's starting linear part (M = m0 + B).
-    m0: Option<Vec<f64>>,
+    m0: Option<DMat3>,
+}
+
+/// `m` with its third row and column those of the identity in the plane
+/// (d = 2), so that its determinant and inverse are the plane's.
+fn planar(m: DMat3, d: usize) -> DMat3 {
+    if d == 2 { DMat3::from_cols(m.x_axis.with_z(0.0), m.y_axis.with_z(0.0), DVec3::Z) } else { m }
+}
+
+/// The d × d matrix of `rows` (row by row) in the top-left corner, zeros
+/// elsewhere.
+fn from_rows(rows: &[f64], d: usize) -> DMat3 {
+    DMat3::from_cols_array_2d(&[0, 1, 2].map(|j| [0, 1, 2].map(|i| if i < d && j < d { rows[i * d + j] } else { 0.0 })))
+}
+
+/// The rank-one u vᵀ.
+fn outer(u: DVec3, v: DVec3) -> DMat3 {
+    DMat3::from_cols(u * v.x, u * v.y, u * v.z)
 }
 
 impl<'a> Fit<'a> {
@@ -315,21 +314,20 @@ impl<'a> Fit<'a> {
     }
 
     /// The linear part M and the translation t (of T(x) = M (x − c) + c + t) at `u`.
-    fn map(&self, u: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    fn map(&self, u: &[f64]) -> (DMat3, DVec3) {
         let d = self.d();
-        let t: Vec<f64> = (0..d).map(|i| self.start.translation[i] + self.length * u[i]).collect();
+        let t = self.start.translation + point(&u[..d]) * self.length;
         if let Some(m0) = &self.m0 {
-            let m = m0.iter().zip(&u[d..]).map(|(a, b)| a + b).collect();
-            return (m, t);
+            return (*m0 + from_rows(&u[d..], d), t);
         }
         let (r, s) = self.rotation_and_scale(u);
-        (r.iter().map(|v| s * v).collect(), t)
+        (planar(r * s, d), t)
     }
 
     /// R = R₀ Exp(ω) and s = s₀ e^σ at `u` (rigid and similarity fits).
-    fn rotation_and_scale(&self, u: &[f64]) -> (Vec<f64>, f64) {
+    fn rotation_and_scale(&self, u: &[f64]) -> (DMat3, f64) {
         let (d, n_rot) = (self.d(), self.n_rot());
-        let r = matmul(&self.start.rotation, &rotation(&u[d..d + n_rot], d), d);
+        let r = self.start.rotation * rotation(&u[d..d + n_rot]);
         let s = match self.kind {
             AlignKind::Similarity => self.start.scale * u[d + n_rot].exp(),
             _ => self.start.scale,
@@ -338,13 +336,9 @@ impl<'a> Fit<'a> {
     }
 
     /// T(x) = M x + b as (M, b).
-    fn affine(&self, u: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let d = self.d();
+    fn affine(&self, u: &[f64]) -> (DMat3, DVec3) {
         let (m, t) = self.map(u);
-        let b = (0..d)
-            .map(|i| self.centre[i] + t[i] - (0..d).map(|j| m[i * d + j] * self.centre[j]).sum::<f64>())
-            .collect();
-        (m, b)
+        (m, self.centre + t - m * self.centre)
     }
 
     /// The start moved to the unknowns `u` (rotation, scale and
@@ -359,7 +353,7 @@ impl<'a> Fit<'a> {
     pub fn value_grad(&self, u: &[f64]) -> Result<(f64, Vec<f64>), MatchError> {
         let d = self.d();
         let (m, b) = self.affine(u);
-        let points = transform(self.source.points(), d, &m, &b);
+        let points = transform(self.source.points(), d, &m, b);
         if points.iter().any(|v| !v.is_finite()) {
             // A trial step too far (a scale overflowing): the line search
             // steps back.
@@ -368,33 +362,30 @@ impl<'a> Fit<'a> {
         let moved = self.source.clone().with_points(points)?;
         let (dist, g) = self.attachment.eval_grad(&moved).map_err(fshape_shoot::ShootError::from)?;
         // Σ g_i and G = Σ g_i (x_i − c)ᵀ.
-        let mut sum = vec![0.0; d];
-        let mut big_g = vec![0.0; d * d];
+        let (mut sum, mut big_g) = (DVec3::ZERO, DMat3::ZERO);
         for (x, gi) in self.source.points().chunks_exact(d).zip(g.points.chunks_exact(d)) {
-            for i in 0..d {
-                sum[i] += gi[i];
-                for j in 0..d {
-                    big_g[i * d + j] += gi[i] * (x[j] - self.centre[j]);
-                }
-            }
+            let gi = point(gi);
+            sum += gi;
+            big_g += outer(gi, point(x) - self.centre);
         }
-        let mut grad: Vec<f64> = sum.iter().map(|v| self.length * v).collect();
+        let mut grad: Vec<f64> = sum.to_array()[..d].iter().map(|v| self.length * v).collect();
         if self.m0.is_some() {
-            grad.extend(&big_g);
+            grad.extend(rows_of(&big_g, d));
             return Ok((dist.value, grad));
         }
         let (r, s) = self.rotation_and_scale(u);
-        // ∂A/∂R = s G; with M = Rᵀ G, δA = s a·(J_r δω).
-        let mm = matmul(&transpose(&r, d), &big_g, d);
+        // ∂A/∂R = s G; with M = Rᵀ G, δA = s a·(J_r δω), a = vee(M − Mᵀ).
+        let mm = r.transpose() * big_g;
+        let a = DVec3::new(mm.y_axis.z - mm.z_axis.y, mm.z_axis.x - mm.x_axis.z, mm.x_axis.y - mm.y_axis.x);
         if d == 2 {
-            grad.push(s * (mm[2] - mm[1]));
+            // About z only: J_r((0, 0, θ)) leaves z alone.
+            grad.push(s * a.z);
         } else {
-            let a = [mm[7] - mm[5], mm[2] - mm[6], mm[3] - mm[1]];
-            let j = right_jacobian(&u[d..d + 3]);
-            grad.extend((0..3).map(|k| s * (0..3).map(|i| j[i * 3 + k] * a[i]).sum::<f64>()));
+            let j = right_jacobian(rotation_vector(&u[d..d + 3]));
+            grad.extend([j.x_axis, j.y_axis, j.z_axis].map(|column| s * column.dot(a)));
         }
         if self.kind == AlignKind::Similarity {
-            grad.push(s * r.iter().zip(&big_g).map(|(a, b)| a * b).sum::<f64>());
+            grad.push(s * rows_of(&r, d).zip(rows_of(&big_g, d)).map(|(a, b)| a * b).sum::<f64>());
         }
         Ok((dist.value, grad))
     }
@@ -419,36 +410,34 @@ impl<'a> Fit<'a> {
 
 /// The area-weighted centroid and principal axes (columns of a proper
 /// rotation, largest spread first) of a shape's cells.
-fn moments(shape: &FShape) -> Result<(Vec<f64>, Vec<f64>), MatchError> {
+fn moments(shape: &FShape) -> Result<(DVec3, DMat3), MatchError> {
     let d = shape.dim();
     let (centres, weights) = (shape.cell_centres(), shape.cell_volumes());
     let total: f64 = weights.iter().sum::<f64>().max(f64::MIN_POSITIVE);
-    let mut c = vec![0.0; d];
+    let mut c = DVec3::ZERO;
     for (x, w) in centres.chunks_exact(d).zip(&weights) {
-        for i in 0..d {
-            c[i] += w * x[i] / total;
-        }
+        c += point(x) * w / total;
     }
     let mut cov = vec![0.0; d * d];
     for (x, w) in centres.chunks_exact(d).zip(&weights) {
+        let x = point(x) - c;
         for i in 0..d {
             for j in 0..d {
-                cov[i * d + j] += w * (x[i] - c[i]) * (x[j] - c[j]) / total;
+                cov[i * d + j] += w * x[i] * x[j] / total;
             }
         }
     }
-    let (_, mut axes) = crate::linalg::symmetric_eigen(&cov, d)?;
-    if determinant(&axes, d) < 0.0 {
-        for i in 0..d {
-            axes[i * d + d - 1] = -axes[i * d + d - 1];
-        }
+    let (_, axes) = crate::linalg::symmetric_eigen(&cov, d)?;
+    let mut axes = planar(from_rows(&axes, d), d);
+    if axes.determinant() < 0.0 {
+        *axes.col_mut(d - 1) = -axes.col(d - 1);
     }
     Ok((c, axes))
 }
 
-/// The proper rotations of the cube (24) or of the square (4), as
-/// signed permutation matrices.
-fn cube_group(d: usize) -> Vec<Vec<f64>> {
+/// The proper rotations of the cube (24) or of the square (4, about z),
+/// as signed permutation matrices.
+fn cube_group(d: usize) -> Vec<DMat3> {
     let perms: Vec<Vec<usize>> = if d == 2 {
         vec![vec![0, 1], vec![1, 0]]
     } else {
@@ -461,7 +450,8 @@ fn cube_group(d: usize) -> Vec<Vec<f64>> {
             for i in 0..d {
                 m[i * d + p[i]] = if signs >> i & 1 == 1 { -1.0 } else { 1.0 };
             }
-            if determinant(&m, d) > 0.0 {
+            let m = planar(from_rows(&m, d), d);
+            if m.determinant() > 0.0 {
                 out.push(m);
             }
         }
@@ -515,14 +505,10 @@ pub fn prealign(
     if !(scale0.is_finite() && scale0 > 0.0) {
         return Err(MatchError::Degenerate("pre-alignment: a shape has no area or length".into()));
     }
-    let translation: Vec<f64> = (0..d).map(|i| ct[i] - cs[i]).collect();
+    let translation = ct - cs;
     let starts: Vec<Start> = cube_group(d)
         .iter()
-        .map(|p| Start {
-            rotation: matmul(&matmul(&axes_t, p, d), &transpose(&axes_s, d), d),
-            scale: scale0,
-            translation: translation.clone(),
-        })
+        .map(|p| Start { rotation: axes_t * *p * axes_s.transpose(), scale: scale0, translation })
         .collect();
     let fit_kind = if section.kind == AlignKind::Affine { AlignKind::Similarity } else { section.kind };
     // The starts on coarse copies: a few iterations each, then the best
@@ -533,7 +519,7 @@ pub fn prealign(
         attachment: &attachment_c,
         source: &source_c,
         kind: fit_kind,
-        centre: cs.clone(),
+        centre: cs,
         length,
         start: start.clone(),
         m0: None,
@@ -560,8 +546,7 @@ pub fn prealign(
     // The winner refined on the shapes themselves, or on finer copies.
     let (source_f, target_f) = (coarse(source, REFINE_VERTICES, "source")?, coarse(target, REFINE_VERTICES, "target")?);
     let attachment = Attachment::new(&target_f, kernel.clone()).map_err(fshape_shoot::ShootError::from)?;
-    let fit =
-        Fit { attachment: &attachment, source: &source_f, kind: fit_kind, centre: cs.clone(), length, start, m0: None };
+    let fit = Fit { attachment: &attachment, source: &source_f, kind: fit_kind, centre: cs, length, start, m0: None };
     let (u, _, _) = fit.minimise(section.max_iterations)?;
     let (mut m, mut b) = fit.affine(&u);
     if section.kind == AlignKind::Affine {
@@ -572,23 +557,21 @@ pub fn prealign(
         (m, b) = affine.affine(&u);
     }
     let before = attachment.eval(&source_f).map_err(fshape_shoot::ShootError::from)?.value;
-    let moved = source_f.clone().with_points(transform(source_f.points(), d, &m, &b))?;
+    let moved = source_f.clone().with_points(transform(source_f.points(), d, &m, b))?;
     let after = attachment.eval(&moved).map_err(fshape_shoot::ShootError::from)?.value;
-    let scale = determinant(&m, d).abs().powf(1.0 / d as f64);
-    let r: Vec<f64> = m.iter().map(|v| v / scale).collect();
-    let cos = if d == 2 { r[0] } else { ((r[0] + r[4] + r[8] - 1.0) / 2.0).clamp(-1.0, 1.0) };
-    let mut matrix: Vec<Vec<f64>> =
-        (0..d).map(|i| m[i * d..(i + 1) * d].iter().copied().chain([b[i]]).collect()).collect();
+    let scale = m.determinant().abs().powf(1.0 / d as f64);
+    let r = m / scale;
+    let cos = if d == 2 { r.x_axis.x } else { ((r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0) };
+    let mut matrix: Vec<Vec<f64>> = (0..d).map(|i| (0..d).map(|j| m.col(j)[i]).chain([b[i]]).collect()).collect();
     matrix.push((0..=d).map(|j| if j == d { 1.0 } else { 0.0 }).collect());
-    let moved_centre: Vec<f64> =
-        (0..d).map(|i| (0..d).map(|j| m[i * d + j] * cs[j]).sum::<f64>() + b[i] - cs[i]).collect();
+    let moved_centre = m * cs + b - cs;
     Ok(Alignment {
         kind: section.kind,
         moving: section.moving,
         matrix,
         scale,
         rotation_degrees: cos.clamp(-1.0, 1.0).acos().to_degrees(),
-        translation: moved_centre,
+        translation: moved_centre.to_array()[..d].to_vec(),
         attachment_before: before,
         attachment_after: after,
         start: k,
@@ -601,17 +584,16 @@ pub fn prealign(
 pub fn fit_for_tests<'a>(source: &'a FShape, attachment: &'a Attachment, kind: AlignKind, affine: bool) -> Fit<'a> {
     let d = source.dim();
     let (centre, _) = moments(source).expect("a test shape has finite moments");
-    let identity: Vec<f64> = (0..d * d).map(|k| if k % (d + 1) == 0 { 1.0 } else { 0.0 }).collect();
     // A start away from the identity, so that no term vanishes by symmetry.
-    let w: Vec<f64> = if d == 2 { vec![0.3] } else { vec![0.3, -0.2, 0.5] };
-    let start = Start { rotation: rotation(&w, d), scale: 1.1, translation: vec![0.05; d] };
+    let w: &[f64] = if d == 2 { &[0.3] } else { &[0.3, -0.2, 0.5] };
+    let start = Start { rotation: rotation(w), scale: 1.1, translation: point(&[0.05; 3][..d]) };
     Fit {
         attachment,
         source,
         kind,
         centre,
         length: source.bounding_box().diagonal(),
-        m0: affine.then(|| identity.iter().map(|v| 0.9 * v).collect()),
+        m0: affine.then(|| planar(DMat3::IDENTITY * 0.9, d)),
         start,
     }
 }

@@ -4,7 +4,7 @@
 //! the diagonal.
 
 use fshape_kernels::Kernel;
-use fshape_match::prealign::{AlignKind, Moving, PrealignSection, fit_for_tests, prealign, rotation};
+use fshape_match::prealign::{AlignKind, DMat3, DVec3, Moving, PrealignSection, fit_for_tests, prealign, rotation};
 use fshape_mesh::FShape;
 use fshape_mesh::generate::SplitMix64;
 use fshape_mesh::io::{ReadOptions, read_mesh};
@@ -18,12 +18,12 @@ fn kernel(width: f64, signal: bool, dim: usize) -> VarifoldKernel {
 }
 
 /// `shape` moved by x ↦ s R x + t.
-fn moved(shape: &FShape, r: &[f64], s: f64, t: &[f64]) -> FShape {
+fn moved(shape: &FShape, r: &DMat3, s: f64, t: &[f64]) -> FShape {
     let d = shape.dim();
     let pts = shape
         .points()
         .chunks_exact(d)
-        .flat_map(|x| (0..d).map(move |i| s * (0..d).map(|j| r[i * d + j] * x[j]).sum::<f64>() + t[i]))
+        .flat_map(|x| (0..d).map(move |i| s * (0..d).map(|j| r.col(j)[i] * x[j]).sum::<f64>() + t[i]))
         .collect();
     shape.clone().with_points(pts).unwrap()
 }
@@ -31,9 +31,9 @@ fn moved(shape: &FShape, r: &[f64], s: f64, t: &[f64]) -> FShape {
 #[test]
 fn the_fit_gradient_matches_central_differences() {
     let surface = perturbed_icosphere(2, 0.1, 3);
-    let target3 = moved(&perturbed_icosphere(2, 0.1, 4), &rotation(&[0.2, 0.1, -0.3], 3), 1.2, &[0.1, 0.0, -0.1]);
+    let target3 = moved(&perturbed_icosphere(2, 0.1, 4), &rotation(&[0.2, 0.1, -0.3]), 1.2, &[0.1, 0.0, -0.1]);
     let curve = random_curve(2, 40, 5);
-    let target2 = moved(&random_curve(2, 40, 6), &rotation(&[0.4], 2), 0.9, &[0.05, 0.1]);
+    let target2 = moved(&random_curve(2, 40, 6), &rotation(&[0.4]), 0.9, &[0.05, 0.1]);
     let mut rng = SplitMix64(7);
     for (source, target) in [(&surface, &target3), (&curve, &target2)] {
         let attachment = Attachment::new(target, kernel(0.4, true, source.dim())).unwrap();
@@ -52,14 +52,14 @@ fn the_fit_gradient_matches_central_differences() {
 
 /// The rotation angle between two rotations, in degrees: of u = aᵀb,
 /// from its skew part and trace (accurate near 0 and π).
-fn angle(a: &[f64], b: &[f64]) -> f64 {
-    let u: Vec<f64> = (0..9).map(|k| (0..3).map(|l| a[l * 3 + k / 3] * b[l * 3 + k % 3]).sum()).collect();
-    let skew = ((u[7] - u[5]).powi(2) + (u[2] - u[6]).powi(2) + (u[3] - u[1]).powi(2)).sqrt();
-    (0.5 * skew).atan2(0.5 * (u[0] + u[4] + u[8] - 1.0)).to_degrees()
+fn angle(a: &DMat3, b: &DMat3) -> f64 {
+    let u = a.transpose() * *b;
+    let skew = DVec3::new(u.y_axis.z - u.z_axis.y, u.z_axis.x - u.x_axis.z, u.x_axis.y - u.y_axis.x).length();
+    (0.5 * skew).atan2(0.5 * (u.x_axis.x + u.y_axis.y + u.z_axis.z - 1.0)).to_degrees()
 }
 
 /// A random rotation (uniform axis, angle uniform in [0°, 180°]).
-fn random_rotation(rng: &mut SplitMix64) -> Vec<f64> {
+fn random_rotation(rng: &mut SplitMix64) -> DMat3 {
     let axis: Vec<f64> = loop {
         let v = random_direction(3, rng);
         let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -68,7 +68,7 @@ fn random_rotation(rng: &mut SplitMix64) -> Vec<f64> {
         }
     };
     let theta = rng.range(0.0, std::f64::consts::PI);
-    rotation(&axis.iter().map(|a| a * theta).collect::<Vec<_>>(), 3)
+    rotation(&axis.iter().map(|a| a * theta).collect::<Vec<_>>())
 }
 
 /// Moves `shape` by random similarities and checks that the alignment of
@@ -94,9 +94,8 @@ fn undoes_random_motions(shape: &FShape, width: f64, seed: u64, cases: usize) {
             .fold(0.0, f64::max);
         let (m, _) = a.linear_and_offset();
         // T ∘ (s R ·) should be the identity: T's linear part ≈ Rᵀ / s.
-        let undone: Vec<f64> =
-            (0..9).map(|k| s * (0..3).map(|l| m[(k / 3) * 3 + l] * r[l * 3 + k % 3]).sum::<f64>()).collect();
-        let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let undone = m * r * s;
+        let identity = DMat3::IDENTITY;
         let degrees = angle(&undone, &identity);
         assert!(
             degrees < 1.0 && worst < 0.01 * diagonal,
@@ -135,7 +134,7 @@ fn a_pair_is_registered_in_the_target_frame_after_prealignment() {
     // bumpy: with `[prealign]` the session runs on the aligned source,
     // which is already close, and says how it moved it.
     let target = perturbed_icosphere(2, 0.05, 21);
-    let source = moved(&perturbed_icosphere(2, 0.0, 21), &rotation(&[0.0, 2.0, 0.5], 3), 1.0, &[3.0, -1.0, 0.5]);
+    let source = moved(&perturbed_icosphere(2, 0.0, 21), &rotation(&[0.0, 2.0, 0.5]), 1.0, &[3.0, -1.0, 0.5]);
     let text = "[model]\nnormalize = false\ngamma_f = 1.0\ngamma_w = 1.0\n[deformation]\nwidths = [0.5]\n\
         [attachment]\nkernel_geom = \"gaussian:0.3\"\nkernel_grass = \"binet\"\n[optimizer]\nmax_iterations = 3\n\
         [prealign]\nkind = \"rigid\"\n";
