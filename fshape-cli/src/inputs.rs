@@ -116,3 +116,16 @@ pub fn warn_if_unchecked(checkpoint: &Path) {
         );
     }
 }
+
+/// Reads a configuration file; with `warn`, prints on stderr each form it
+/// uses that reads but is better written otherwise (`[schedule]`'s
+/// arrays), naming the file.
+pub fn read_config(path: &Path, warn: bool) -> Result<fshape_match::Config> {
+    let config = fshape_match::Config::read(path)?;
+    if warn {
+        for w in config.warnings() {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+    }
+    Ok(config)
+}

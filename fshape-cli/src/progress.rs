@@ -1,20 +1,19 @@
 //! How a long run reports its progress on stderr: a progress bar on a
 //! terminal, a line per stage and iteration elsewhere (a batch system's
-//! log, a file, a pipe) or with `--verbose`, nothing with `--quiet`; and
-//! `--stop-after`.
+//! log, a file, a pipe) or with `--verbose`, nothing with `--quiet`.
+//! `--stop-after` is an observer of its own (fshape-match's `StopAfter`),
+//! beside this one in the run's `Observers`.
 
 use std::time::Instant;
 
 use fshape_match::{Control, Iteration, Observer, Plan, StageRecord, StageSpec};
 
 /// The progress bar on a terminal, a line per stage and iteration
-/// elsewhere (or with `--verbose`), and `--stop-after`.
+/// elsewhere (or with `--verbose`).
 pub struct Progress {
     gamma_w: f64,
-    /// Iterations this invocation may still make.
-    budget: Option<usize>,
     bar: Option<indicatif::ProgressBar>,
-    /// Never draw (the other processes of an MPI run, `--quiet`).
+    /// Never draw (`--quiet`).
     hidden: bool,
     /// Lines instead of a bar.
     lines: bool,
@@ -26,10 +25,9 @@ pub struct Progress {
 }
 
 impl Progress {
-    /// Stopping after `budget` iterations, reporting as `verbosity` says
-    /// (the model's γ_W, which the iteration lines weigh the attachment
-    /// by, comes with [`Observer::planned`]).
-    pub(crate) fn new(budget: Option<usize>, verbosity: crate::args::Verbosity) -> Progress {
+    /// Reporting as `verbosity` says (the model's γ_W, which the iteration
+    /// lines weigh the attachment by, comes with [`Observer::planned`]).
+    pub(crate) fn new(verbosity: crate::args::Verbosity) -> Progress {
         use crate::args::Verbosity;
         use std::io::IsTerminal;
         let lines = match verbosity {
@@ -39,7 +37,6 @@ impl Progress {
         };
         Progress {
             gamma_w: f64::NAN,
-            budget,
             bar: None,
             hidden: verbosity == Verbosity::Quiet,
             lines,
@@ -47,13 +44,6 @@ impl Progress {
             stage: String::new(),
             start: Instant::now(),
         }
-    }
-
-    /// The same budget, nothing shown.
-    pub(crate) fn hidden(mut self) -> Progress {
-        self.hidden = true;
-        self.lines = false;
-        self
     }
 
     /// Each line starts with `[label] `.
@@ -97,7 +87,7 @@ impl Observer for Progress {
         bar.set_prefix(self.stage.clone());
         bar.set_position(done as u64);
         self.bar = Some(bar);
-        if self.budget == Some(0) { Control::Stop } else { Control::Continue }
+        Control::Continue
     }
 
     fn iteration(&mut self, _stage: usize, it: &Iteration) -> Control {
@@ -115,8 +105,7 @@ impl Observer for Progress {
             bar.set_position(it.iteration as u64);
             bar.set_message(parts);
         }
-        self.budget = self.budget.map(|b| b.saturating_sub(1));
-        if self.budget == Some(0) { Control::Stop } else { Control::Continue }
+        Control::Continue
     }
 
     fn setup(&mut self, step: &str) {

@@ -469,6 +469,12 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     let out = tmp("match_out");
     let o = fshape(&["match", &s, &t, "--config", &c, "--out", &out.display().to_string()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The configuration's older [schedule] arrays read, with a warning
+    // naming the file; the configuration the run writes is in tables.
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains(&format!("warning: {c}: [schedule]: its arrays are the older form")), "{stderr}");
+    let shoot = std::fs::read_to_string(out.join("shoot.toml")).unwrap();
+    assert!(shoot.contains("[[stage]]") && !shoot.contains("[schedule]"), "{shoot}");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let stages = summary["stages"].as_array().unwrap();
@@ -777,11 +783,15 @@ fn demo_bunny_quick_runs_three_stages_on_the_coarse_sphere_with_their_convergenc
             assert!(["Decrease", "Iterations", "Gradient"].contains(&s["stop"].as_str().unwrap()), "{norm}: {s}");
         }
         // The full demo's first three stages: the third is the deep one.
+        // (Written as [[stage]] tables, which read with no warning.)
+        let written = fshape_match::Config::read(&dir.join("config.toml")).unwrap();
+        assert!(written.stage.is_some() && written.warnings().is_empty(), "{norm}");
+        let specs = written.schedule().unwrap();
+        let decrease: Vec<(f64, usize)> = specs.iter().map(|s| s.decrease).collect();
+        assert_eq!(decrease, [(0.005, 5), (0.005, 5), (0.002, 10)], "{norm}");
+        assert_eq!(specs.iter().map(|s| s.max_iterations).collect::<Vec<_>>(), [4, 4, 6], "{norm}");
         let config = std::fs::read_to_string(dir.join("config.toml")).unwrap();
         for line in [
-            "decrease_window = [5, 5, 10]",
-            "decrease_tolerance = [0.005, 0.005, 0.002]",
-            "max_iterations = [4, 4, 6]",
             "memory = 30",
             "momentum_metric = \"energy\"",
             // The demo's own γ_f, not the default (demo::BUNNY_GAMMA_F).

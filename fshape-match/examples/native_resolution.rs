@@ -191,7 +191,7 @@ fn main() -> Result<()> {
     if args.iter().any(|a| a == "--profile") {
         return profile(&source, &target, &config);
     }
-    std::fs::write(out.join("config.toml"), config.to_toml())?;
+    std::fs::write(out.join("config.toml"), config.clone().with_stage_tables().to_toml())?;
     let start = Instant::now();
     let mut session = Session::new(&source, &target, &config).context("setting up")?;
     println!("set up in {:.1} s", start.elapsed().as_secs_f64());

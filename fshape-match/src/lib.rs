@@ -60,8 +60,8 @@ pub use config::{
 pub use prealign::{AlignKind, Alignment, Moving, PrealignSection};
 pub use quality::{ChannelQuality, Quality, quality};
 pub use runner::{
-    CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Outcome, Runner, StageRecord, StageSetup,
-    Staged, UNCHECKED_FORMAT,
+    CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Observers, Outcome, Runner, StageRecord,
+    StageSetup, Staged, StopAfter, UNCHECKED_FORMAT,
 };
 pub use session::{MatchResult, Session, fingerprint};
 pub use unknowns::{Metric, Metrics};

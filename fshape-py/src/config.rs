@@ -31,19 +31,19 @@ impl PyConfig {
                 message: e.into_inner().to_string(),
             })
         })?;
-        Ok(PyConfig { inner })
+        Ok(PyConfig { inner: warned(tables.py(), inner)? })
     }
 
     /// The configuration in TOML text (errors name the key and line).
     #[staticmethod]
-    fn from_toml(text: &str) -> PyResult<PyConfig> {
-        Ok(PyConfig { inner: Config::parse(text).map_err(err)? })
+    fn from_toml(py: Python<'_>, text: &str) -> PyResult<PyConfig> {
+        Ok(PyConfig { inner: warned(py, Config::parse(text).map_err(err)?)? })
     }
 
     /// The configuration in a TOML file (errors name the file).
     #[staticmethod]
-    fn read(path: PathBuf) -> PyResult<PyConfig> {
-        Ok(PyConfig { inner: Config::read(&path).map_err(err)? })
+    fn read(py: Python<'_>, path: PathBuf) -> PyResult<PyConfig> {
+        Ok(PyConfig { inner: warned(py, Config::read(&path).map_err(err)?)? })
     }
 
     /// Every key, defaults included, as TOML text.
@@ -82,7 +82,18 @@ pub(crate) fn config_of(obj: &Bound<'_, PyAny>) -> PyResult<Config> {
             let shown: String = text.chars().take(60).collect();
             return Err(err(format!("config: no file {shown:?}{hint}")));
         }
-        return Config::read(&p).map_err(err);
+        return warned(obj.py(), Config::read(&p).map_err(err)?);
     }
     Err(err("config: expected a fshape.Config, a dict of the TOML tables or a path to a TOML file"))
+}
+
+/// `config`, after a DeprecationWarning for each form it uses that reads
+/// but is better written otherwise ([`Config::warnings`]: `[schedule]`'s
+/// arrays), pointing at the caller's line.
+fn warned(py: Python<'_>, config: Config) -> PyResult<Config> {
+    for warning in config.warnings() {
+        let message = std::ffi::CString::new(warning).map_err(err)?;
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyDeprecationWarning>(), &message, 2)?;
+    }
+    Ok(config)
 }

@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import threading
+import warnings
 from pathlib import Path
 
 import nibabel as nib
@@ -48,7 +49,7 @@ CONFIG = {
     "integrator": {"steps": 5},
     "attachment": {"kernel_geom": "gaussian:0.1", "kernel_signal": "gaussian:0.5"},
     "optimizer": {"max_iterations": 10},
-    "schedule": {"kernel_geom": ["gaussian:0.3", "gaussian:0.1"]},
+    "stage": [{"kernel_geom": "gaussian:0.3"}, {"kernel_geom": "gaussian:0.1"}],
 }
 
 
@@ -432,7 +433,7 @@ def test_an_atlas_of_three_subjects_brings_its_template_closer():
     src, tgt = sphere_pair()
     mid = fshape.FShape(0.5 * (src.points + tgt.points), src.cells, 0.5 * (src.signal + tgt.signal))
     config = {**CONFIG, "optimizer": {"max_iterations": 6}}
-    del config["schedule"]
+    del config["stage"]
     far = fshape.FShape(src.points * [0.8, 1.1, 1.2], src.cells, src.signal - 0.3)
     r = fshape.atlas([src, tgt, far], config, template=mid)
     assert isinstance(r.template, fshape.FShape) and len(r.subjects) == 3
@@ -448,7 +449,7 @@ def test_an_atlas_of_subjects_with_two_maps_gives_a_template_of_two_maps():
     two = [s.with_signal(np.column_stack([s.signal, s.points[:, 1] - 0.1 * i])) for i, s in enumerate([src, tgt])]
     config = {**CONFIG, "attachment": {"kernel_geom": "gaussian:0.1", "kernel_signal": "gaussian:0.5,0.5"},
               "optimizer": {"max_iterations": 6}}
-    del config["schedule"]
+    del config["stage"]
     r = fshape.atlas(two, config)
     assert r.template.n_channels == 2 and r.template.signal.shape == (12, 2)
     for s in r.subjects:
@@ -644,13 +645,28 @@ def test_results_are_read_only_classes_that_still_index_by_their_keys():
     assert repr(r).startswith("MatchResult(stopped, p0, pf,")
     shot = fshape.shoot(src, r.p0, r.config, pf=r.pf)
     assert type(shot) is fshape.Geodesic and shot.points.shape == (6, 12, 3)
-    config = {key: value for key, value in CONFIG.items() if key != "schedule"}
+    config = {key: value for key, value in CONFIG.items() if key != "stage"}
     config["optimizer"] = {"max_iterations": 1}
     atlas = fshape.atlas([src, tgt, src], config)
     assert type(atlas) is fshape.AtlasResult and all(type(s) is fshape.SubjectResult for s in atlas.subjects)
     st = fshape.stats(atlas, {"group": ["a", "b", "a"]}, "group", maps=["area"], permutations=4)
     assert type(st) is fshape.StatsResult and type(st.maps["area"]) is fshape.MapTest
     assert st.maps["area"].statistic.shape == (12,) and st.maps["area"].kind == "t"
+
+
+def test_the_older_schedule_arrays_read_with_a_deprecation_warning(tmp_path):
+    arrays = {**{k: v for k, v in CONFIG.items() if k != "stage"},
+              "schedule": {"kernel_geom": ["gaussian:0.3", "gaussian:0.1"]}}
+    with pytest.warns(DeprecationWarning, match=r"\[schedule\]: its arrays are the older form"):
+        old = fshape.Config(arrays)
+    (tmp_path / "old.toml").write_text(old.to_toml())
+    with pytest.warns(DeprecationWarning, match="older form"):
+        fshape.Config.read(tmp_path / "old.toml")
+    # The tables say the same schedule, and read without a warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        new = fshape.Config(CONFIG)
+    assert new.to_dict()["stage"][1]["kernel_geom"] == old.to_dict()["schedule"]["kernel_geom"][1]
 
 
 def test_a_mask_travels_with_the_shape_and_a_masked_match_reads_no_masked_value(tmp_path):
@@ -667,7 +683,7 @@ def test_a_mask_travels_with_the_shape_and_a_masked_match_reads_no_masked_value(
     with pytest.raises(fshape.FShapeError, match="vertex"):
         fshape.FShape(src.points, src.cells, np.where(cap, src.signal, np.nan), mask)
     # Nothing masked is read: the same bits with NaN, 0 or 1e300 under the masks.
-    config = dict(CONFIG, optimizer={"max_iterations": 4}, schedule={"kernel_geom": ["gaussian:0.1"]})
+    config = dict(CONFIG, optimizer={"max_iterations": 4}, stage=[{"kernel_geom": "gaussian:0.1"}])
     runs = []
     for v in (np.nan, 0.0, 1e300):
         s = fshape.FShape(src.points, src.cells, filled(src, v), mask)

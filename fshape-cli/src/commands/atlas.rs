@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use fshape_match::ops::{self, AtlasRequest, Checkpointing};
-use fshape_match::{Config, MatchError, Outcome};
+use fshape_match::{MatchError, Observers, Outcome, StopAfter};
 use fshape_mesh::FShape;
 use fshape_mesh::io;
 use fshape_report::outputs::{self, AtlasFolder};
@@ -167,7 +167,7 @@ pub fn run_with(a: &AtlasArgs<'_>) -> Result<()> {
 
 /// [`run`] as process `rank` of `cluster` (none: alone).
 fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, rank: usize) -> Result<()> {
-    let config = Config::read(a.config)?;
+    let config = crate::inputs::read_config(a.config, true)?;
     let paths = subject_paths(a)?;
     let subjects: Vec<FShape> = paths
         .iter()
@@ -197,16 +197,17 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         (false, _) => Checkpointing::None,
     };
     // The run's clock starts here: the subjects' pre-alignments report on
-    // it too (on process 0 only). Every process runs the same iterations
-    // (so --stop-after stops them all at once, counted by its hidden
-    // progress).
-    let mut progress = crate::progress::Progress::new(a.stop_after, a.verbosity);
-    if rank > 0 {
-        progress = progress.hidden();
-    }
+    // it too (on process 0 only). Every process runs the same iterations,
+    // so --stop-after stops them all at once; only process 0 shows them.
+    let mut progress = crate::progress::Progress::new(a.verbosity);
+    let mut budget = StopAfter(a.stop_after);
     let request =
         AtlasRequest { template: &template, subjects: &subjects, config: &config, modes: MODES, collect: rank == 0 };
-    let run = match ops::estimate_atlas(&request, templates, &checkpointing, cluster, &mut progress) {
+    let observers = if rank == 0 { Observers::new().with(&mut progress) } else { Observers::new() };
+    let mut observers = observers.with(&mut budget);
+    let run = ops::estimate_atlas(&request, templates, &checkpointing, cluster, &mut observers);
+    drop(observers);
+    let run = match run {
         Ok(run) => run,
         Err(e @ MatchError::Kinds(_)) => bail!("{}: {e}", template_path.display()),
         Err(e @ (MatchError::Checkpoint { .. } | MatchError::InFile { .. })) if a.resume => {

@@ -216,7 +216,7 @@ pub fn run_with(a: &BatchArgs<'_>) -> Result<()> {
 /// Registers this shard's rows that have not finished; an error when any
 /// of its rows failed.
 fn run_rows(a: &BatchArgs<'_>, request: &BatchRequest<'_>, rows: &[BatchPair]) -> Result<()> {
-    fshape_match::Config::read(a.config)?;
+    crate::inputs::read_config(a.config, true)?;
     let (shard, shards) = request.shard;
     let mine = rows.iter().filter(|r| request.in_shard(r)).count();
     let todo = request.todo(rows);

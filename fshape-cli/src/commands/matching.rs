@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use fshape_match::ops::{self, Checkpointing, Labels, MatchRequest};
-use fshape_match::{Config, MatchError, Outcome};
+use fshape_match::{MatchError, Observers, Outcome, StopAfter};
 use fshape_report::outputs::{self, Folder};
 
 use crate::progress::Progress;
@@ -83,7 +83,8 @@ pub struct MatchArgs<'a> {
 }
 
 pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
-    let config = Config::read(a.config)?;
+    // A batch row does not repeat what the batch said once.
+    let config = crate::inputs::read_config(a.config, a.label.is_none())?;
     let source = crate::inputs::load_masked(a.source, a.signal_name.clone(), a.signals.0, &a.masking.0)?;
     let target = crate::inputs::load_masked(a.target, a.signal_name.clone(), a.signals.1, &a.masking.1)?;
     let stages = config.stage_count();
@@ -97,10 +98,14 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     };
     // The run's clock starts here: the setup (pre-alignment, simplified
     // stages) reports on it too.
-    let mut progress = Progress::new(a.stop_after, a.verbosity).labelled(a.label);
+    let mut progress = Progress::new(a.verbosity).labelled(a.label);
+    let mut budget = StopAfter(a.stop_after);
     let request = MatchRequest { source: &source, target: &target, config: &config, result_when_stopped: false };
     let pair = || format!("{} -> {}", a.source.display(), a.target.display());
-    let reg = match ops::register(&request, templates, &checkpointing, &mut progress) {
+    let mut observers = Observers::new().with(&mut progress).with(&mut budget);
+    let run = ops::register(&request, templates, &checkpointing, &mut observers);
+    drop(observers);
+    let reg = match run {
         Ok(reg) => reg,
         Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
         // The library says "the target shape has no signal"; the user knows

@@ -90,9 +90,8 @@ fn momenta(a: &ShootArgs<'_>, shape: &FShape) -> Result<(Vec<f64>, Vec<f64>)> {
 }
 
 fn shoot(a: &ShootArgs<'_>) -> Result<()> {
-    use fshape_match::Config;
     let start = std::time::Instant::now();
-    let config = Config::read(a.config)?;
+    let config = crate::inputs::read_config(a.config, true)?;
     let model = config.model()?;
     if config.model.normalize {
         anyhow::bail!(

@@ -43,25 +43,23 @@
 //! signal_metric = "l2"              # metric of p^f: l2 (L²(x_0), the paper's) | euclidean | energy (default l2)
 //! momentum_metric = "energy"        # metric of p_0: euclidean | l2 | energy (default energy)
 //!
-//! [schedule]                        # coarse to fine (default: one stage, [attachment])
-//! kernel_geom = ["gaussian:0.2", "gaussian:0.1", "gaussian:0.05"]
-//! scheme = ["midpoint", "midpoint", "rk4"]  # per stage (default [integrator]'s; the last must be it)
-//! steps = [5, 5, 10]                        # per stage (likewise)
-//! max_iterations = [200, 100, 30]           # per stage (default [optimizer]'s)
-//! decrease_tolerance = [1e-2, 1e-2, 1e-3]    # per stage (default [optimizer]'s)
-//! decrease_window = [10, 10, 3]              # per stage (default [optimizer]'s)
-//! vertices = [2000, 10000]                   # each stage's template but the last (default: the source)
-//! coarse_targets = true                      # with vertices: the target simplified alike (default true)
+//! [[stage]]                         # coarse to fine, a table per stage (default: one stage, [attachment])
+//! kernel_geom = "gaussian:0.2"      # the stage's position kernel      (required)
+//! scheme = "midpoint"               # its integrator (default [integrator]'s; the last stage's must be it)
+//! steps = 5                         # its time steps (likewise)
+//! max_iterations = 200              # (default [optimizer]'s)
+//! decrease_tolerance = 1e-2         # (default [optimizer]'s)
+//! decrease_window = 10              # (default [optimizer]'s)
+//! vertices = 2000                   # its template: the source simplified (every stage but the last, or none)
+//! coarse_target = true              # with vertices: the target simplified alike (default true)
+//! [[stage]]
+//! kernel_geom = "gaussian:0.1"      # the last stage runs on the source and target themselves
 //!
-//! # or the same schedule, a table per stage (each key as above, for its
-//! # stage; one left out takes [integrator]'s or [optimizer]'s):
-//! # [[stage]]
-//! # kernel_geom = "gaussian:0.2"
-//! # scheme = "midpoint"
-//! # max_iterations = 200
-//! # vertices = 2000
-//! # [[stage]]
-//! # ...
+//! # or, the older form of the same schedule (still read, with a warning):
+//! # [schedule]
+//! # kernel_geom = ["gaussian:0.2", "gaussian:0.1"]
+//! # scheme = ["midpoint", "rk4"]   # and steps, max_iterations, decrease_tolerance,
+//! # vertices = [2000]              # decrease_window: an array each; coarse_targets = true
 //!
 //! [atlas]                           # fshape atlas only
 //! template = "free"                 # free | hypertemplate              (default free)
@@ -367,7 +365,7 @@ impl Config {
 
     /// This configuration with the weights a model normalised by `scales`
     /// uses, written out (`normalize = false`): what shooting the
-    /// registration's momenta again needs.
+    /// registration's momenta again needs (its schedule as `[[stage]]` tables).
     pub fn resolved(&self, scales: Option<&Scales>) -> Config {
         let mut c = self.clone();
         if let (true, Some(s)) = (c.model.normalize, scales) {
@@ -378,7 +376,7 @@ impl Config {
             }
         }
         c.model.normalize = false;
-        c
+        c.with_stage_tables()
     }
 
     /// Everything checked at once for matching `template` onto `target`:

@@ -9,7 +9,8 @@ use super::check::bad;
 use super::{Config, PositionKernel};
 use crate::MatchError;
 
-/// `[schedule]`.
+/// `[schedule]`. The older form of the schedule, an array per key: it
+/// still reads, with a warning, and a run writes it as `[[stage]]` tables.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScheduleSection {
@@ -306,5 +307,63 @@ impl Config {
             vertices: (with_vertices > 0).then(|| tables[..n - 1].iter().filter_map(|t| t.vertices).collect()),
             coarse_targets,
         })
+    }
+
+    /// The same configuration with `[schedule]`'s arrays written as
+    /// `[[stage]]` tables, a stage's keys together (the form the program
+    /// writes); unchanged without arrays, or with arrays whose lengths do
+    /// not fit (their checks then name the array).
+    pub fn with_stage_tables(mut self) -> Config {
+        fn at<T: Copy>(v: &Option<Vec<T>>, i: usize) -> Option<T> {
+            v.as_ref().and_then(|v| v.get(i).copied())
+        }
+        let Some(s) = &self.schedule else { return self };
+        let n = s.kernel_geom.len();
+        let fits = |len: Option<usize>, want: usize| len.is_none_or(|l| l == want);
+        if !(fits(s.scheme.as_ref().map(Vec::len), n)
+            && fits(s.steps.as_ref().map(Vec::len), n)
+            && fits(s.max_iterations.as_ref().map(Vec::len), n)
+            && fits(s.decrease_tolerance.as_ref().map(Vec::len), n)
+            && fits(s.decrease_window.as_ref().map(Vec::len), n)
+            && fits(s.vertices.as_ref().map(Vec::len), n.saturating_sub(1))
+            && (s.vertices.is_some() || s.coarse_targets.is_none())
+            && self.stage.is_none())
+        {
+            return self;
+        }
+        let tables = (0..n)
+            .map(|i| {
+                let vertices = at(&s.vertices, i);
+                StageTable {
+                    kernel_geom: s.kernel_geom[i].clone(),
+                    scheme: at(&s.scheme, i),
+                    steps: at(&s.steps, i),
+                    max_iterations: at(&s.max_iterations, i),
+                    decrease_tolerance: at(&s.decrease_tolerance, i),
+                    decrease_window: at(&s.decrease_window, i),
+                    vertices,
+                    coarse_target: s.coarse_targets.filter(|_| vertices.is_some()),
+                }
+            })
+            .collect();
+        self.schedule = None;
+        self.stage = Some(tables);
+        self
+    }
+
+    /// What reads but is better written otherwise, a sentence each (the
+    /// program prints them as warnings, Python as DeprecationWarnings):
+    /// `[schedule]`'s parallel arrays, the older form of the schedule.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.schedule.is_some() {
+            out.push(
+                "[schedule]: its arrays are the older form of the schedule and still read; write one [[stage]] \
+                 table per stage instead, its keys together (the configuration reference shows both; the \
+                 configuration a run writes is in that form)"
+                    .to_string(),
+            );
+        }
+        out
     }
 }

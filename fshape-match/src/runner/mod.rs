@@ -71,6 +71,79 @@ pub trait Observer {
 
 impl Observer for () {}
 
+impl Control {
+    /// Stop when either says so.
+    fn or(self, other: Control) -> Control {
+        if self == Control::Stop { Control::Stop } else { other }
+    }
+}
+
+/// Several observers as one, in argmin's manner: each is told every event,
+/// in the order they were added, and the run stops when any of them asks
+/// (the others are still told of that event). A display, a log,
+/// `--stop-after`'s budget and a Python callback are each an observer of
+/// their own.
+#[derive(Default)]
+pub struct Observers<'a>(Vec<&'a mut dyn Observer>);
+
+impl<'a> Observers<'a> {
+    /// No observer yet.
+    pub fn new() -> Observers<'a> {
+        Observers(Vec::new())
+    }
+
+    /// With `observer` told after those already added.
+    pub fn with(mut self, observer: &'a mut dyn Observer) -> Observers<'a> {
+        self.0.push(observer);
+        self
+    }
+}
+
+impl Observer for Observers<'_> {
+    fn stage_started(&mut self, stage: usize, stages: usize, spec: &StageSpec, done: usize) -> Control {
+        self.0.iter_mut().fold(Control::Continue, |c, o| o.stage_started(stage, stages, spec, done).or(c))
+    }
+
+    fn iteration(&mut self, stage: usize, record: &Iteration) -> Control {
+        self.0.iter_mut().fold(Control::Continue, |c, o| o.iteration(stage, record).or(c))
+    }
+
+    fn stage_finished(&mut self, stage: usize, record: &StageRecord) {
+        self.0.iter_mut().for_each(|o| o.stage_finished(stage, record));
+    }
+
+    fn setup(&mut self, step: &str) {
+        self.0.iter_mut().for_each(|o| o.setup(step));
+    }
+
+    fn planned(&mut self, plan: &Plan) {
+        self.0.iter_mut().for_each(|o| o.planned(plan));
+    }
+}
+
+/// Stops a run after a number of accepted iterations of this invocation
+/// (`--stop-after`: a run resumed from its checkpoint counts afresh), or
+/// at its first stage when the number is 0; `None` never stops.
+#[derive(Clone, Copy, Debug)]
+pub struct StopAfter(pub Option<usize>);
+
+impl StopAfter {
+    fn control(self) -> Control {
+        if self.0 == Some(0) { Control::Stop } else { Control::Continue }
+    }
+}
+
+impl Observer for StopAfter {
+    fn stage_started(&mut self, _stage: usize, _stages: usize, _spec: &StageSpec, _done: usize) -> Control {
+        self.control()
+    }
+
+    fn iteration(&mut self, _stage: usize, _record: &Iteration) -> Control {
+        self.0 = self.0.map(|n| n.saturating_sub(1));
+        self.control()
+    }
+}
+
 /// How [`Runner::run`] ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Outcome {

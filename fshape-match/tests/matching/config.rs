@@ -167,6 +167,40 @@ fn stages(c: &Config) -> Vec<Stage> {
 }
 
 #[test]
+fn the_older_arrays_read_with_a_warning_and_are_written_as_tables_with_the_same_stages() {
+    let base = "[deformation]\nwidths = [0.2]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n\
+                [integrator]\nsteps = 8\n[optimizer]\nmax_iterations = 40\n";
+    let schedules = [
+        "kernel_geom = [\"gaussian:0.3\", \"gaussian:0.1\"]\n",
+        "kernel_geom = [\"gaussian:0.4\", \"gaussian:0.2\", \"gaussian:0.1\"]\nmax_iterations = [100, 40, 10]\n\
+         scheme = [\"midpoint\", \"euler\", \"rk4\"]\nsteps = [4, 6, 8]\ndecrease_tolerance = [1e-2, 1e-3, 1e-4]\n\
+         decrease_window = [5, 4, 3]\nvertices = [500, 2000]\ncoarse_targets = false\n",
+        "kernel_geom = [\"gaussian:0.3\", \"gaussian:0.1\"]\nvertices = [900]\n",
+    ];
+    for schedule in schedules {
+        let arrays = Config::parse(&format!("{base}[schedule]\n{schedule}")).unwrap();
+        let warnings = arrays.warnings();
+        assert!(warnings.len() == 1 && warnings[0].contains("[[stage]]"), "{warnings:?}");
+        let tables = arrays.clone().with_stage_tables();
+        assert!(tables.schedule.is_none() && tables.warnings().is_empty());
+        assert_eq!(stages(&tables), stages(&arrays), "{schedule}");
+        // What a run writes (its resolved configuration) is in tables, and
+        // reads back to the same value.
+        let resolved = arrays.resolved(None);
+        let text = resolved.to_toml();
+        assert!(text.contains("[[stage]]") && !text.contains("[schedule]"), "{text}");
+        assert_eq!(Config::parse(&text).unwrap(), resolved);
+        assert_eq!(stages(&resolved), stages(&arrays));
+    }
+    // Arrays of the wrong length stay arrays, for their check to name.
+    let short =
+        Config::parse(&format!("{base}[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.1\"]\nsteps = [4]\n"))
+            .unwrap();
+    assert_eq!(short.clone().with_stage_tables(), short);
+    assert!(short.schedule().unwrap_err().to_string().contains("schedule.steps"));
+}
+
+#[test]
 fn a_schedule_of_stage_tables_is_the_schedule_of_its_arrays() {
     let base = "[deformation]\nwidths = [0.2]\n[attachment]\nkernel_geom = \"gaussian:0.1\"\n\
                 [optimizer]\nmax_iterations = 40\ndecrease_window = 7\n";

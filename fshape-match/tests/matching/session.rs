@@ -2,8 +2,8 @@
 //! to the same bits, and checkpoints checked before use.
 
 use fshape_match::{
-    CHECKPOINT_FORMAT, Checkpoint, Config, Control, Iteration, MatchError, Observer, Outcome, Session, StageRecord,
-    StageSpec,
+    CHECKPOINT_FORMAT, Checkpoint, Config, Control, Iteration, MatchError, Observer, Observers, Outcome, Session,
+    StageRecord, StageSpec, StopAfter,
 };
 use fshape_mesh::FShape;
 use fshape_mesh::test_support::perturbed_icosphere;
@@ -76,6 +76,28 @@ fn stages_run_in_order_and_the_observer_sees_each_iteration() {
         result.energies.attachment < 0.5 * result.stages[1].initial.attachment.max(result.stages[0].initial.attachment)
     );
     assert_eq!(result.energies.value.to_bits(), result.stages[1].iterations.last().unwrap().value.to_bits());
+}
+
+#[test]
+fn observers_compose_each_told_every_event_and_any_may_stop_the_run() {
+    let (source, target, config) = inputs();
+    // Two recorders and a budget of four iterations: both recorders see
+    // the same four, and the run stops there, as with one observer.
+    let mut whole = Session::new(&source, &target, &config).unwrap();
+    let (mut first, mut second, mut budget) = (Recorder::default(), Recorder::default(), StopAfter(Some(4)));
+    let mut observers = Observers::new().with(&mut first).with(&mut budget).with(&mut second);
+    assert_eq!(whole.run(&mut observers).unwrap(), Outcome::Interrupted);
+    drop(observers);
+    assert_eq!(first.iterations.len(), 4);
+    assert_eq!(first.events, second.events, "each told every event, the one that stopped too");
+    let mut alone = Recorder { stop_after: Some(4), ..Recorder::default() };
+    Session::new(&source, &target, &config).unwrap().run(&mut alone).unwrap();
+    assert_eq!(alone.events, first.events);
+    // A budget of none never stops; of 0, at the first stage.
+    let mut zero = StopAfter(Some(0));
+    assert_eq!(Session::new(&source, &target, &config).unwrap().run(&mut zero).unwrap(), Outcome::Interrupted);
+    let mut none = StopAfter(None);
+    assert_eq!(Session::new(&source, &target, &config).unwrap().run(&mut none).unwrap(), Outcome::Finished);
 }
 
 #[test]

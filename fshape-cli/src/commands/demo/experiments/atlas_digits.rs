@@ -111,6 +111,6 @@ pub fn atlas_digits(a: &DigitsArgs<'_>, subjects: usize) -> Result<()> {
     std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
     let cfg = run.join("config.toml");
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
-    io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
+    io::write_atomic(&cfg, format!("{comments}\n{}", config.clone().with_stage_tables().to_toml()).as_bytes(), false)?;
     super::run_atlas(&list_path, &template_path, &cfg, &run, (0.0, 90.0))
 }

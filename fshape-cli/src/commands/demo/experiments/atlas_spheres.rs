@@ -86,7 +86,7 @@ pub fn atlas_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Result<
     let header = "# fshape demo atlas-spheres: an atlas with a known answer (truth.ply), H1 metamorphosis,\n\
                   # scale-free weights, p_0 in the energy metric, one stage ending when the mean J fell\n\
                   # by less than 1e-3 over 5 iterations.\n\n";
-    io::write_atomic(&cfg, format!("{header}{}", config.to_toml()).as_bytes(), false)?;
+    io::write_atomic(&cfg, format!("{header}{}", config.clone().with_stage_tables().to_toml()).as_bytes(), false)?;
     eprintln!("atlas-spheres: {} subjects shot from an ellipsoid of {n} vertices -> {}", subjects.len(), run.display());
     super::run_atlas(&list_path, &start, &cfg, &run, crate::args::DEFAULT_CAMERA.pair())?;
     // The estimate against the truth, and the bound.

@@ -92,7 +92,7 @@ fn run_match(
     std::fs::create_dir_all(run).with_context(|| format!("creating {}", run.display()))?;
     let cfg = run.join("config.toml");
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
-    io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
+    io::write_atomic(&cfg, format!("{comments}\n{}", config.clone().with_stage_tables().to_toml()).as_bytes(), false)?;
     crate::commands::matching::run_with(&crate::commands::matching::MatchArgs {
         masking: Default::default(),
         source,

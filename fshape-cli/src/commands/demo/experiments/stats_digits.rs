@@ -42,7 +42,7 @@ pub fn stats_digits(a: &DigitsArgs<'_>, per_class: usize, permutations: usize) -
     std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
     let cfg = run.join("config.toml");
     let comments: String = header.lines().map(|l| format!("# {l}\n")).collect();
-    io::write_atomic(&cfg, format!("{comments}\n{}", config.to_toml()).as_bytes(), false)?;
+    io::write_atomic(&cfg, format!("{comments}\n{}", config.clone().with_stage_tables().to_toml()).as_bytes(), false)?;
     eprintln!(
         "stats-digits: {per_class} writers' 3s and {per_class} writers' 5s on a square of {} vertices -> {}",
         mesh.n_vertices(),

@@ -263,7 +263,7 @@ pub fn stats_spheres(a: &StatsSpheresArgs<'_>) -> Result<()> {
     let cfg = run.join("config.toml");
     let header = "# fshape demo stats-spheres: the atlas of two groups of ellipsoids, each subject pre-aligned\n\
                   # (rigid) to the initial template, H1 metamorphosis, p_0 in the energy metric.\n\n";
-    io::write_atomic(&cfg, format!("{header}{}", config.to_toml()).as_bytes(), false)?;
+    io::write_atomic(&cfg, format!("{header}{}", config.clone().with_stage_tables().to_toml()).as_bytes(), false)?;
     eprintln!(
         "stats-spheres: {} ellipsoids of {n} vertices in two groups, turned and moved -> {}",
         2 * a.per_group,
