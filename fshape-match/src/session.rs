@@ -45,12 +45,13 @@ pub struct MatchResult {
 
 /// FNV-1a, as hex, of the source, the target and the configuration (as
 /// data: the shapes bit for bit, and the configuration's TOML with every
-/// default written out).
+/// default written out and its schedule as `[schedule]`'s arrays).
 pub fn fingerprint(source: &FShape, target: &FShape, config: &Config) -> String {
     let mut h = Fnv::new();
     h.shape(source);
     h.shape(target);
-    h.eat(config.to_toml().as_bytes());
+    // (Its schedule as arrays: either form of one schedule, one fingerprint.)
+    h.eat(config.clone().with_schedule_arrays().to_toml().as_bytes());
     // Masked inputs' signal scale skips their masked vertices since this
     // tag: a checkpoint of a masked pair from before ran another
     // objective, and is refused.

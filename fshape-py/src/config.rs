@@ -89,11 +89,13 @@ pub(crate) fn config_of(obj: &Bound<'_, PyAny>) -> PyResult<Config> {
 
 /// `config`, after a DeprecationWarning for each form it uses that reads
 /// but is better written otherwise ([`Config::warnings`]: `[schedule]`'s
-/// arrays), pointing at the caller's line.
+/// arrays), at the caller's line (stack level 1: the native call's caller,
+/// so that Python's default filter for `__main__` shows it).
 fn warned(py: Python<'_>, config: Config) -> PyResult<Config> {
     for warning in config.warnings() {
-        let message = std::ffi::CString::new(warning).map_err(err)?;
-        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyDeprecationWarning>(), &message, 2)?;
+        // (The sentences are ours: no NUL byte to refuse.)
+        let message = std::ffi::CString::new(warning.replace('\0', "")).unwrap_or_default();
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyDeprecationWarning>(), &message, 1)?;
     }
     Ok(config)
 }

@@ -3,9 +3,11 @@
 //! Each is a frozen class whose attributes are numpy arrays, shapes and
 //! plain records (the quality, energies and pre-alignment as the dicts of
 //! summary.json's keys), as polars and pydantic-core return objects rather
-//! than dicts. The results were dicts before they were classes, so
-//! `result["matched"]` still reads the attribute (with `keys()`), and
-//! code written for either keeps working.
+//! than dicts. The results were dicts before they were classes, so each
+//! is also a read-only mapping of its attributes by name (`result["matched"]`,
+//! `keys()`, `items()`, `get()`, iteration, `len()`, `dict(result)`), and
+//! code written for the dicts keeps working; only what needs a real dict
+//! (`json.dumps`, assigning a key) needs `dict(result)`.
 
 use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
@@ -48,13 +50,45 @@ macro_rules! result_class {
                 }
             }
 
-            fn __contains__(&self, key: &str) -> bool {
-                Self::KEYS.contains(&key)
+            fn __contains__(&self, key: &Bound<'_, PyAny>) -> bool {
+                key.extract::<String>().is_ok_and(|k| Self::KEYS.contains(&k.as_str()))
+            }
+
+            fn __len__(&self) -> usize {
+                Self::KEYS.len()
+            }
+
+            fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyIterator>> {
+                pyo3::types::PyList::new(py, Self::KEYS)?.try_iter()
             }
 
             /// The attributes' names.
             fn keys(&self) -> Vec<&'static str> {
                 Self::KEYS.to_vec()
+            }
+
+            /// The attributes' values, in the order of `keys()`.
+            fn values(&self, py: Python<'_>) -> Vec<Py<PyAny>> {
+                vec![$(self.$field.clone_ref(py)),*]
+            }
+
+            /// (name, value) pairs, in the order of `keys()`.
+            fn items(&self, py: Python<'_>) -> Vec<(&'static str, Py<PyAny>)> {
+                Self::KEYS.iter().copied().zip(self.values(py)).collect()
+            }
+
+            /// The attribute named `key`, or `default` without one.
+            #[pyo3(signature = (key, default = None))]
+            fn get(&self, py: Python<'_>, key: &str, default: Option<Py<PyAny>>) -> Py<PyAny> {
+                self.__getitem__(py, key).unwrap_or_else(|_| default.unwrap_or_else(|| py.None()))
+            }
+
+            /// The attributes for Python's garbage collector (they may be
+            /// dicts and lists a caller fills, so a cycle through them is
+            /// found; those containers' own clearing breaks it).
+            fn __traverse__(&self, visit: pyo3::PyVisit<'_>) -> Result<(), pyo3::PyTraverseError> {
+                $(visit.call(&self.$field)?;)*
+                Ok(())
             }
 
             fn __repr__(&self) -> String {

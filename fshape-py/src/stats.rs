@@ -52,11 +52,12 @@ fn covariates_text(covariates: &Bound<'_, PyAny>, n: usize) -> PyResult<(String,
     Ok((text, path.display().to_string()))
 }
 
-/// Tests a contrast on an atlas (the dict `atlas` returns), vertex by
-/// vertex on the template, as `fshape stats` does. Returns a dict:
-/// `design` (columns, terms), `contrast`, `maps` ({name: {statistic,
-/// effect, p, p_fwe, tfce, tfce_p_fwe, kind, dof, critical}}) and
-/// `multivariate` (when `scores` is given: Hotelling–Lawley on its rows).
+/// Tests a contrast on an atlas (the `AtlasResult` `atlas` returns), vertex
+/// by vertex on the template, as `fshape stats` does. Returns a
+/// `StatsResult`: `design` (columns, terms), `contrast`, `maps` ({name:
+/// `MapTest` with statistic, effect, p, p_fwe, tfce, tfce_p_fwe, kind,
+/// dof, critical}) and `multivariate` (when `scores` is given:
+/// Hotelling–Lawley on its rows).
 #[pyfunction]
 #[pyo3(signature = (atlas, covariates, contrast, maps = None, columns = None, permutations = 5000, seed = 0, tfce = false, one_sided = false, scores = None, alpha = 0.05))]
 #[expect(clippy::too_many_arguments, reason = "Python keyword arguments")]

@@ -643,6 +643,9 @@ def test_results_are_read_only_classes_that_still_index_by_their_keys():
     with pytest.raises(AttributeError):
         r.p0 = None
     assert repr(r).startswith("MatchResult(stopped, p0, pf,")
+    # A read-only mapping of its attributes, as the dicts were.
+    assert len(r) == 15 and list(r) == r.keys() and dict(r)["p0"] is r.p0 and 1 not in r
+    assert r.get("p1", 3) == 3 and r.get("p0") is r.p0 and dict(r.items()) == dict(r)
     shot = fshape.shoot(src, r.p0, r.config, pf=r.pf)
     assert type(shot) is fshape.Geodesic and shot.points.shape == (6, 12, 3)
     config = {key: value for key, value in CONFIG.items() if key != "stage"}

@@ -167,7 +167,8 @@ pub fn run_with(a: &AtlasArgs<'_>) -> Result<()> {
 
 /// [`run`] as process `rank` of `cluster` (none: alone).
 fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, rank: usize) -> Result<()> {
-    let config = crate::inputs::read_config(a.config, true)?;
+    // (Under mpirun, said once: by process 0.)
+    let config = crate::inputs::read_config(a.config, rank == 0)?;
     let paths = subject_paths(a)?;
     let subjects: Vec<FShape> = paths
         .iter()

@@ -216,7 +216,8 @@ pub fn run_with(a: &BatchArgs<'_>) -> Result<()> {
 /// Registers this shard's rows that have not finished; an error when any
 /// of its rows failed.
 fn run_rows(a: &BatchArgs<'_>, request: &BatchRequest<'_>, rows: &[BatchPair]) -> Result<()> {
-    crate::inputs::read_config(a.config, true)?;
+    // (Under mpirun or a job array, said by the first shard.)
+    crate::inputs::read_config(a.config, request.shard.0 == 0)?;
     let (shard, shards) = request.shard;
     let mine = rows.iter().filter(|r| request.in_shard(r)).count();
     let todo = request.todo(rows);
@@ -227,7 +228,11 @@ fn run_rows(a: &BatchArgs<'_>, request: &BatchRequest<'_>, rows: &[BatchPair]) -
         todo.len(),
         a.jobs.max(1)
     );
-    let failed = batch::run_rows(request, rows, &todo, &|row, dir| register_row(a, row, dir))?;
+    let run = batch::run_rows(request, rows, &todo, &|row, dir| register_row(a, row, dir));
+    for (name, e) in &run.unwritable {
+        eprintln!("row {name}: {e}");
+    }
+    let failed = run.failed + run.unwritable.len();
     if failed > 0 {
         bail!("{failed} of this shard's {mine} rows failed; see {}", a.out.join("index.csv").display());
     }

@@ -257,7 +257,8 @@ pub fn atlas_fingerprint(template: &FShape, subjects: &[FShape], config: &Config
     for s in subjects {
         h.shape(s);
     }
-    h.eat(config.to_toml().as_bytes());
+    // (Its schedule as arrays: either form of one schedule, one fingerprint.)
+    h.eat(config.clone().with_schedule_arrays().to_toml().as_bytes());
     // As for a pair: masked inputs' signal scale skips masked vertices
     // since this tag.
     if std::iter::once(template).chain(subjects).any(|s| s.mask().is_some()) {

@@ -351,6 +351,24 @@ impl Config {
         self
     }
 
+    /// The same configuration with `[[stage]]` tables as `[schedule]`'s
+    /// arrays: the one form a checkpoint's fingerprint hashes, so that a
+    /// configuration rewritten from arrays to tables (as its warning
+    /// advises, or as a run writes it) resumes the checkpoints of the
+    /// arrays, whose fingerprints are unchanged. Unchanged when the tables
+    /// do not check (the run refuses them first).
+    pub(crate) fn with_schedule_arrays(mut self) -> Config {
+        let Some(tables) = &self.stage else { return self };
+        if self.schedule.is_some() {
+            return self;
+        }
+        if let Ok(arrays) = self.tables_as_schedule(tables) {
+            self.schedule = Some(arrays);
+            self.stage = None;
+        }
+        self
+    }
+
     /// What reads but is better written otherwise, a sentence each (the
     /// program prints them as warnings, Python as DeprecationWarnings):
     /// `[schedule]`'s parallel arrays, the older form of the schedule.

@@ -236,22 +236,32 @@ impl BatchRequest<'_> {
     }
 }
 
+/// What [`run_rows`] did: how many of this shard's rows failed (this
+/// run's and earlier ones), and the rows whose folder or error file could
+/// not be written (not run, or their error not recorded), each with why.
+#[derive(Debug, Default)]
+pub struct RowsRun {
+    /// This shard's failed rows, from their folders.
+    pub failed: usize,
+    /// Rows the file system refused, by name.
+    pub unwritable: Vec<(String, MatchError)>,
+}
+
 /// Registers `todo` with `register_row`, `request.jobs` rows at once (each
 /// with a thread pool of its share of the cores, rows taken in order); a
 /// row's error goes to its folder's [`ERROR_FILE`] (removed when it runs
-/// again) and the others go on. `register_row` registers one row into its
-/// folder (made before the call) and returns its error's message.
-/// Returns how many of this shard's rows failed (this run's and earlier
-/// ones).
+/// again) and the others go on, as they do when a row's folder or error
+/// file cannot be written (said in [`RowsRun::unwritable`]).
+/// `register_row` registers one row into its folder (made before the
+/// call) and returns its error's message.
 pub fn run_rows(
     request: &BatchRequest<'_>,
     rows: &[BatchPair],
     todo: &[&BatchPair],
     register_row: &(dyn Fn(&BatchPair, &Path) -> Result<(), String> + Sync),
-) -> Result<usize, MatchError> {
+) -> RowsRun {
     let file_error =
         |path: &Path, e: std::io::Error| MatchError::File { path: path.to_path_buf(), message: e.to_string() };
-    std::fs::create_dir_all(request.out).map_err(|e| file_error(request.out, e))?;
     let one = |row: &BatchPair| -> Result<(), MatchError> {
         let dir = request.folder(row);
         std::fs::create_dir_all(&dir).map_err(|e| file_error(&dir, e))?;
@@ -265,16 +275,21 @@ pub fn run_rows(
         }
         Ok(())
     };
+    let unwritable = std::sync::Mutex::new(Vec::new());
+    let tried = |row: &BatchPair, done: Result<(), MatchError>| {
+        if let Err(e) = done {
+            unwritable.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push((row.index, row.name.clone(), e));
+        }
+    };
     let jobs = request.jobs.max(1).min(todo.len().max(1));
     if jobs == 1 {
         for row in todo {
-            one(row)?;
+            tried(row, one(row));
         }
     } else {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = (cores / jobs).max(1);
         let next = AtomicUsize::new(0);
-        let first_error = std::sync::Mutex::new(None);
         std::thread::scope(|s| {
             for _ in 0..jobs {
                 s.spawn(|| {
@@ -286,18 +301,17 @@ pub fn run_rows(
                             Ok(pool) => pool.install(|| one(row)),
                             Err(_) => one(row),
                         };
-                        if let Err(e) = done {
-                            first_error.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_or_insert(e);
-                        }
+                        tried(row, done);
                     }
                 });
             }
         });
-        if let Some(e) = first_error.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner) {
-            return Err(e);
-        }
     }
-    Ok(rows.iter().filter(|r| request.in_shard(r) && request.row_state(r).status == Status::Failed).count())
+    // In the table's order, whichever thread met them.
+    let mut unwritable = unwritable.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
+    unwritable.sort_by_key(|(index, _, _)| *index);
+    let failed = rows.iter().filter(|r| request.in_shard(r) && request.row_state(r).status == Status::Failed).count();
+    RowsRun { failed, unwritable: unwritable.into_iter().map(|(_, name, e)| (name, e)).collect() }
 }
 
 #[cfg(test)]
@@ -349,10 +363,19 @@ mod tests {
             };
             let todo = request.todo(&rows);
             assert_eq!(todo.len(), 3, "the invalid row is not run");
-            let failed = run_rows(&request, &rows, &todo, &register).unwrap();
+            // The last row's folder cannot be made (a file is in the way):
+            // said, and the other rows still run.
+            std::fs::create_dir_all(&out).unwrap();
+            std::fs::write(out.join("last"), b"in the way").unwrap();
+            let run = run_rows(&request, &rows, &todo, &register);
+            assert_eq!(run.unwritable.len(), 1);
+            assert_eq!(run.unwritable[0].0, "last");
+            assert!(run.unwritable[0].1.to_string().contains("last"), "{}", run.unwritable[0].1);
+            std::fs::remove_file(out.join("last")).unwrap();
+            let failed = run.failed;
             let mut seen = seen.into_inner().unwrap();
             seen.sort();
-            assert_eq!(seen, ["first", "last", "row_002"], "each valid row once");
+            assert_eq!(seen, ["first", "row_002"], "each valid row with a folder once");
             assert_eq!(failed, 2, "the failed row and the invalid one");
             let index = request.index(&rows);
             let status: Vec<Status> = index.rows.iter().map(|r| r.status).collect();
@@ -362,7 +385,7 @@ mod tests {
             assert_eq!((index.done, index.failed, index.incomplete, index.pending), (0, 2, 1, 1));
             // Run again with a register that succeeds: the error file goes.
             let ok = |_: &BatchPair, _: &Path| -> Result<(), String> { Ok(()) };
-            run_rows(&request, &rows, &request.todo(&rows), &ok).unwrap();
+            run_rows(&request, &rows, &request.todo(&rows), &ok);
             assert_eq!(request.index(&rows).rows[0].status, Status::Pending);
             // Shard 1 of 2 holds the second and fourth rows.
             let half = BatchRequest { shard: (1, 2), ..request };

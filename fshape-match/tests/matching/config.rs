@@ -1,6 +1,7 @@
 //! The configuration file: defaults, unknown keys, checked values.
 
 use fshape_match::Config;
+use fshape_mesh::test_support::perturbed_icosphere;
 use fshape_shoot::{Integrator, ModelKind};
 
 #[test]
@@ -192,6 +193,15 @@ fn the_older_arrays_read_with_a_warning_and_are_written_as_tables_with_the_same_
         assert_eq!(Config::parse(&text).unwrap(), resolved);
         assert_eq!(stages(&resolved), stages(&arrays));
     }
+    // Either form of one schedule is one problem: the checkpoint of a run
+    // configured with the arrays resumes with the tables.
+    let (source, target) = (perturbed_icosphere(1, 0.0, 1), perturbed_icosphere(1, 0.05, 2));
+    let arrays = Config::parse(&format!("{base}[schedule]\n{}", schedules[1])).unwrap();
+    let fingerprint = |c: &Config| fshape_match::fingerprint(&source, &target, c);
+    assert_eq!(fingerprint(&arrays.clone().with_stage_tables()), fingerprint(&arrays));
+    let mut other = arrays.clone();
+    other.optimizer.max_iterations += 1;
+    assert_ne!(fingerprint(&other), fingerprint(&arrays));
     // Arrays of the wrong length stay arrays, for their check to name.
     let short =
         Config::parse(&format!("{base}[schedule]\nkernel_geom = [\"gaussian:0.3\", \"gaussian:0.1\"]\nsteps = [4]\n"))
