@@ -43,9 +43,11 @@ use fshape_mesh::io::{self, Encoding, ReadOptions};
 /// metric, and four stages: k_p 20, 10 and 5 mm on copies simplified to
 /// 2000, 8000 and a fifth of the vertices (at least 8000; the targets
 /// simplified alike), then k_p 2.5 mm on the surface itself, with at most
-/// 100, 100, 60 and 10 iterations.
-fn config(n: usize, kernel_signal: &str) -> Result<Config> {
+/// 100, 100, 60 and 10 iterations. A real pair (`prealign`: two surfaces
+/// in their own frames) is rigidly pre-aligned first.
+fn config(n: usize, kernel_signal: &str, prealign: bool) -> Result<Config> {
     let third = (n / 5 / 1000 * 1000).max(8000);
+    let prealign = if prealign { "[prealign]\nkind = \"rigid\"\n" } else { "" };
     let text = format!(
         r#"
 [model]
@@ -70,13 +72,34 @@ tolerance = 1e-6
 [optimizer]
 momentum_metric = "energy"
 
-[schedule]
-kernel_geom = ["gaussian:20", "gaussian:10", "gaussian:5", "gaussian:2.5"]
-max_iterations = [100, 100, 60, 10]
-decrease_tolerance = [1e-2, 1e-2, 1e-3, 1e-3]
-decrease_window = [5, 5, 5, 3]
-vertices = [2000, 8000, {third}]
-"#
+[[stage]]
+kernel_geom = "gaussian:20"
+max_iterations = 100
+decrease_tolerance = 1e-2
+decrease_window = 5
+vertices = 2000
+
+[[stage]]
+kernel_geom = "gaussian:10"
+max_iterations = 100
+decrease_tolerance = 1e-2
+decrease_window = 5
+vertices = 8000
+
+[[stage]]
+kernel_geom = "gaussian:5"
+max_iterations = 60
+decrease_tolerance = 1e-3
+decrease_window = 5
+vertices = {third}
+
+[[stage]]
+kernel_geom = "gaussian:2.5"
+max_iterations = 10
+decrease_tolerance = 1e-3
+decrease_window = 3
+
+{prealign}"#
     );
     Ok(Config::parse(&text)?)
 }
@@ -144,30 +167,15 @@ fn peak_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
-fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let case = args.first().map(String::as_str).unwrap_or("s1");
-    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(PathBuf::from);
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
-    let (mesh, signals, kernel_signal): (&str, &[&str], &str) = match case {
-        "s1" => ("pycortex_S1/lh.pia.ply.gz", &["pycortex_S1/lh.pia_wm_distance.csv.gz"], "gaussian:1"),
-        "conte69" => ("conte69_32k/lh.midthickness.ply.gz", &["conte69_32k/lh.thickness.csv.gz"], "gaussian:1"),
-        "conte69-maps" => (
-            "conte69_32k/lh.midthickness.ply.gz",
-            &["conte69_32k/lh.thickness.csv.gz", "conte69_32k/lh.t1wt2w.csv.gz"],
-            "gaussian:1,0.5",
-        ),
-        other => anyhow::bail!("unknown case {other}: s1, conte69 or conte69-maps"),
-    };
-    let signal = signals.join(" and ");
-    let out = flag("--out").unwrap_or_else(|| Path::new("target/native_resolution").join(case));
-    std::fs::create_dir_all(&out)?;
-    let clock = Instant::now();
+/// A mesh of `data` with its maps (one column each, NaN where a map has
+/// no value: those vertices are masked, as conte69's medial wall is),
+/// mirrored when asked, and how many vertices are masked.
+fn read_side(data: &Path, (mesh, maps, mirrored): (&str, &[&str], bool)) -> Result<(fshape_mesh::FShape, usize)> {
     let shape = io::read_mesh(&data.join(mesh), &ReadOptions::default())?;
     let columns =
-        signals.iter().map(|s| Ok(io::csv::read_signal(&data.join(s), true)?.values)).collect::<Result<Vec<_>>>()?;
+        maps.iter().map(|s| Ok(io::csv::read_signal(&data.join(s), true)?.values)).collect::<Result<Vec<_>>>()?;
     let n = shape.n_vertices();
-    if let Some((s, c)) = signals.iter().zip(&columns).find(|(_, c)| c.len() != n) {
+    if let Some((s, c)) = maps.iter().zip(&columns).find(|(_, c)| c.len() != n) {
         anyhow::bail!("{s}: {} values for a mesh of {n} vertices", c.len());
     }
     // A vertex missing in any map is masked (conte69's maps share their wall).
@@ -175,18 +183,48 @@ fn main() -> Result<()> {
     let mask =
         (missing > 0).then(|| (0..n).map(|v| f64::from(u8::from(columns.iter().all(|c| !c[v].is_nan())))).collect());
     let values: Vec<f64> = (0..n).flat_map(|v| columns.iter().map(move |c| c[v])).collect();
-    let source = shape.with_signals_and_mask(Some(values), columns.len(), mask)?;
-    let pair = fshape_match::demo::displaced(&source, 10.0, 20.0, 35)?;
-    let target = pair.target;
+    let shape = shape.with_signals_and_mask(Some(values), columns.len(), mask)?;
+    Ok((if mirrored { fshape_match::demo::mirror_x(&shape)? } else { shape }, missing))
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let case = args.first().map(String::as_str).unwrap_or("s1");
+    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(PathBuf::from);
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let (lh, lh_thickness) = ("conte69_32k/lh.midthickness.ply.gz", "conte69_32k/lh.thickness.csv.gz");
+    let (rh, rh_thickness) = ("conte69_32k/rh.midthickness.ply.gz", "conte69_32k/rh.thickness.csv.gz");
+    // (mesh, its maps, whether it is a right hemisphere to mirror (x → −x,
+    // faces reoriented) so that both sides are left ones; the other side
+    // of a real pair; the signal kernel).
+    type Side<'a> = (&'a str, &'a [&'a str], bool);
+    let (side, other, kernel_signal): (Side<'_>, Option<Side<'_>>, &str) = match case {
+        "s1" => (("pycortex_S1/lh.pia.ply.gz", &["pycortex_S1/lh.pia_wm_distance.csv.gz"], false), None, "gaussian:1"),
+        "conte69" => ((lh, &[lh_thickness], false), None, "gaussian:1"),
+        "conte69-maps" => ((lh, &[lh_thickness, "conte69_32k/lh.t1wt2w.csv.gz"], false), None, "gaussian:1,0.5"),
+        "conte69-pair" => ((lh, &[lh_thickness], false), Some((rh, &[rh_thickness], true)), "gaussian:1"),
+        "conte69-pair-rh" => ((rh, &[rh_thickness], true), Some((lh, &[lh_thickness], false)), "gaussian:1"),
+        other => anyhow::bail!("unknown case {other}: s1, conte69, conte69-maps, conte69-pair or conte69-pair-rh"),
+    };
+    let signal = side.1.join(" and ");
+    let out = flag("--out").unwrap_or_else(|| Path::new("target/native_resolution").join(case));
+    std::fs::create_dir_all(&out)?;
+    let clock = Instant::now();
+    let (source, missing) = read_side(&data, side)?;
+    let (target, target_missing) = match other {
+        Some(other) => read_side(&data, other)?,
+        None => (fshape_match::demo::displaced(&source, 10.0, 20.0, 35)?.target, missing),
+    };
     println!(
-        "{case}: {} vertices, {} triangles; signal {signal} ({missing} missing values masked); read and paired in {:.1} s",
+        "{case}: {} vertices, {} triangles onto {} vertices; signal {signal} ({missing} and {target_missing} missing values masked); read and paired in {:.1} s",
         source.n_vertices(),
         source.n_cells(),
+        target.n_vertices(),
         clock.elapsed().as_secs_f64()
     );
     let config = match flag("--config") {
         Some(path) => Config::read(&path)?,
-        None => config(source.n_vertices(), kernel_signal)?,
+        None => config(source.n_vertices(), kernel_signal, other.is_some())?,
     };
     if args.iter().any(|a| a == "--profile") {
         return profile(&source, &target, &config);

@@ -58,6 +58,31 @@ pub fn bunny_setting_at_level(bunny: &FShape, level: u32) -> Result<(FShape, FSh
     Ok((template, target))
 }
 
+/// `shape` mirrored through the plane x = 0 (a right hemisphere onto a
+/// left one): x → −x, and each cell's last two corners swapped so that
+/// normals still point out (a reflection reverses orientation); the
+/// signal's maps and the mask go with their vertices.
+pub fn mirror_x(shape: &FShape) -> Result<FShape, MatchError> {
+    let dim = shape.dim();
+    let points: Vec<f64> = shape
+        .points()
+        .chunks_exact(dim)
+        .flat_map(|p| p.iter().enumerate().map(|(k, &c)| if k == 0 { -c } else { c }))
+        .collect();
+    let k = shape.kind().n_corners();
+    let mut cells = shape.cells().to_vec();
+    if k >= 2 {
+        for c in cells.chunks_exact_mut(k) {
+            c.swap(k - 2, k - 1);
+        }
+    }
+    Ok(FShape::try_new(dim, shape.kind(), points, cells, None)?.with_signals_and_mask(
+        shape.signal().map(<[f64]>::to_vec),
+        shape.n_channels().max(1),
+        shape.mask().map(<[f64]>::to_vec),
+    )?)
+}
+
 /// A surface and its copy moved by a known smooth displacement with a
 /// known signal change ([`displaced`]).
 #[derive(Clone, Debug)]
@@ -142,6 +167,49 @@ pub fn displaced(source: &FShape, amplitude: f64, width: f64, seed: u64) -> Resu
 #[cfg(test)]
 mod tests {
     use fshape_mesh::test_support::perturbed_icosphere;
+
+    /// Σ det(a, b, c)/6 over the triangles: the enclosed volume, positive
+    /// when the faces are counter-clockwise seen from outside.
+    fn signed_volume(points: &[f64], cells: &[usize]) -> f64 {
+        let p = |i: usize| &points[3 * i..3 * i + 3];
+        cells
+            .chunks_exact(3)
+            .map(|c| {
+                let (a, b, d) = (p(c[0]), p(c[1]), p(c[2]));
+                (a[0] * (b[1] * d[2] - b[2] * d[1]) - a[1] * (b[0] * d[2] - b[2] * d[0])
+                    + a[2] * (b[0] * d[1] - b[1] * d[0]))
+                    / 6.0
+            })
+            .sum()
+    }
+
+    #[test]
+    fn mirroring_negates_x_keeps_the_signal_and_keeps_the_normals_outward() {
+        let sphere = icosphere(2, 1.0);
+        let pts: Vec<f64> =
+            sphere.points().chunks_exact(3).flat_map(|p| [p[0] + 3.0, p[1] - 1.0, p[2] + 2.0]).collect();
+        let signal: Vec<f64> = pts.chunks_exact(3).map(|p| p[0] * p[1]).collect();
+        let mask: Vec<f64> = (0..pts.len() / 3).map(|v| f64::from(u8::from(v % 5 != 0))).collect();
+        let masked: Vec<f64> = signal.iter().zip(&mask).map(|(&f, &m)| if m > 0.0 { f } else { f64::NAN }).collect();
+        let shape = sphere
+            .with_points(pts.clone())
+            .unwrap()
+            .with_signals_and_mask(Some(signal.clone()), 1, Some(mask.clone()))
+            .unwrap();
+        let m = mirror_x(&shape).unwrap();
+        for (a, b) in m.points().chunks_exact(3).zip(pts.chunks_exact(3)) {
+            assert_eq!(a, [-b[0], b[1], b[2]]);
+        }
+        assert_eq!(m.mask().unwrap(), &mask[..]);
+        let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+        assert!(same(m.signal().unwrap(), &masked));
+        let v = signed_volume(&pts, shape.cells());
+        // Inscribed in the unit sphere: a little below 4π/3.
+        assert!(v > 3.5 && v < 4.0 * std::f64::consts::PI / 3.0, "{v}");
+        assert!((signed_volume(m.points(), m.cells()) - v).abs() < 1e-12 * v);
+        // The reflection alone turns the faces inside out.
+        assert!((signed_volume(m.points(), shape.cells()) + v).abs() < 1e-12 * v);
+    }
 
     use super::*;
 

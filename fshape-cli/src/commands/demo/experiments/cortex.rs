@@ -7,26 +7,6 @@ use fshape_mesh::io::{self, Encoding, write_mesh};
 
 use super::{BUNNY_DECREASE, RunArgs, attachment, run_match, schedule, write_inputs};
 
-/// The right hemisphere mirrored onto the left: x → −x, and each
-/// triangle's last two corners swapped so that normals still point out
-/// (a reflection reverses orientation).
-pub fn mirror_x(shape: &fshape_mesh::FShape) -> Result<fshape_mesh::FShape> {
-    let dim = shape.dim();
-    let points: Vec<f64> = shape
-        .points()
-        .chunks_exact(dim)
-        .flat_map(|p| p.iter().enumerate().map(|(k, &c)| if k == 0 { -c } else { c }))
-        .collect();
-    let k = shape.kind().n_corners();
-    let mut cells = shape.cells().to_vec();
-    if k >= 2 {
-        for c in cells.chunks_exact_mut(k) {
-            c.swap(k - 2, k - 1);
-        }
-    }
-    Ok(fshape_mesh::FShape::try_new(dim, shape.kind(), points, cells, shape.signal().map(<[f64]>::to_vec))?)
-}
-
 /// The H¹ length scale of the cortex runs, in millimetres: thickness
 /// variations over less than ~2πℓ ≈ 30 mm (a few gyri) cost more through
 /// their gradient than through their size.
@@ -55,7 +35,7 @@ pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
         thick.values.len(),
         right.n_vertices()
     );
-    let target = mirror_x(&right.with_signal(Some(thick.values))?)?;
+    let target = fshape_match::demo::mirror_x(&right.with_signal(Some(thick.values))?)?;
     let (sp, tp) = write_inputs(&dir, &source, &target)?;
     eprintln!(
         "cortex: left pial ({} vertices) onto the mirrored right pial ({} vertices), thickness in mm",
@@ -105,45 +85,4 @@ pub fn cortex(a: &RunArgs<'_>) -> Result<()> {
             .with_context(|| format!("cortex, {}", kind.name()))?;
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use fshape_mesh::generate::icosphere;
-
-    /// Σ det(a, b, c)/6 over the triangles: the enclosed volume, positive
-    /// when the faces are counter-clockwise seen from outside.
-    fn signed_volume(points: &[f64], cells: &[usize]) -> f64 {
-        let p = |i: usize| &points[3 * i..3 * i + 3];
-        cells
-            .chunks_exact(3)
-            .map(|c| {
-                let (a, b, d) = (p(c[0]), p(c[1]), p(c[2]));
-                (a[0] * (b[1] * d[2] - b[2] * d[1]) - a[1] * (b[0] * d[2] - b[2] * d[0])
-                    + a[2] * (b[0] * d[1] - b[1] * d[0]))
-                    / 6.0
-            })
-            .sum()
-    }
-
-    #[test]
-    fn mirroring_negates_x_keeps_the_signal_and_keeps_the_normals_outward() {
-        let sphere = icosphere(2, 1.0);
-        let pts: Vec<f64> =
-            sphere.points().chunks_exact(3).flat_map(|p| [p[0] + 3.0, p[1] - 1.0, p[2] + 2.0]).collect();
-        let signal: Vec<f64> = pts.chunks_exact(3).map(|p| p[0] * p[1]).collect();
-        let shape = sphere.with_points(pts.clone()).unwrap().with_signal(Some(signal.clone())).unwrap();
-        let m = mirror_x(&shape).unwrap();
-        for (a, b) in m.points().chunks_exact(3).zip(pts.chunks_exact(3)) {
-            assert_eq!(a, [-b[0], b[1], b[2]]);
-        }
-        assert_eq!(m.signal().unwrap(), &signal[..]);
-        let v = signed_volume(&pts, shape.cells());
-        // Inscribed in the unit sphere: a little below 4π/3.
-        assert!(v > 3.5 && v < 4.0 * std::f64::consts::PI / 3.0, "{v}");
-        assert!((signed_volume(m.points(), m.cells()) - v).abs() < 1e-12 * v);
-        // The reflection alone turns the faces inside out.
-        assert!((signed_volume(m.points(), shape.cells()) + v).abs() < 1e-12 * v);
-    }
 }
