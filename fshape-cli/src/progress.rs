@@ -59,6 +59,15 @@ impl Progress {
         }
     }
 
+    /// Says that the outputs are being written into `out`, on the run's
+    /// clock (renders and the report take a while on a large surface).
+    pub(crate) fn outputs(&mut self, out: &std::path::Path) {
+        if !self.hidden {
+            self.stage = "outputs".into();
+            self.line(format_args!("writing {}", out.display()));
+        }
+    }
+
     fn line(&self, what: std::fmt::Arguments<'_>) {
         eprintln!("{}[{:8.1} s] {} {what}", self.label, self.start.elapsed().as_secs_f64(), self.stage);
     }

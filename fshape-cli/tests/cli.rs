@@ -475,6 +475,9 @@ fn match_writes_a_geodesic_momenta_and_a_summary_and_decreases_the_data_term() {
     assert!(stderr.contains(&format!("warning: {c}: [schedule]: its arrays are the older form")), "{stderr}");
     let shoot = std::fs::read_to_string(out.join("shoot.toml")).unwrap();
     assert!(shoot.contains("[[stage]]") && !shoot.contains("[schedule]"), "{shoot}");
+    // Writing the outputs is said on the run's clock, after the last stage.
+    let (last, writing) = (stderr.rfind("stage 2/2").unwrap(), stderr.find("outputs writing").unwrap());
+    assert!(last < writing && stderr[..writing].ends_with(" s] "), "{stderr}");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let stages = summary["stages"].as_array().unwrap();

@@ -234,6 +234,7 @@ fn run_on(a: &AtlasArgs<'_>, cluster: Option<Box<dyn fshape_match::Cluster>>, ra
         subjects: &subject_labels,
         view: a.view,
     };
+    progress.outputs(a.out);
     let Some(written) = outputs::write_atlas(&run, &folder)? else {
         bail!("the atlas of {} subjects ended without a result", subjects.len());
     };

@@ -101,28 +101,11 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
     let mut progress = Progress::new(a.verbosity).labelled(a.label);
     let mut budget = StopAfter(a.stop_after);
     let request = MatchRequest { source: &source, target: &target, config: &config, result_when_stopped: false };
-    let pair = || format!("{} -> {}", a.source.display(), a.target.display());
     let mut observers = Observers::new().with(&mut progress).with(&mut budget);
     let run = ops::register(&request, templates, &checkpointing, &mut observers);
     drop(observers);
-    let reg = match run {
-        Ok(reg) => reg,
-        Err(e @ MatchError::Kinds(_)) => bail!("{} and {}: {e}", a.source.display(), a.target.display()),
-        // The library says "the target shape has no signal"; the user knows
-        // it by its file. (A source without a signal starts from f_0 = 0:
-        // only the target's signal is compared.)
-        Err(e) if e.is_missing_target_signal() => bail!(
-            "{}: the target has no signal, but [attachment] kernel_signal compares signals: give one with \
-             --target-signal FILE (or name a PLY/VTK/GIfTI property with --signal-name), or remove kernel_signal \
-             for a purely geometric match",
-            a.target.display()
-        ),
-        Err(e @ (MatchError::Checkpoint { .. } | MatchError::InFile { .. })) if a.resume => {
-            return Err(anyhow::Error::new(e).context("--resume"));
-        }
-        Err(e @ MatchError::StageTemplates(_)) => return Err(anyhow::Error::new(e).context("--stage-templates")),
-        Err(e) => return Err(anyhow::Error::new(e).context(format!("matching {}", pair()))),
-    };
+    let reg = run.map_err(|e| failure(a, e))?;
+    let pair = || format!("{} -> {}", a.source.display(), a.target.display());
     if reg.outcome == Outcome::Interrupted {
         progress.abandon("stopped by --stop-after; continue with --resume");
         eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint.display());
@@ -136,6 +119,7 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         times: a.times,
         view: a.view,
     };
+    progress.outputs(a.out);
     let Some(written) = outputs::write_registration(&reg, &folder)? else {
         bail!("{}: the run ended without a result", pair());
     };
@@ -169,6 +153,27 @@ pub fn run_with(a: &MatchArgs<'_>) -> Result<()> {
         written.files - 1
     );
     Ok(())
+}
+
+/// A registration's error, said with the files and flags it concerns.
+fn failure(a: &MatchArgs<'_>, e: MatchError) -> anyhow::Error {
+    match e {
+        MatchError::Kinds(_) => anyhow::anyhow!("{} and {}: {e}", a.source.display(), a.target.display()),
+        // The library says "the target shape has no signal"; the user knows
+        // it by its file. (A source without a signal starts from f_0 = 0:
+        // only the target's signal is compared.)
+        e if e.is_missing_target_signal() => anyhow::anyhow!(
+            "{}: the target has no signal, but [attachment] kernel_signal compares signals: give one with \
+             --target-signal FILE (or name a PLY/VTK/GIfTI property with --signal-name), or remove kernel_signal \
+             for a purely geometric match",
+            a.target.display()
+        ),
+        e @ (MatchError::Checkpoint { .. } | MatchError::InFile { .. }) if a.resume => {
+            anyhow::Error::new(e).context("--resume")
+        }
+        e @ MatchError::StageTemplates(_) => anyhow::Error::new(e).context("--stage-templates"),
+        e => anyhow::Error::new(e).context(format!("matching {} -> {}", a.source.display(), a.target.display())),
+    }
 }
 
 /// How close the template was and the matched shape is, in a few lines
