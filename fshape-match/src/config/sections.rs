@@ -127,7 +127,7 @@ pub struct IntegratorSection {
     /// Number of time steps.
     pub steps: usize,
     /// The relative drift of the Hamiltonian beyond which a shooting is
-    /// reported as diverged ([`Model::with_max_drift`]).
+    /// reported as diverged (fshape-shoot's `Model::with_max_drift`).
     pub max_drift: f64,
 }
 
