@@ -27,15 +27,20 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
+//! [`Regression`] fits one geodesic to several observations at their
+//! times (geodesic regression), with the same exact adjoint.
+//!
 //! The configuration file, the optimiser and the registration workflow
 //! (stages, checkpoints) are fshape-match's; this crate is the model.
 
 mod dynamics;
 mod model;
+mod regression;
 mod shoot;
 
 pub use dynamics::Timings;
 pub use model::{DEFAULT_MAX_DRIFT, Integrator, Model, ModelKind};
+pub use regression::{Regression, RegressionEnergies, RegressionGradient};
 pub use shoot::{Energies, Gradient, Problem, Trajectory};
 
 /// Why shooting or matching failed.

@@ -42,6 +42,10 @@ pub struct Trajectory {
     /// t = 0, the value the data term sees; [`Trajectory::at`] reports the
     /// paper's f_0 + tζ). Empty for the other models.
     zeta: Vec<f64>,
+    /// The node times t_0 = 0 < … < t_N = 1 of a grid that is not
+    /// uniform (a regression's, with a node at every visit); empty for
+    /// the uniform t_k = k/N.
+    times: Vec<f64>,
 }
 
 impl Trajectory {
@@ -67,14 +71,31 @@ impl Trajectory {
         self.nodes.len() / self.layout.len() - 1
     }
 
+    /// The time of node k: k/N on the uniform grid.
+    ///
+    /// # Panics
+    ///
+    /// If k > [`Trajectory::steps`].
+    #[track_caller]
+    pub fn time(&self, k: usize) -> f64 {
+        let n = self.steps();
+        assert!(k <= n, "node {k} of {n} steps");
+        if self.times.is_empty() { k as f64 / n as f64 } else { self.times[k] }
+    }
+
+    /// The length of step k (from node k to k + 1).
+    pub(crate) fn dt(&self, k: usize) -> f64 {
+        if self.times.is_empty() { 1.0 / self.steps() as f64 } else { self.times[k + 1] - self.times[k] }
+    }
+
     /// z at step k.
-    fn node(&self, k: usize) -> &[f64] {
+    pub(crate) fn node(&self, k: usize) -> &[f64] {
         let len = self.layout.len();
         &self.nodes[k * len..(k + 1) * len]
     }
 
     /// F(z) at step k.
-    fn slope(&self, k: usize) -> &[f64] {
+    pub(crate) fn slope(&self, k: usize) -> &[f64] {
         let len = self.layout.len();
         &self.slopes[k * len..(k + 1) * len]
     }
@@ -140,10 +161,16 @@ impl Trajectory {
     /// the tangential model f is the paper's affine path f_0 + tζ.
     pub fn at(&self, t: f64) -> (Vec<f64>, Vec<f64>) {
         let n = self.steps();
-        let s = (t.clamp(0.0, 1.0) * n as f64).min(n as f64);
-        let k = (s.floor() as usize).min(n - 1);
-        let u = s - k as f64;
-        let dt = 1.0 / n as f64;
+        let (k, u) = if self.times.is_empty() {
+            let s = (t.clamp(0.0, 1.0) * n as f64).min(n as f64);
+            let k = (s.floor() as usize).min(n - 1);
+            (k, s - k as f64)
+        } else {
+            // The last node at or before t (the first step for t ≤ 0).
+            let k = self.times.partition_point(|&s| s <= t).saturating_sub(1).min(n - 1);
+            (k, ((t - self.times[k]) / self.dt(k)).clamp(0.0, 1.0))
+        };
+        let dt = self.dt(k);
         let (h00, h10, h01, h11) = (
             2.0 * u.powi(3) - 3.0 * u * u + 1.0,
             u.powi(3) - 2.0 * u * u + u,
@@ -185,7 +212,7 @@ pub struct Problem {
     model: Model,
     fem: Option<SignalNorm>,
     attachment: Option<Attachment>,
-    layout: Layout,
+    pub(crate) layout: Layout,
     /// γ_c = γ_f w_c for each signal channel.
     gamma_f: Vec<f64>,
     parallel: bool,
@@ -298,7 +325,7 @@ impl Problem {
         &self.template
     }
 
-    fn dynamics(&self) -> Dynamics<'_> {
+    pub(crate) fn dynamics(&self) -> Dynamics<'_> {
         let evolving = self.model.kind() == ModelKind::Metamorphosis;
         Dynamics {
             kernel: self.model.kernel(),
@@ -310,7 +337,7 @@ impl Problem {
         }
     }
 
-    fn check(&self, p0: &[f64], pf: &[f64]) -> Result<(), ShootError> {
+    pub(crate) fn check(&self, p0: &[f64], pf: &[f64]) -> Result<(), ShootError> {
         let l = self.layout;
         for (what, v, n) in [("momentum p0", p0, l.pn), ("signal momentum", pf, l.pk())] {
             if v.len() != n {
@@ -325,7 +352,7 @@ impl Problem {
 
     /// The initial state: for the tangential model the signal residual ζ
     /// is added to the template signal (and p^f is 0).
-    fn initial(&self, p0: &[f64], pf: &[f64]) -> Vec<f64> {
+    pub(crate) fn initial(&self, p0: &[f64], pf: &[f64]) -> Vec<f64> {
         let l = self.layout;
         let mut z = vec![0.0; l.len()];
         z[l.x()].copy_from_slice(self.template.points());
@@ -353,7 +380,7 @@ impl Problem {
     /// p^f (or ζ) with its masked entries set to 0: the signal control is
     /// zero where the template's mask is 0 (the signal there has no value),
     /// whatever the caller gives; the gradient is projected the same way.
-    fn unmasked<'a>(&self, pf: &'a [f64]) -> std::borrow::Cow<'a, [f64]> {
+    pub(crate) fn unmasked<'a>(&self, pf: &'a [f64]) -> std::borrow::Cow<'a, [f64]> {
         match self.template.mask() {
             Some(m) if m.contains(&0.0) => {
                 let mut out = pf.to_vec();
@@ -365,7 +392,7 @@ impl Problem {
     }
 
     /// Zeroes a gradient's masked entries (the adjoint of [`Problem::unmasked`]).
-    fn project_masked(&self, g: &mut [f64]) {
+    pub(crate) fn project_masked(&self, g: &mut [f64]) {
         if let Some(m) = self.template.mask() {
             // Every channel of a masked vertex.
             for (g, w) in g.chunks_exact_mut(self.layout.nf).zip(m) {
@@ -381,21 +408,23 @@ impl Problem {
     /// tangential model the signal residual ζ, for LDDMM ignored).
     pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
         self.check(p0, pf)?;
-        let mut traj = self.shoot_from(self.initial(p0, pf))?;
+        let mut traj = self.shoot_from(self.initial(p0, pf), Vec::new())?;
         if self.model.kind() == ModelKind::Tangential {
             traj.zeta = self.unmasked(pf).into_owned();
         }
         Ok(traj)
     }
 
-    /// The forward pass. Every buffer is allocated here, before the first
+    /// The forward pass on the node times `times` (empty: the model's
+    /// uniform steps). Every buffer is allocated here, before the first
     /// step: the loop over steps allocates nothing.
-    fn shoot_from(&self, z0: Vec<f64>) -> Result<Trajectory, ShootError> {
+    pub(crate) fn shoot_from(&self, z0: Vec<f64>, times: Vec<f64>) -> Result<Trajectory, ShootError> {
         let dynamics = self.dynamics();
         let mut scratch = Scratch::new(self.layout, dynamics.fem)?;
         let (a, b) = self.model.integrator().tableau();
-        let n = self.model.steps();
-        let dt = 1.0 / n as f64;
+        let n = if times.is_empty() { self.model.steps() } else { times.len() - 1 };
+        let uniform = 1.0 / n as f64;
+        let step_length = |k: usize| if times.is_empty() { uniform } else { times[k + 1] - times[k] };
         let mut t = Timings::default();
         let l = self.layout;
         let (len, s) = (l.len(), b.len());
@@ -420,6 +449,7 @@ impl Problem {
             if step == n {
                 break;
             }
+            let dt = step_length(step);
             ks[..len].copy_from_slice(k0);
             let zs = &mut stages[step * s * len..(step + 1) * s * len];
             zs[..len].copy_from_slice(z);
@@ -453,6 +483,7 @@ impl Problem {
             hamiltonian: ham,
             timings: t,
             zeta: Vec::new(),
+            times,
         };
         let (drift, step) = traj.drift();
         let tolerance = self.model.max_drift();
@@ -557,7 +588,7 @@ impl Problem {
         for (o, v) in lam[l.f()].iter_mut().zip(&ga.signal) {
             *o = gw * v;
         }
-        let lam = self.backward(&traj, lam, &mut t)?;
+        let lam = self.backward(&traj, lam, &[], &mut t)?;
         let backward = back.elapsed().as_secs_f64();
         // ∂J/∂p_0 = ∂H_0/∂p + λ_p; ∂J/∂p^f = ∂H_0/∂p^f + λ_pf (metamorphosis),
         // or the signal energy's gradient + λ_f (tangential: f_0 = f + ζ).
@@ -604,20 +635,35 @@ impl Problem {
     }
 
     /// The adjoint pass: from λ = ∂Φ/∂z_N at the end of `traj`, ∂Φ/∂z_0
-    /// through the integrator's steps (the discrete adjoint).
-    fn backward(&self, traj: &Trajectory, mut lam: Vec<f64>, t: &mut Timings) -> Result<Vec<f64>, ShootError> {
+    /// through the integrator's steps (the discrete adjoint). `jumps`
+    /// (node k, ∂Φ/∂z_k's explicit part, a full state's length) are added
+    /// as the pass reaches their node: Φ that also reads the states
+    /// between the ends (a regression's visits) jumps there.
+    pub(crate) fn backward(
+        &self,
+        traj: &Trajectory,
+        mut lam: Vec<f64>,
+        jumps: &[(usize, Vec<f64>)],
+        t: &mut Timings,
+    ) -> Result<Vec<f64>, ShootError> {
         let l = self.layout;
-        let last = self.model.steps();
+        let last = traj.steps();
         let dynamics = self.dynamics();
         let mut scratch = Scratch::new(l, dynamics.fem)?;
         let (a, b) = self.model.integrator().tableau();
-        let dt = 1.0 / last as f64;
         let (len, s) = (l.len(), b.len());
+        let jump = |lam: &mut Vec<f64>, node: usize| {
+            for (_, g) in jumps.iter().filter(|(k, _)| *k == node) {
+                axpy(lam, 1.0, g);
+            }
+        };
         // ∂J/∂Z_i for the stages of one step, ∂J/∂k_i, and h at a stage.
         let mut gz = vec![0.0; s * len];
         let mut gk = vec![0.0; len];
         let mut h = vec![0.0; l.pk()];
         for step in (0..last).rev() {
+            jump(&mut lam, step + 1);
+            let dt = traj.dt(step);
             for i in (0..s).rev() {
                 // ∂J/∂k_i = dt b_i λ + Σ_{j>i} dt a_ji ∂J/∂Z_j.
                 for (g, v) in gk.iter_mut().zip(&lam) {
@@ -643,6 +689,7 @@ impl Problem {
                 axpy(&mut lam, 1.0, g);
             }
         }
+        jump(&mut lam, 0);
         Ok(lam)
     }
 
@@ -667,7 +714,7 @@ impl Problem {
         lam[l.x()].copy_from_slice(end_x);
         lam[l.f()].copy_from_slice(end_f);
         let mut t = Timings::default();
-        let lam = self.backward(traj, lam, &mut t)?;
+        let lam = self.backward(traj, lam, &[], &mut t)?;
         let k0 = traj.slope(0);
         let grad_p = lam[l.mom()].iter().zip(&k0[l.x()]).map(|(a, b)| a + b).collect();
         let grad_pf = match self.model.kind() {
@@ -687,7 +734,6 @@ impl Problem {
             return Err(ShootError::Points { what: "points to flow", found: y0.len(), dim: l.dim });
         }
         let (a, b) = self.model.integrator().tableau();
-        let dt = 1.0 / self.model.steps() as f64;
         let field = |y: &[f64], z: &[f64]| -> Result<Vec<f64>, ShootError> {
             let sums = fshape_kernels::KernelSums::try_new(self.model.kernel(), &z[l.x()], l.dim)?
                 .with_parallel(self.parallel);
@@ -696,6 +742,7 @@ impl Problem {
         let mut y = y0.to_vec();
         let mut out = vec![y.clone()];
         for step in 0..traj.steps() {
+            let dt = traj.dt(step);
             let mut ks: Vec<Vec<f64>> = Vec::new();
             for (i, ai) in a.iter().enumerate() {
                 let mut yi = y.clone();
@@ -756,11 +803,11 @@ pub struct Gradient {
     pub trajectory: Trajectory,
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
+pub(crate) fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
     for (u, v) in y.iter_mut().zip(x) {
         *u += a * v;
     }

@@ -8,6 +8,8 @@ mod dynamics;
 mod gradient;
 #[path = "shoot/model.rs"]
 mod model;
+#[path = "shoot/regression.rs"]
+mod regression;
 
 use fshape_fem::Norm;
 use fshape_kernels::Kernel;
