@@ -45,6 +45,7 @@ pub mod prealign;
 pub mod precondition;
 pub mod quality;
 pub mod record;
+pub mod regression;
 pub mod resolution;
 pub mod runner;
 pub mod session;
@@ -59,6 +60,7 @@ pub use config::{
 };
 pub use prealign::{AlignKind, Alignment, Moving, PrealignSection};
 pub use quality::{ChannelQuality, Quality, quality};
+pub use regression::{Regress, RegressionResult, Visit};
 pub use runner::{
     CHECKPOINT_FORMAT, Checkpoint, Control, Current, Iteration, Observer, Observers, Outcome, Runner, StageRecord,
     StageSetup, Staged, StopAfter, UNCHECKED_FORMAT,

@@ -20,6 +20,8 @@ mod precondition;
 mod quality;
 #[path = "matching/reference.rs"]
 mod reference;
+#[path = "matching/regression.rs"]
+mod regression;
 #[path = "matching/resolution.rs"]
 mod resolution;
 #[path = "matching/session.rs"]

@@ -43,12 +43,14 @@ pub struct Regression {
 /// The regression objective's value and its parts.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct RegressionEnergies {
-    /// J = energy + γ_W Σ_v w_v A_v.
+    /// J = energy + γ_W · data.
     pub value: f64,
     /// H(x_0, p_0, p^f): the geodesic's energy on [0, 1].
     pub energy: f64,
     /// The signal part of the energy (metamorphosis).
     pub signal_energy: f64,
+    /// Σ_v w_v A_v, the weighted attachments.
+    pub data: f64,
     /// A_v, the attachment of the state at each visit's time to the visit
     /// (unweighted), in the order the visits were added.
     pub attachments: Vec<f64>,
@@ -182,7 +184,7 @@ impl Regression {
         };
         let gw = self.problem.model().gamma_w();
         let data: f64 = self.visits.iter().zip(&attachments).map(|(v, a)| v.weight * a).sum();
-        RegressionEnergies { value: energy + gw * data, energy, signal_energy, attachments }
+        RegressionEnergies { value: energy + gw * data, energy, signal_energy, data, attachments }
     }
 
     fn no_visits(&self) -> Result<(), ShootError> {
