@@ -97,6 +97,16 @@ enum Command {
     /// subject's momenta and matched template, momenta.csv (one row per
     /// subject), pictures and summary.json; checkpoints every iteration.
     Atlas(commands::atlas::Args),
+    /// Fit one geodesic to each subject's visits over time.
+    ///
+    /// Geodesic regression: for each subject of the visits table, the
+    /// metamorphosis from its earliest visit (the baseline) whose states
+    /// at the visits' ages match the visits (J = H + γ_W Σ w·A, the
+    /// `fshape match` configuration). Writes each visit's fitted state,
+    /// pictures of the fits beside the visits, the momenta, the rates per
+    /// unit age (normal velocity and each map's rate) and summary.json,
+    /// in OUT (one subject) or OUT/SUBJECT; checkpoints every iteration.
+    Regress(commands::regress::Args),
     /// Group statistics on an atlas: GLM maps and permutation tests.
     ///
     /// Group statistics on an atlas: where do the subjects' shapes and
@@ -173,6 +183,7 @@ fn main() -> ExitCode {
         Command::Batch(a) => commands::batch::run(a),
         Command::Atlas(a) => commands::atlas::run(a),
         Command::Stats(a) => commands::stats::run(a),
+        Command::Regress(a) => commands::regress::run(a),
         Command::Transfer(a) => commands::transfer::run(a),
         Command::Demo(a) => commands::demo::run(a),
         Command::Render(a) => commands::render::run(a),

@@ -2581,3 +2581,72 @@ fn stats_on_an_atlas_of_two_maps_finds_the_group_difference_in_the_map_that_has_
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--maps signal_3") && err.contains("with 2 signal map(s)"), "{err}");
 }
+
+#[test]
+fn regress_fits_each_subjects_visits_in_its_folder_and_resumes_to_the_same_bytes() {
+    let (dir, _) = batch_inputs("regress");
+    std::fs::write(
+        dir.join("visits.csv"),
+        "# two subjects; B's later visit counts twice\n\
+         subject,age,mesh,signal,weight\n\
+         A,50,sphere.ply,,\n\
+         A,53.5,ellipsoid1.ply,signal1.csv,\n\
+         A,52,ellipsoid0.ply,,1\n\
+         B,10,sphere.ply,,\n\
+         B,11,ellipsoid2.ply,,2\n",
+    )
+    .unwrap();
+    let config = dir.join("regress.toml").display().to_string();
+    std::fs::write(&config, sphere_config(40)).unwrap();
+    let path = |name: &str| dir.join(name).display().to_string();
+    let run = |out: &str, extra: &[&str]| {
+        fshape(
+            &[&["regress", "--visits", &path("visits.csv"), "--config", &config, "--out", &path(out)], extra].concat(),
+        )
+    };
+    let o = run("run", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("A: 3 visits, ages 50 to 53.5") && stdout.contains("B: 2 visits, ages 10 to 11"),
+        "{stdout}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run/A/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["kind"], "regression");
+    assert_eq!((summary["t0"].as_f64(), summary["span"].as_f64()), (Some(50.0), Some(3.5)));
+    let visits = summary["visits"].as_array().unwrap();
+    let times: Vec<f64> = visits.iter().map(|v| v["time"].as_f64().unwrap()).collect();
+    assert_eq!(times, [0.0, 1.0, 2.0 / 3.5]);
+    // The later visits are closer to their fitted states than to the baseline.
+    for v in &visits[1..] {
+        let (before, after) =
+            (v["quality_before"]["mean_distance"].as_f64().unwrap(), v["quality"]["mean_distance"].as_f64().unwrap());
+        assert!(after < 0.5 * before, "{v}");
+    }
+    for file in ["fitted_002.ply", "visit_001.png", "p0.csv", "pf.csv", "rates.vtk", "trajectory.pvd", "energy.svg"] {
+        assert!(dir.join("run/A").join(file).exists(), "{file}");
+    }
+    let rates = std::fs::read_to_string(dir.join("run/A/rates.csv")).unwrap();
+    assert!(rates.starts_with("normal_velocity,signal_rate\n") && rates.lines().count() == 163, "{rates:.60}");
+    let record = <fshape_match::record::RegressionRecord as fshape_match::record::RunRecord>::read(
+        &dir.join("run/B/summary.json"),
+    )
+    .unwrap();
+    assert_eq!(record.visits[1].weight, 2.0);
+    // Stopped after one iteration and resumed: the same momenta, byte for byte.
+    let o = run("again", &["--subject", "B", "--stop-after", "1"]);
+    assert!(o.status.success() && !dir.join("again/B/summary.json").exists(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run("again", &["--subject", "B", "--resume"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(dir.join("again/B/p0.csv")).unwrap(), std::fs::read(dir.join("run/B/p0.csv")).unwrap());
+    assert!(!dir.join("again/A").exists());
+    // A table's mistakes are named with their line.
+    std::fs::write(dir.join("bad.csv"), "subject,age,mesh\nA,50,sphere.ply\nA,fifty,ellipsoid0.ply\n").unwrap();
+    let o = fshape(&["regress", "--visits", &path("bad.csv"), "--config", &config, "--out", &path("bad")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.contains("bad.csv:3") && err.contains("age `fifty`"), "{err}");
+    let o = run("none", &["--subject", "C"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.contains("no subject `C` (the table has A, B)"), "{err}");
+}

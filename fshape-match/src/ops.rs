@@ -19,6 +19,7 @@ pub use stats::{Scores, StatsLabels, StatsRequest, StatsRun, StatsSubject, group
 pub use transfer::{TransferRequest, TransferRun, TransferValues, transfer};
 
 pub mod batch;
+pub mod regress;
 mod stats;
 mod transfer;
 

@@ -38,6 +38,8 @@ pub enum Kind {
     Batch,
     /// `fshape stats`: a group analysis.
     Stats,
+    /// `fshape regress`: one subject's geodesic regression.
+    Regression,
 }
 
 impl Kind {
@@ -49,6 +51,7 @@ impl Kind {
             Kind::Shoot => "shoot",
             Kind::Batch => "batch",
             Kind::Stats => "stats",
+            Kind::Regression => "regression",
         }
     }
 }
@@ -551,6 +554,86 @@ pub struct ScoresRecord {
     pub p: f64,
 }
 
+/// One visit of a regression, as fitted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VisitRecord {
+    /// Its mesh file, as given.
+    pub file: String,
+    /// Its age, as given.
+    pub age: f64,
+    /// Its time on the geodesic, (age − t0)/span.
+    pub time: f64,
+    /// Its weight.
+    pub weight: f64,
+    /// A(fitted state at its time; the visit).
+    pub attachment: f64,
+    /// How close the fitted state at its time is to it.
+    pub quality: Quality,
+    /// How close the baseline is to it.
+    pub quality_before: Quality,
+}
+
+/// `fshape regress`'s summary.json: one subject's regression.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RegressionRecord {
+    /// [`Kind::Regression`].
+    pub kind: Kind,
+    /// [`FORMAT`].
+    pub format: u32,
+    /// The subject, as the visits table names it (empty without a
+    /// `subject` column).
+    pub subject: String,
+    /// The visits table, as given.
+    pub visits_table: String,
+    /// The configuration file, as given.
+    pub config: String,
+    /// The model's name.
+    pub model: String,
+    /// The signal norm's name.
+    pub norm: String,
+    /// The weights as written.
+    pub gamma_v: f64,
+    /// See `gamma_v`.
+    pub gamma_f: f64,
+    /// See `gamma_v`.
+    pub gamma_w: f64,
+    /// The scales the weights were normalised by (`null`: as written).
+    pub scales: Option<Scales>,
+    /// The weights the model used, (γ_V, γ_f, γ_W).
+    pub effective_weights: [f64; 3],
+    /// Uniform time steps of the geodesic (a node is added at each visit).
+    pub steps: usize,
+    /// The metrics of the unknowns.
+    pub metrics: Metrics,
+    /// The age at the baseline (t = 0).
+    pub t0: f64,
+    /// The span of ages mapped onto [0, 1]: rates per unit age are the
+    /// geodesic's velocities divided by it.
+    pub span: f64,
+    /// Every visit, in the table's order.
+    pub visits: Vec<VisitRecord>,
+    /// Every stage, with its iterations.
+    pub stages: Vec<StageRecord>,
+    /// J at the result.
+    pub final_value: f64,
+    /// Its path energy.
+    pub final_energy: f64,
+    /// Its data term, Σ_v w_v A_v.
+    pub final_attachment: f64,
+    /// √H_0.
+    pub geodesic_distance: f64,
+    /// H along the geodesic.
+    pub hamiltonian: Vec<f64>,
+    /// Accepted iterations over all stages.
+    pub iterations: usize,
+    /// Objective evaluations.
+    pub evaluations: usize,
+    /// Wall time, with the outputs.
+    pub seconds: f64,
+    /// The files written beside it.
+    pub files: Vec<String>,
+}
+
 /// Any record, read by its kind.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Record {
@@ -564,6 +647,8 @@ pub enum Record {
     Batch(Box<BatchIndex>),
     /// A group test.
     Stats(Box<StatsRecord>),
+    /// A geodesic regression.
+    Regression(Box<RegressionRecord>),
 }
 
 impl Record {
@@ -576,6 +661,7 @@ impl Record {
             Kind::Shoot => Record::Shoot(Box::new(typed(path, value)?)),
             Kind::Batch => Record::Batch(Box::new(typed(path, value)?)),
             Kind::Stats => Record::Stats(Box::new(typed(path, value)?)),
+            Kind::Regression => Record::Regression(Box::new(typed(path, value)?)),
         })
     }
 
@@ -587,6 +673,7 @@ impl Record {
             Record::Shoot(_) => Kind::Shoot,
             Record::Batch(_) => Kind::Batch,
             Record::Stats(_) => Kind::Stats,
+            Record::Regression(_) => Kind::Regression,
         }
     }
 }
@@ -628,6 +715,9 @@ impl RunRecord for BatchIndex {
 }
 impl RunRecord for StatsRecord {
     const KIND: Kind = Kind::Stats;
+}
+impl RunRecord for RegressionRecord {
+    const KIND: Kind = Kind::Regression;
 }
 
 /// The file's JSON and its kind (from `kind`, or from its keys), its

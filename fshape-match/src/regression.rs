@@ -52,6 +52,8 @@ pub struct RegressionResult {
     pub span: f64,
     /// Each visit's normalised time, in the order given.
     pub times: Vec<f64>,
+    /// Each visit's node on the trajectory (its time is the node's).
+    pub nodes: Vec<usize>,
     /// How close the fitted state at each visit's time is to the visit.
     pub quality: Vec<crate::Quality>,
     /// How close the baseline is to each visit, for comparison.
@@ -271,6 +273,11 @@ impl Runner<Visits> {
         if auto { runner.set_stage_templates(templates, false) } else { Ok(runner) }
     }
 
+    /// The baseline: the earliest visit's mesh, which the last stage runs on.
+    pub fn baseline(&self) -> &FShape {
+        &self.staged.stages.start
+    }
+
     /// Parallel (default) or serial work in every evaluation; the results
     /// are the same bit for bit.
     pub fn with_parallel(mut self, parallel: bool) -> Regress {
@@ -315,6 +322,7 @@ impl Runner<Visits> {
             t0,
             span,
             times,
+            nodes,
             quality,
             initial_quality,
             stages: checkpoint.done.clone(),

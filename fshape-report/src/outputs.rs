@@ -3,13 +3,15 @@
 //! ([`write_registration`]: the geodesic's states, the momenta, renders,
 //! the matched and target surfaces, the energy plot, summary.json and
 //! report.html), an atlas's ([`write_atlas`]), a group test's
-//! ([`write_stats`]), a batch's index ([`write_batch_index`]), and a geodesic's states as files
+//! ([`write_stats`]), a regression's ([`write_regression`]), a batch's
+//! index ([`write_batch_index`]), and a geodesic's states as files
 //! ([`trajectory_files`], which `fshape shoot` writes too).
 
 use std::path::{Path, PathBuf};
 
+use fshape_match::ops::regress::{RegressionLabels, RegressionRun};
 use fshape_match::ops::{AtlasLabels, AtlasRun, Labels, Registration, StatsLabels, StatsRun};
-use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, RunRecord, StatsRecord};
+use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, RegressionRecord, RunRecord, StatsRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, Encoding};
 use fshape_shoot::ModelKind;
@@ -484,4 +486,133 @@ pub fn write_batch_index(out: &Path, index: &BatchIndex, view: (f64, f64)) -> Re
     let page = crate::batch_page_of(out, index, view)?;
     io::write_atomic(&out.join("report.html"), crate::html(&page).as_bytes(), false)?;
     Ok(())
+}
+
+/// What [`write_regression`] wrote.
+#[derive(Clone, Debug)]
+pub struct RegressionWritten {
+    /// summary.json's contents.
+    pub record: RegressionRecord,
+    /// The number of files written.
+    pub files: usize,
+}
+
+/// Writes the folder of a finished regression (`None` without a result):
+/// the fitted state at each visit's age (`fitted_000.ply`, `.vtk`, …, in
+/// the visits' order) with a ParaView collection over the ages
+/// (`trajectory.pvd`), a render of each fitted state and of each visit
+/// with one camera and colour range, p0.csv, pf.csv (not for LDDMM),
+/// momenta.vtk, the rates of change per unit age (rates.csv and
+/// rates.vtk: the normal velocity and each map's rate at the baseline's
+/// vertices), shoot.toml, the energy plot and summary.json. Everything is
+/// computed before the first file is written, each file atomically.
+pub fn write_regression(
+    run: &RegressionRun,
+    labels: &RegressionLabels<'_>,
+    out: &Path,
+    view: (f64, f64),
+) -> Result<Option<RegressionWritten>> {
+    let Some(result) = &run.result else { return Ok(None) };
+    let Some((normal, signal_rate)) = run.rates() else { return Ok(None) };
+    let template = &run.baseline;
+    let channels = template.n_channels().max(1);
+    let traj = &result.trajectory;
+    let nodes = &result.nodes;
+    let mut outputs: Vec<Output> = Vec::new();
+    let mut files: Vec<String> = Vec::new();
+    let mut fitted = Vec::with_capacity(nodes.len());
+    let mut steps: Vec<(f64, String)> = Vec::new();
+    for (i, &k) in nodes.iter().enumerate() {
+        let state = template
+            .clone()
+            .with_points(traj.points(k).to_vec())?
+            .with_signals(Some(traj.signal(k).to_vec()), channels)?;
+        for (ext, format) in [("vtk", io::Format::Vtk), ("ply", io::Format::Ply)] {
+            let name = format!("fitted_{i:03}.{ext}");
+            let mut bytes = Vec::new();
+            io::write_to(&mut bytes, &state, format, Encoding::Binary)?;
+            outputs.push((out.join(&name), bytes));
+            files.push(name);
+        }
+        steps.push((run.visits[i].age, format!("fitted_{i:03}.vtk")));
+        fitted.push(state);
+    }
+    steps.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let entries: Vec<(f64, &str)> = steps.iter().map(|(t, f)| (*t, f.as_str())).collect();
+    outputs.push((out.join("trajectory.pvd"), io::vtk::collection(&entries).into_bytes()));
+    files.push("trajectory.pvd".into());
+    // The fitted states and the visits, one camera and colour range.
+    let visits: Vec<&FShape> = run.visits.iter().map(|v| &v.shape).collect();
+    let all: Vec<&FShape> = fitted.iter().chain(visits.iter().copied()).collect();
+    let camera = View::fit(&all, view.0, view.1).with_range_of(&all);
+    for (i, (f, v)) in fitted.iter().zip(&visits).enumerate() {
+        for (name, shape) in [(format!("fitted_{i:03}.png"), f), (format!("visit_{i:03}.png"), *v)] {
+            outputs.push((out.join(&name), render::picture(shape, &camera)?));
+            files.push(name);
+        }
+    }
+    let dim = template.dim();
+    let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
+    outputs.push((out.join("p0.csv"), io::csv::vectors_text(names, &result.p0).into_bytes()));
+    files.push("p0.csv".into());
+    let pf_names: Vec<String> = (0..channels).map(|c| io::channel_name("pf", c)).collect();
+    let rate_names: Vec<String> = (0..channels).map(|c| io::channel_name("signal_rate", c)).collect();
+    let columns = |v: &[f64]| -> Vec<Vec<f64>> {
+        (0..channels).map(|c| v.iter().skip(c).step_by(channels).copied().collect()).collect()
+    };
+    let kind = run.plan.model.kind();
+    if kind != ModelKind::Lddmm {
+        let names: Vec<&str> = pf_names.iter().map(String::as_str).collect();
+        outputs.push((out.join("pf.csv"), io::csv::vectors_text(&names, &result.pf).into_bytes()));
+        files.push("pf.csv".into());
+    }
+    let pf_columns = columns(&result.pf);
+    let pf_fields: Vec<(&str, &[f64])> =
+        pf_names.iter().zip(&pf_columns).map(|(n, c)| (n.as_str(), c.as_slice())).collect();
+    let mut vtk = Vec::new();
+    io::vtk::write_point_fields(
+        &mut vtk,
+        template,
+        "fshape regress: initial momenta",
+        &[("p0", &result.p0)],
+        &pf_fields,
+    )?;
+    outputs.push((out.join("momenta.vtk"), vtk));
+    files.push("momenta.vtk".into());
+    // Rates per unit age: the normal velocity (where the baseline has
+    // normals) and each map's rate.
+    let rate_columns = columns(&signal_rate);
+    let mut rate_fields: Vec<(&str, &[f64])> = Vec::new();
+    if !normal.is_empty() {
+        rate_fields.push(("normal_velocity", &normal));
+    }
+    rate_fields.extend(rate_names.iter().zip(&rate_columns).map(|(n, c)| (n.as_str(), c.as_slice())));
+    let header: Vec<&str> = rate_fields.iter().map(|(n, _)| *n).collect();
+    let table: Vec<f64> = (0..template.n_vertices()).flat_map(|i| rate_fields.iter().map(move |(_, c)| c[i])).collect();
+    outputs.push((out.join("rates.csv"), io::csv::vectors_text(&header, &table).into_bytes()));
+    files.push("rates.csv".into());
+    let mut vtk = Vec::new();
+    io::vtk::write_point_fields(&mut vtk, template, "fshape regress: rates per unit age", &[], &rate_fields)?;
+    outputs.push((out.join("rates.vtk"), vtk));
+    files.push("rates.vtk".into());
+    let shoot = format!(
+        "# {} with the weights fshape regress used (normalize = false): shoot p0.csv and pf.csv with it \
+         from the baseline; t = 1 is the last visit's age.\n\n{}",
+        labels.config,
+        run.resolved.to_toml()
+    );
+    outputs.push((out.join("shoot.toml"), shoot.into_bytes()));
+    files.push("shoot.toml".into());
+    let gamma_w = run.plan.model.gamma_w();
+    let (svg, png) = crate::plot::energy_plot(&result.stages, gamma_w, "regression: objective by iteration")?;
+    outputs.push((out.join("energy.svg"), svg.into_bytes()));
+    outputs.push((out.join("energy.png"), png));
+    files.extend(["energy.svg".into(), "energy.png".into()]);
+    let seconds = result.seconds + run.stages_ended.elapsed().as_secs_f64();
+    let Some(record) = run.record(labels, seconds, files) else { return Ok(None) };
+    outputs.push((out.join("summary.json"), record.to_json()));
+    for (path, bytes) in &outputs {
+        io::write_atomic(path, bytes, false)?;
+    }
+    Ok(Some(RegressionWritten { record, files: outputs.len() }))
 }

@@ -11,6 +11,7 @@ pub mod fem;
 pub mod info;
 pub mod matching;
 pub mod quality;
+pub mod regress;
 pub mod render;
 pub mod report;
 pub mod shoot;
