@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The HTML reports as a colleague opens them: a registration's (of one map and of two), an atlas's
-# and a batch's report.html made by the fshape program (debug build unless
+# The HTML reports as a colleague opens them: a registration's (of one map and of two), an atlas's,
+# a regression's and a batch's report.html made by the fshape program (debug build unless
 # FSHAPE_BIN names one), each opened in headless Chromium (Debian's
 # package, installed if missing) by scripts/report-check.mjs through
 # playwright-core (npm, installed under target/report-check): no console
@@ -61,8 +61,17 @@ done
     --signal "$work/batch/source.1.csv" --signal "$work/batch/source.2.csv" \
     --target-signal "$work/batch/target.1.csv" --target-signal "$work/batch/target.2.csv" \
     --config "$work/batch/config.toml" --out "$work/two_maps" >/dev/null 2>&1
+# A regression of the digit's two shapes as one subject's visits, the
+# subject named as hostilely as the batch's row.
+cat > "$work/batch/visits.csv" <<'TABLE'
+subject,age,mesh
+"x<!--<script>&""'",60,source.ply
+"x<!--<script>&""'",62.5,target.ply
+TABLE
+"$FSHAPE_BIN" regress --visits "$work/batch/visits.csv" --config "$work/batch/config.toml" --out "$work/regress" >/dev/null 2>&1
 node "$check/report-check.mjs" \
     "$work/digits/ratio_100/report.html" \
+    "$work/regress/x<!--<script>&\"'/report.html::x<!--<script>&\"'" \
     "$work/two_maps/report.html" \
     "$work/stats-spheres/atlas/report.html" \
     "$work/batch/out/report.html::x<!--<script>&\"'" \

@@ -2629,6 +2629,14 @@ fn regress_fits_each_subjects_visits_in_its_folder_and_resumes_to_the_same_bytes
     }
     let rates = std::fs::read_to_string(dir.join("run/A/rates.csv")).unwrap();
     assert!(rates.starts_with("normal_velocity,signal_rate\n") && rates.lines().count() == 163, "{rates:.60}");
+    // The page: the fitted geodesic, then each visit beside its fit;
+    // `fshape report` writes the same page again from the folder.
+    let page = std::fs::read_to_string(dir.join("run/A/report.html")).unwrap();
+    assert!(page.contains("the fitted geodesic at the visits") && page.contains("visit 3 (age 52)"), "{page:.300}");
+    std::fs::remove_file(dir.join("run/A/report.html")).unwrap();
+    let again = fshape(&["report", &path("run/A")]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert_eq!(std::fs::read_to_string(dir.join("run/A/report.html")).unwrap(), page);
     let record = <fshape_match::record::RegressionRecord as fshape_match::record::RunRecord>::read(
         &dir.join("run/B/summary.json"),
     )

@@ -31,7 +31,10 @@ use fshape_match::record::{Record, RecordError};
 use fshape_mesh::io;
 
 pub use page::{Page, escape, html, table};
-pub use pages::{AtlasShapes, atlas_page, atlas_page_of, batch_page, batch_page_of, match_page, registration_page};
+pub use pages::{
+    AtlasShapes, atlas_page, atlas_page_of, batch_page, batch_page_of, match_page, registration_page, regression_page,
+    regression_page_of,
+};
 pub use scene::{DISPLAY_VERTICES, Scene, scene};
 
 /// What can stop a report; each names its file.
@@ -102,6 +105,7 @@ pub fn write_report(dir: &Path, view: (f64, f64)) -> Result<PathBuf> {
         match Record::read(&dir.join("summary.json"))? {
             Record::Atlas(_) => atlas_page(dir, view)?,
             Record::Match(_) => match_page(dir, view)?,
+            Record::Regression(_) => regression_page(dir, view)?,
             other => {
                 return Err(ReportError::File {
                     path: dir.join("summary.json"),

@@ -504,7 +504,8 @@ pub struct RegressionWritten {
 /// with one camera and colour range, p0.csv, pf.csv (not for LDDMM),
 /// momenta.vtk, the rates of change per unit age (rates.csv and
 /// rates.vtk: the normal velocity and each map's rate at the baseline's
-/// vertices), shoot.toml, the energy plot and summary.json. Everything is
+/// vertices), each visit (visit_000.ply, …), shoot.toml, the energy plot,
+/// summary.json and report.html. Everything is
 /// computed before the first file is written, each file atomically.
 pub fn write_regression(
     run: &RegressionRun,
@@ -550,6 +551,12 @@ pub fn write_regression(
             outputs.push((out.join(&name), render::picture(shape, &camera)?));
             files.push(name);
         }
+        // The visit as fitted, for the report (`fshape report` reads it).
+        let name = format!("visit_{i:03}.ply");
+        let mut bytes = Vec::new();
+        io::write_to(&mut bytes, v, io::Format::Ply, Encoding::Binary)?;
+        outputs.push((out.join(&name), bytes));
+        files.push(name);
     }
     let dim = template.dim();
     let names: &[&str] = if dim == 3 { &["p_x", "p_y", "p_z"] } else { &["p_x", "p_y"] };
@@ -601,16 +608,19 @@ pub fn write_regression(
         labels.config,
         run.resolved.to_toml()
     );
-    outputs.push((out.join("shoot.toml"), shoot.into_bytes()));
+    outputs.push((out.join("shoot.toml"), shoot.clone().into_bytes()));
     files.push("shoot.toml".into());
     let gamma_w = run.plan.model.gamma_w();
     let (svg, png) = crate::plot::energy_plot(&result.stages, gamma_w, "regression: objective by iteration")?;
-    outputs.push((out.join("energy.svg"), svg.into_bytes()));
+    outputs.push((out.join("energy.svg"), svg.clone().into_bytes()));
     outputs.push((out.join("energy.png"), png));
-    files.extend(["energy.svg".into(), "energy.png".into()]);
+    files.extend(["energy.svg".into(), "energy.png".into(), "report.html".into()]);
     let seconds = result.seconds + run.stages_ended.elapsed().as_secs_f64();
     let Some(record) = run.record(labels, seconds, files) else { return Ok(None) };
     outputs.push((out.join("summary.json"), record.to_json()));
+    let visit_shapes: Vec<FShape> = visits.iter().map(|v| (*v).clone()).collect();
+    let page = crate::regression_page_of(&fitted, &visit_shapes, &record, Some(&shoot), Some(&svg), view)?;
+    outputs.push((out.join("report.html"), crate::html(&page).into_bytes()));
     for (path, bytes) in &outputs {
         io::write_atomic(path, bytes, false)?;
     }

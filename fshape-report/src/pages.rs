@@ -1,12 +1,13 @@
 //! The page of each kind of run, from its folder or from memory: a
 //! registration (its geodesic, quality, stages, energy and
-//! configuration), an atlas (its template, subjects and modes) and a
-//! batch (its index with thumbnails).
+//! configuration), an atlas (its template, subjects and modes), a
+//! regression (its fit at each visit beside the visit) and a batch (its
+//! index with thumbnails).
 
 use std::path::Path;
 
 use base64::Engine;
-use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, RunRecord};
+use fshape_match::record::{AtlasRecord, BatchIndex, MatchRecord, RegressionRecord, RunRecord};
 use fshape_match::{Quality, StageRecord};
 use fshape_mesh::FShape;
 use fshape_mesh::io::{self, ReadOptions};
@@ -416,4 +417,113 @@ fn thumbnail(path: &Path) -> Option<Vec<u8>> {
         }
     }
     render::png_sized(&rgb, w as u32, h as u32).ok()
+}
+
+/// The report of an `fshape regress` folder (one subject's).
+pub fn regression_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
+    let summary = RegressionRecord::read(&dir.join("summary.json"))?;
+    let mut fitted = Vec::with_capacity(summary.visits.len());
+    let mut visits = Vec::with_capacity(summary.visits.len());
+    for i in 0..summary.visits.len() {
+        fitted.push(read(&dir.join(format!("fitted_{i:03}.ply")))?);
+        visits.push(read(&dir.join(format!("visit_{i:03}.ply")))?);
+    }
+    let config = std::fs::read_to_string(dir.join("shoot.toml")).ok();
+    let energy = std::fs::read_to_string(dir.join("energy.svg")).ok();
+    regression_page_of(&fitted, &visits, &summary, config.as_deref(), energy.as_deref(), view)
+}
+
+/// The report of a regression from what it produced: the fitted state at
+/// each visit's age and each visit (in the record's order), its record,
+/// the configuration's text and the energy plot. The first scene is the
+/// fitted geodesic with a slider over the visits' ages and the last visit
+/// beside; then a scene per visit, its fit beside it.
+pub fn regression_page_of(
+    fitted: &[FShape],
+    visits: &[FShape],
+    summary: &RegressionRecord,
+    config: Option<&str>,
+    energy_svg: Option<&str>,
+    view: (f64, f64),
+) -> Result<Page> {
+    let mut order: Vec<usize> = (0..summary.visits.len().min(fitted.len()).min(visits.len())).collect();
+    order.sort_by(|&a, &b| summary.visits[a].age.total_cmp(&summary.visits[b].age));
+    let frames: Vec<&FShape> = order.iter().map(|&i| &fitted[i]).collect();
+    let labels: Vec<String> = order.iter().map(|&i| format!("age {}", summary.visits[i].age)).collect();
+    let last = order.last().map(|&i| &visits[i]);
+    let mut scenes =
+        vec![scene("the fitted geodesic at the visits' ages", &frames, labels, last.map(|v| ("last visit", v)))?];
+    for &i in &order {
+        let v = &summary.visits[i];
+        let name = format!("visit {} (age {}): its fit and the visit", i + 1, v.age);
+        scenes.push(scene(&name, &[&fitted[i]], vec![format!("age {}", v.age)], Some(("visit", &visits[i])))?);
+    }
+    let rows: Vec<Vec<String>> = order
+        .iter()
+        .map(|&i| {
+            let v = &summary.visits[i];
+            vec![
+                format!("{}", i + 1),
+                escape(&v.file),
+                format!("{}", v.age),
+                format!("{:.3}", v.time),
+                format!("{}", v.weight),
+                format!(
+                    "{} → {}",
+                    percent(Some(v.quality_before.mean_distance)),
+                    percent(Some(v.quality.mean_distance))
+                ),
+                format!("{} → {}", percent(v.quality_before.signal_rms), percent(v.quality.signal_rms)),
+            ]
+        })
+        .collect();
+    let header =
+        ["visit", "file", "age", "t", "weight", "mean distance (baseline → fit)", "signal error (baseline → fit)"];
+    let mut sections = vec![
+        format!(
+            "<h2>How close the fit is to each visit</h2><p>Ages {} to {} are mapped onto the geodesic's t ∈ [0, 1]; \
+             the baseline is the earliest visit. Distances are fractions of each visit's diagonal, signal errors of its range.</p>{}",
+            summary.t0,
+            summary.t0 + summary.span,
+            table("quality", &header, &rows)
+        ),
+        format!(
+            "<h2>The run</h2><p>{} model, {} signal norm; J = {:.4e} (energy {:.4e}, data term {:.4e}) after {} iterations and {} evaluations in {:.1} s.</p>{}",
+            escape(&summary.model),
+            escape(&summary.norm),
+            summary.final_value,
+            summary.final_energy,
+            summary.final_attachment,
+            summary.iterations,
+            summary.evaluations,
+            summary.seconds,
+            stages_table(&summary.stages)
+        ),
+    ];
+    if let Some(svg) = energy_svg {
+        sections.push(format!("<h2>The objective by iteration</h2><div class=\"figure\">{svg}</div>"));
+    }
+    if let Some(config) = config {
+        sections.push(format!(
+            "<h2>Configuration</h2><p>As run, with the weights the model used.</p><pre>{}</pre>",
+            escape(config)
+        ));
+    }
+    let worst = summary.visits.iter().map(|v| v.quality.mean_distance).fold(0.0, f64::max);
+    Ok(Page {
+        title: format!(
+            "{}: {} visits",
+            if summary.subject.is_empty() { "regression" } else { &summary.subject },
+            summary.visits.len()
+        ),
+        subtitle: format!(
+            "fshape regress: ages {} to {}; the fit's largest mean distance to a visit {} of its diagonal",
+            summary.t0,
+            summary.t0 + summary.span,
+            percent(Some(worst))
+        ),
+        view,
+        scenes,
+        sections,
+    })
 }
