@@ -571,6 +571,10 @@ pub struct VisitRecord {
     pub quality: Quality,
     /// How close the baseline is to it.
     pub quality_before: Quality,
+    /// Its pre-alignment onto the baseline (`[prealign]`), if any: the
+    /// qualities are of the visit as aligned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prealign: Option<Alignment>,
 }
 
 /// `fshape regress`'s summary.json: one subject's regression.

@@ -11,7 +11,11 @@
 //! by the span in years, [`RegressionResult::span`]). The baseline (the
 //! template the geodesic starts from) is the earliest visit's mesh as
 //! given; every visit, the earliest included, is attached with its
-//! weight. The model is fshape-shoot's [`Regression`]: the time grid has a
+//! weight. With a `[prealign]` kind, every other visit is first moved
+//! onto the baseline by its own map (rigid, similarity or affine, found on
+//! the first stage's attachment as for a pair; `move` is not read: the
+//! baseline is the frame), so that a subject scanned in different
+//! positions is fitted in one frame. The model is fshape-shoot's [`Regression`]: the time grid has a
 //! node at every visit, the adjoint jumps there.
 
 use fshape_mesh::FShape;
@@ -58,6 +62,10 @@ pub struct RegressionResult {
     pub quality: Vec<crate::Quality>,
     /// How close the baseline is to each visit, for comparison.
     pub initial_quality: Vec<crate::Quality>,
+    /// Each visit's pre-alignment onto the baseline (`[prealign]`; `None`
+    /// for the baseline and without one). The qualities above are of the
+    /// visits as aligned.
+    pub alignments: Vec<Option<crate::Alignment>>,
     /// Every finished stage's records.
     pub stages: Vec<StageRecord>,
     /// Accepted iterations, all stages.
@@ -85,6 +93,8 @@ pub struct Visits {
     visits: Vec<Visit>,
     /// Normalised times, in the visits' order.
     times: Vec<f64>,
+    /// Each visit's pre-alignment onto the baseline, if any.
+    alignments: Vec<Option<crate::Alignment>>,
     t0: f64,
     span: f64,
     regression: Regression,
@@ -246,6 +256,23 @@ impl Runner<Visits> {
             }
         }
         let times = visits.iter().map(|v| (v.age - t0) / span).collect();
+        // With [prealign], every other visit moved onto the baseline.
+        let mut visits = visits;
+        let mut alignments = vec![None; visits.len()];
+        if config.prealign.as_ref().is_some_and(|s| s.kind != crate::AlignKind::None) {
+            let mut onto = config.clone();
+            if let Some(s) = onto.prealign.as_mut() {
+                s.moving = crate::Moving::Source;
+            }
+            let baseline = visits[first].shape.clone();
+            for (i, v) in visits.iter_mut().enumerate().filter(|(i, _)| *i != first) {
+                observer.setup(&format!("visit {i} onto the baseline"));
+                let (moved, _, alignment) = crate::prealign::prealigned(&v.shape, &baseline, &onto, observer)?;
+                v.shape = moved;
+                alignments[i] = alignment;
+            }
+        }
+        let baseline = &visits[first].shape;
         let plan = config.plan(baseline, &visits[last].shape)?;
         let counts: Vec<Option<usize>> = plan.stages.iter().map(|s| s.vertices).collect();
         let auto = counts.iter().any(Option::is_some);
@@ -262,6 +289,7 @@ impl Runner<Visits> {
             stages,
             visits,
             times,
+            alignments,
             t0,
             span,
             regression: Regression::new(problem)?,
@@ -271,6 +299,11 @@ impl Runner<Visits> {
         };
         let runner = Runner::of(staged, fingerprint);
         if auto { runner.set_stage_templates(templates, false) } else { Ok(runner) }
+    }
+
+    /// The visits as fitted: in the baseline's frame with `[prealign]`.
+    pub fn visits(&self) -> &[Visit] {
+        &self.staged.visits
     }
 
     /// The baseline: the earliest visit's mesh, which the last stage runs on.
@@ -311,7 +344,7 @@ impl Runner<Visits> {
             quality.push(crate::quality(&fitted, &visit.shape)?);
             initial_quality.push(crate::quality(template, &visit.shape)?);
         }
-        let (t0, span, times) = (v.t0, v.span, v.times.clone());
+        let (t0, span, times, alignments) = (v.t0, v.span, v.times.clone(), v.alignments.clone());
         let checkpoint = self.checkpoint();
         let (iterations, evaluations) = checkpoint.totals();
         Ok(RegressionResult {
@@ -325,6 +358,7 @@ impl Runner<Visits> {
             nodes,
             quality,
             initial_quality,
+            alignments,
             stages: checkpoint.done.clone(),
             iterations,
             evaluations,

@@ -136,7 +136,7 @@ pub struct RegressionRun {
     pub result: Option<RegressionResult>,
     /// The baseline (the earliest visit's mesh).
     pub baseline: FShape,
-    /// The visits as given.
+    /// The visits as fitted (moved onto the baseline with `[prealign]`).
     pub visits: Vec<Visit>,
     /// The configuration as given.
     pub config: Config,
@@ -158,7 +158,7 @@ pub fn regress(
     checkpointing: &Checkpointing,
     observer: &mut impl Observer,
 ) -> Result<RegressionRun, MatchError> {
-    let runner = Regress::new_observed(visits.clone(), config, observer)?;
+    let runner = Regress::new_observed(visits, config, observer)?;
     let mut runner = prepared(runner, None, checkpointing)?;
     observer.planned(runner.plan());
     let outcome = runner.run(observer)?;
@@ -172,7 +172,7 @@ pub fn regress(
         outcome,
         result,
         baseline: runner.baseline().clone(),
-        visits,
+        visits: runner.visits().to_vec(),
         config: config.clone(),
         resolved: config.resolved(plan.scales.as_ref()),
         plan,
@@ -230,6 +230,7 @@ impl RegressionRun {
                 attachment: e.attachments[i],
                 quality: result.quality[i].clone(),
                 quality_before: result.initial_quality[i].clone(),
+                prealign: result.alignments[i].clone(),
             })
             .collect();
         Some(RegressionRecord {

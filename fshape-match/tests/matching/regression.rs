@@ -11,17 +11,28 @@ use fshape_shoot::{Model, Problem};
 /// The truth: a sphere (642 vertices) with the signal 0.5 + 0.4 z,
 /// stretched along x and squeezed along z while its signal grows along y.
 fn truth() -> (FShape, fshape_shoot::Trajectory) {
-    let sphere = perturbed_icosphere(3, 0.0, 1);
-    let f: Vec<f64> = sphere.points().chunks_exact(3).map(|p| 0.5 + 0.4 * p[2]).collect();
+    truth_scaled(1.0, false)
+}
+
+/// [`truth`] with the momenta times `a`, from a lumpy sphere whose signal
+/// also varies along x if `lumpy` (no symmetry left for a rigid map).
+fn truth_scaled(a: f64, lumpy: bool) -> (FShape, fshape_shoot::Trajectory) {
+    let sphere = perturbed_icosphere(3, if lumpy { 0.1 } else { 0.0 }, 1);
+    let x = if lumpy { 0.3 } else { 0.0 };
+    let f: Vec<f64> = sphere.points().chunks_exact(3).map(|p| 0.5 + 0.4 * p[2] + x * p[0]).collect();
     let sphere = sphere.with_signal(Some(f)).unwrap();
     let config = config();
     let model: Model =
         config.plan(&sphere, &sphere).unwrap().model.with_integrator(fshape_shoot::Integrator::Rk4, 40).unwrap();
     let problem = Problem::new(&sphere, model).unwrap();
     let m = sphere.vertex_volumes();
-    let p0: Vec<f64> =
-        sphere.points().chunks_exact(3).zip(&m).flat_map(|(p, m)| [0.08 * m * p[0], 0.0, -0.05 * m * p[2]]).collect();
-    let pf: Vec<f64> = sphere.points().chunks_exact(3).zip(&m).map(|(p, m)| 0.06 * m * p[1]).collect();
+    let p0: Vec<f64> = sphere
+        .points()
+        .chunks_exact(3)
+        .zip(&m)
+        .flat_map(|(p, m)| [0.08 * a * m * p[0], 0.0, -0.05 * a * m * p[2]])
+        .collect();
+    let pf: Vec<f64> = sphere.points().chunks_exact(3).zip(&m).map(|(p, m)| 0.06 * a * m * p[1]).collect();
     let traj = problem.shoot(&p0, &pf).unwrap();
     (sphere, traj)
 }
@@ -184,4 +195,50 @@ fn expected_checkpoint(visits: &[Visit], config: &Config) -> fshape_match::Check
     let mut run = Regress::new(visits.to_vec(), config).unwrap();
     run.run(&mut StopAfter(Some(1))).unwrap();
     run.checkpoint().clone()
+}
+
+#[test]
+fn with_prealign_each_visit_scanned_elsewhere_is_moved_onto_the_baseline() {
+    // A change over the visits small beside the scanner's move, as in a
+    // study (a rigid map cannot be told from a large stretch).
+    let (sphere, traj) = truth_scaled(0.1, true);
+    let (angle, shift) = (20f64.to_radians(), [0.1, -0.05, 0.2]);
+    let moved = |s: FShape| {
+        let (c, sn) = (angle.cos(), angle.sin());
+        let pts: Vec<f64> = s
+            .points()
+            .chunks_exact(3)
+            .flat_map(|p| [p[0] + shift[0], c * p[1] - sn * p[2] + shift[1], sn * p[1] + c * p[2] + shift[2]])
+            .collect();
+        s.with_points(pts).unwrap()
+    };
+    let visits = |rotate: bool| -> Vec<Visit> {
+        [(0.0, 120), (0.5, 100), (1.0, 110)]
+            .iter()
+            .map(|&(t, n)| {
+                let shape = state(&sphere, &traj, t).simplified(n).unwrap().shape;
+                let shape = if rotate && t > 0.0 { moved(shape) } else { shape };
+                Visit { age: t, shape, weight: 1.0 }
+            })
+            .collect()
+    };
+    let mut config = config();
+    config.optimizer.max_iterations = 40;
+    let fit = |visits: Vec<Visit>, config: &Config| {
+        let mut run = Regress::new(visits, config).unwrap();
+        run.run(&mut ()).unwrap();
+        run.result().unwrap()
+    };
+    let still = fit(visits(false), &config);
+    let mut aligned = config.clone();
+    aligned.prealign = Config::parse("[deformation]\nwidths = [1.0]\n[prealign]\nkind = \"rigid\"\n").unwrap().prealign;
+    let moved = fit(visits(true), &aligned);
+    assert!(moved.alignments[0].is_none());
+    for (i, a) in moved.alignments.iter().enumerate().skip(1) {
+        let a = a.as_ref().unwrap();
+        assert!((a.rotation_degrees - 20.0).abs() < 3.0, "visit {i}: {}", a.describe());
+        let (q, q0) = (&moved.quality[i], &still.quality[i]);
+        eprintln!("visit {i}: {} (unmoved visits: {})", q.describe(), q0.describe());
+        assert!(q.mean_distance <= 1.5 * q0.mean_distance + 0.001, "visit {i}");
+    }
 }
