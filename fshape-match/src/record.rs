@@ -1,11 +1,11 @@
-//! The run records: what `fshape match`, `atlas`, `shoot` and `batch` write
-//! as summary.json (batch: index.json), as one type per kind, written and
+//! The run records: what `fshape match`, `atlas`, `shoot`, `regress` and
+//! `batch` write as summary.json (batch: index.json), as one type per kind, written and
 //! read back through the same type by every crate that touches them (the
 //! report, batch, stats, the demos, Python). `fshape stats` writes a
 //! [`StatsRecord`].
 //!
 //! Each record starts with two keys: `kind` (`match`, `atlas`, `shoot`,
-//! `batch`, `stats`) and `format` ([`FORMAT`]); the rest are the keys users
+//! `batch`, `stats`, `regression`) and `format` ([`FORMAT`]); the rest are the keys users
 //! and scripts already read, unchanged. A file written before the records
 //! were typed has neither: its kind is recognised by its keys (a group
 //! test has `contrast`, an atlas `subjects`, a batch index `rows`, a shoot `hamiltonian_drift`, a match

@@ -59,6 +59,7 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shoot::shoot, m)?)?;
     m.add_function(wrap_pyfunction!(registration::match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(registration::atlas, m)?)?;
+    m.add_function(wrap_pyfunction!(registration::regress, m)?)?;
     m.add_function(wrap_pyfunction!(stats::stats, m)?)?;
     m.add_function(wrap_pyfunction!(report::report, m)?)?;
     Ok(())

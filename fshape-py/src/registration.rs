@@ -1,4 +1,5 @@
-//! Registration and atlas estimation: `match` and `atlas`.
+//! Registration, atlas estimation and regression: `match`, `atlas` and
+//! `regress`.
 
 use std::path::PathBuf;
 
@@ -13,7 +14,7 @@ use crate::config::config_of;
 use crate::conversions::{rows, to_py};
 use crate::err;
 use crate::progress::Progress;
-use crate::results::{AtlasResult, MatchResult, SubjectResult};
+use crate::results::{AtlasResult, MatchResult, RegressionResult, SubjectResult};
 use crate::shape::PyFShape;
 use crate::shape::shape_of;
 use crate::shoot::{geodesic, node_times};
@@ -202,6 +203,118 @@ pub(crate) fn atlas<'py>(
             iterations: any(r.iterations.into_pyobject(py)?.into_any()),
             evaluations: any(r.evaluations.into_pyobject(py)?.into_any()),
             seconds: any(r.seconds.into_pyobject(py)?.into_any()),
+        },
+    )
+}
+
+/// Fits one geodesic to a subject's `visits` (FShapes, each its own mesh)
+/// at `ages` as `fshape regress` does: the earliest visit is the baseline
+/// at t = 0, the ages are mapped onto t ∈ [0, 1], and J = H + γ_W Σ w·A
+/// over the visits (`weights`, default 1 each). `config`, `progress` and
+/// `checkpoint` as for `match` (a callback that returns True ends the run
+/// without a result: continue it from its checkpoint).
+///
+/// Returns a `RegressionResult`: `p0` (n × d) and `pf` (n, or n × k) on
+/// the baseline, `energies` (with each visit's `attachments`), `t0` and
+/// `span` (t = (age − t0)/span), `times` (each visit's t), `quality` and
+/// `initial_quality` (per visit: how close the fit at its age and the
+/// baseline are to it), `alignments` (per visit, with `[prealign]`),
+/// `fitted` (the FShape fitted at each visit's age), `rates` (per unit
+/// age at the baseline's vertices: `normal_velocity` and `signal_rate`),
+/// `geodesic` (at `ages_out`, default 5 ages over the span; its `times`
+/// are ages), `baseline`, `stages`, `iterations`, `evaluations`,
+/// `seconds` and `config` (the weights used).
+#[pyfunction]
+#[pyo3(signature = (visits, ages, config, weights = None, progress = None, ages_out = None, checkpoint = None))]
+#[expect(clippy::too_many_arguments, reason = "one per keyword argument of the Python call")]
+pub(crate) fn regress<'py>(
+    py: Python<'py>,
+    visits: Vec<Bound<'py, PyAny>>,
+    ages: Vec<f64>,
+    config: &Bound<'py, PyAny>,
+    weights: Option<Vec<f64>>,
+    progress: Option<Py<PyAny>>,
+    ages_out: Option<Vec<f64>>,
+    checkpoint: Option<PathBuf>,
+) -> PyResult<Bound<'py, RegressionResult>> {
+    if ages.len() != visits.len() {
+        return Err(err(format!("{} visits but {} ages", visits.len(), ages.len())));
+    }
+    let weights = weights.unwrap_or_else(|| vec![1.0; visits.len()]);
+    if weights.len() != visits.len() {
+        return Err(err(format!("{} visits but {} weights", visits.len(), weights.len())));
+    }
+    let mut list = Vec::with_capacity(visits.len());
+    for ((v, age), weight) in visits.iter().zip(&ages).zip(&weights) {
+        list.push(fshape_match::Visit { age: *age, shape: shape_of(v)?, weight: *weight });
+    }
+    let config = config_of(config)?;
+    let mut observer = Progress::new(progress);
+    let checkpointing = checkpoint.map_or(Checkpointing::None, Checkpointing::Continue);
+    let run = py.detach(|| ops::regress::regress(list, &config, &checkpointing, &mut observer));
+    observer.raised()?;
+    let run = run.map_err(err)?;
+    let rates = run.rates();
+    let (Some(r), Some((normal, signal_rate))) = (run.result.as_ref(), rates) else {
+        return Err(crate::errors::other(
+            "stopped by the progress callback: there is no result; call again with the same checkpoint to continue",
+        ));
+    };
+    let baseline = &run.baseline;
+    let (dim, channels) = (baseline.dim(), baseline.n_channels().max(1));
+    let (t0, span) = (r.t0, r.span);
+    let ages_out = ages_out.unwrap_or_else(|| (0..5).map(|k| t0 + span * k as f64 / 4.0).collect());
+    if let Some(a) = ages_out.iter().find(|a| !(t0..=t0 + span).contains(*a)) {
+        return Err(err(format!("ages_out: {a} is outside the visits' ages [{t0}, {}]", t0 + span)));
+    }
+    let normalised: Vec<f64> = ages_out.iter().map(|a| (a - t0) / span).collect();
+    let geo = geodesic(py, &r.trajectory, dim, &normalised)?;
+    // The geodesic's times as ages.
+    let geo = Bound::new(
+        py,
+        crate::results::Geodesic {
+            times: PyArray1::from_slice(py, &ages_out).into_any().unbind(),
+            points: geo.get().points.clone_ref(py),
+            signals: geo.get().signals.clone_ref(py),
+            hamiltonian: geo.get().hamiltonian.clone_ref(py),
+        },
+    )?;
+    let fitted = PyList::empty(py);
+    for &k in &r.nodes {
+        let s = baseline
+            .clone()
+            .with_points(r.trajectory.points(k).to_vec())
+            .and_then(|s| s.with_signals(Some(r.trajectory.signal(k).to_vec()), channels))
+            .map_err(err)?;
+        fitted.append(Bound::new(py, PyFShape { inner: s })?)?;
+    }
+    let rates = pyo3::types::PyDict::new(py);
+    if !normal.is_empty() {
+        rates.set_item("normal_velocity", PyArray1::from_slice(py, &normal))?;
+    }
+    rates.set_item("signal_rate", signal_momentum(py, &signal_rate, channels)?)?;
+    let any = |v: Bound<'py, PyAny>| v.unbind();
+    Bound::new(
+        py,
+        RegressionResult {
+            p0: any(rows(py, r.p0.clone(), dim).into_any()),
+            pf: any(signal_momentum(py, &r.pf, channels)?),
+            energies: any(to_py(py, &r.energies)?),
+            t0: any(t0.into_pyobject(py)?.into_any()),
+            span: any(span.into_pyobject(py)?.into_any()),
+            times: any(PyArray1::from_slice(py, &r.times).into_any()),
+            quality: any(to_py(py, &r.quality)?),
+            initial_quality: any(to_py(py, &r.initial_quality)?),
+            alignments: any(to_py(py, &r.alignments)?),
+            fitted: any(fitted.into_any()),
+            rates: any(rates.into_any()),
+            geodesic: any(geo.into_any()),
+            baseline: any(Bound::new(py, PyFShape { inner: baseline.clone() })?.into_any()),
+            stages: any(to_py(py, &r.stages)?),
+            iterations: any(r.iterations.into_pyobject(py)?.into_any()),
+            evaluations: any(r.evaluations.into_pyobject(py)?.into_any()),
+            seconds: any(r.seconds.into_pyobject(py)?.into_any()),
+            config: any(to_py(py, &run.resolved)?),
         },
     )
 }

@@ -1,4 +1,5 @@
-//! The result classes: what `match`, `atlas`, `shoot` and `stats` return.
+//! The result classes: what `match`, `atlas`, `regress`, `shoot` and
+//! `stats` return.
 //!
 //! Each is a frozen class whose attributes are numpy arrays, shapes and
 //! plain records (the quality, energies and pre-alignment as the dicts of
@@ -134,6 +135,14 @@ result_class! {
 }
 
 result_class! {
+    /// What `regress` returns (see its docs).
+    RegressionResult {
+        p0, pf, energies, t0, span, times, quality, initial_quality, alignments, fitted, rates, geodesic,
+        baseline, stages, iterations, evaluations, seconds, config,
+    }
+}
+
+result_class! {
     /// One map's test (see `stats`).
     MapTest { kind, dof, statistic, effect, p, p_fwe, tfce, tfce_p_fwe, critical }
 }
@@ -149,6 +158,7 @@ pub(crate) fn add(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<MatchResult>()?;
     m.add_class::<SubjectResult>()?;
     m.add_class::<AtlasResult>()?;
+    m.add_class::<RegressionResult>()?;
     m.add_class::<MapTest>()?;
     m.add_class::<StatsResult>()?;
     Ok(())

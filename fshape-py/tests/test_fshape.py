@@ -444,6 +444,44 @@ def test_an_atlas_of_three_subjects_brings_its_template_closer():
     assert 0 < after < 0.5 * before
 
 
+def test_a_regression_fits_its_visits_and_equals_the_cli(tmp_path):
+    src, tgt = sphere_pair()
+    mid = fshape.FShape(0.5 * (src.points + tgt.points), src.cells, 0.5 * (src.signal + tgt.signal))
+    visits = [src, tgt, mid]
+    ages = [30.0, 32.0, 31.0]
+    for name, v in zip(["a", "b", "c"], visits):
+        fshape.write_mesh(tmp_path / f"{name}.ply", v)
+    (tmp_path / "visits.csv").write_text("age,mesh\n30,a.ply\n32,b.ply\n31,c.ply\n")
+    lines = [
+        '[model]\nnorm = "h1"\nlength = 0.2\ngamma_w = 400.0',
+        "[deformation]\nwidths = [0.4, 0.2]",
+        "[integrator]\nsteps = 5",
+        '[attachment]\nkernel_geom = "gaussian:0.1"\nkernel_signal = "gaussian:0.5"',
+        "[optimizer]\nmax_iterations = 10",
+        '[[stage]]\nkernel_geom = "gaussian:0.3"\n[[stage]]\nkernel_geom = "gaussian:0.1"',
+    ]
+    (tmp_path / "regress.toml").write_text("\n".join(lines) + "\n")
+    cli("regress", "--visits", tmp_path / "visits.csv", "--config", tmp_path / "regress.toml", "--out", tmp_path / "run")
+    r = fshape.regress(visits, ages, CONFIG)
+    assert (r.t0, r.span) == (30.0, 2.0) and list(r.times) == [0.0, 1.0, 0.5]
+    # The same optimisation as the program's, to the last bit.
+    p0 = np.loadtxt(tmp_path / "run" / "p0.csv", delimiter=",", skiprows=1)
+    assert np.array_equal(r.p0, p0)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert r.energies["value"] == summary["final_value"]
+    # Each later visit is closer to its fit than to the baseline.
+    for q, q0 in zip(r.quality[1:], r.initial_quality[1:]):
+        assert q["mean_distance"] < 0.5 * q0["mean_distance"]
+    assert len(r.fitted) == 3 and r.rates["normal_velocity"].shape == (12,) and r.rates["signal_rate"].shape == (12,)
+    g = r.geodesic
+    assert list(g.times) == [30.0, 30.5, 31.0, 31.5, 32.0] and g.points.shape == (5, 12, 3)
+    assert np.allclose(g.points[-1], r.fitted[1].points) and np.allclose(g.points[2], r.fitted[2].points)
+    with pytest.raises(fshape.FShapeError, match="3 visits but 2 ages"):
+        fshape.regress(visits, ages[:2], CONFIG)
+    with pytest.raises(fshape.FShapeError, match="ages_out: 29"):
+        fshape.regress(visits, ages, CONFIG, ages_out=[29.0])
+
+
 def test_an_atlas_of_subjects_with_two_maps_gives_a_template_of_two_maps():
     src, tgt = sphere_pair()
     two = [s.with_signal(np.column_stack([s.signal, s.points[:, 1] - 0.1 * i])) for i, s in enumerate([src, tgt])]

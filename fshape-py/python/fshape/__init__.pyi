@@ -29,6 +29,7 @@ __all__ = [
     "MatchResult",
     "SubjectResult",
     "AtlasResult",
+    "RegressionResult",
     "MapTest",
     "StatsResult",
     "ConfigLike",
@@ -52,6 +53,7 @@ __all__ = [
     "shoot",
     "match",
     "atlas",
+    "regress",
     "stats",
     "report",
 ]
@@ -392,6 +394,70 @@ class AtlasResult:
     def items(self) -> list[Tuple[str, Any]]: ...
     def get(self, key: str, default: Optional[Any] = None) -> Any: ...
 
+@final
+class RegressionResult:
+    """What `regress` returns."""
+
+    @property
+    def p0(self) -> npt.NDArray[np.float64]:
+        """Initial momenta on the baseline, n x d, per the span of ages."""
+    @property
+    def pf(self) -> npt.NDArray[np.float64]:
+        """Signal momentum on the baseline, n (or n x k)."""
+    @property
+    def energies(self) -> dict[str, Any]:
+        """value, energy, signal_energy, data and each visit's attachments."""
+    @property
+    def t0(self) -> float:
+        """The earliest visit's age: t = (age - t0) / span."""
+    @property
+    def span(self) -> float: ...
+    @property
+    def times(self) -> npt.NDArray[np.float64]:
+        """Each visit's t, in the visits' order."""
+    @property
+    def quality(self) -> list[Quality]:
+        """Per visit: how close the fit at its age is to it."""
+    @property
+    def initial_quality(self) -> list[Quality]:
+        """Per visit: how close the baseline is to it."""
+    @property
+    def alignments(self) -> list[Optional[Alignment]]:
+        """Per visit, its map onto the baseline with [prealign]."""
+    @property
+    def fitted(self) -> list[FShape]:
+        """The fit at each visit's age, on the baseline's mesh."""
+    @property
+    def rates(self) -> dict[str, npt.NDArray[np.float64]]:
+        """Per unit age at the baseline's vertices: normal_velocity (surfaces
+        and plane curves) and signal_rate (n, or n x k)."""
+    @property
+    def geodesic(self) -> Geodesic:
+        """The fit at ages_out; its times are ages."""
+    @property
+    def baseline(self) -> FShape: ...
+    @property
+    def stages(self) -> list[dict[str, Any]]: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def evaluations(self) -> int: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def config(self) -> dict[str, Any]:
+        """The configuration with the weights used."""
+    def __getitem__(self, key: str, /) -> Any:
+        """The attribute named key."""
+    def __contains__(self, key: object, /) -> bool: ...
+    def __len__(self) -> int: ...
+    def __iter__(self) -> Iterator[str]: ...
+    def keys(self) -> list[str]:
+        """The attributes' names."""
+    def values(self) -> list[Any]: ...
+    def items(self) -> list[Tuple[str, Any]]: ...
+    def get(self, key: str, default: Optional[Any] = None) -> Any: ...
+
 Progress = Callable[[dict[str, Any]], Optional[bool]]
 """Called with {"event": "stage" | "iteration" | "stage_finished", ...};
 returning True ends the run, as in scipy.optimize: `match` returns its
@@ -500,6 +566,20 @@ def atlas(
     as for `match`. Subjects may carry several maps (n x k signals), the
     same k for every subject and the template."""
 
+def regress(
+    visits: Sequence[FShape],
+    ages: Sequence[float],
+    config: ConfigLike,
+    weights: Optional[Sequence[float]] = None,
+    progress: Optional[Progress] = None,
+    ages_out: Optional[Sequence[float]] = None,
+    checkpoint: Union[str, "PathLike[str]", None] = None,
+) -> RegressionResult:
+    """Fits one geodesic to a subject's visits at their ages as `fshape
+    regress` does: the earliest visit is the baseline at t = 0, the ages
+    map onto t in [0, 1]; each visit may be its own mesh. `checkpoint` as
+    for `match`; a callback returning True ends the run without a result
+    (call again with the checkpoint to continue)."""
 
 @final
 class MapTest:
