@@ -13,7 +13,7 @@
 //! is the model's uniform one with a node added at every visit's time (a
 //! uniform node closer than a quarter step to a visit is dropped, so steps
 //! stay between a quarter and one and a quarter uniform steps; see
-//! [`grid`]). The gradient is the discrete adjoint of that integration:
+//! `grid`). The gradient is the discrete adjoint of that integration:
 //! the co-state integrates backward from 0 and jumps by
 //! γ_W w_v ∂A_v/∂(x, f) at each visit's node, so it is exact for the
 //! discrete J (tests/shoot/regression.rs against central differences).
@@ -154,7 +154,8 @@ impl Regression {
         self.visits.len()
     }
 
-    /// The node times of the integration ([`grid`]) and each visit's node.
+    /// The node times of the integration (the uniform steps with a node at
+    /// every visit, see the module docs) and each visit's node.
     pub fn times(&self) -> (Vec<f64>, Vec<usize>) {
         let t: Vec<f64> = self.visits.iter().map(|v| v.time).collect();
         grid(self.problem.model().steps(), &t)

@@ -1,4 +1,4 @@
-//! `fshape regress`: fshape-match's [`regress`] for every subject of a
+//! `fshape regress`: fshape-match's [`regress()`] for every subject of a
 //! visits table, each in its own folder, with the program's parts around
 //! it: arguments, reading each visit's files, a progress bar, the outputs
 //! and a few lines of results. Each subject's regression checkpoints
