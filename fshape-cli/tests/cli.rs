@@ -2657,4 +2657,39 @@ fn regress_fits_each_subjects_visits_in_its_folder_and_resumes_to_the_same_bytes
     let o = run("none", &["--subject", "C"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.code() == Some(1) && err.contains("no subject `C` (the table has A, B)"), "{err}");
+    // A subject that cannot be fitted (one visit) is said; the others run.
+    std::fs::write(
+        dir.join("dropout.csv"),
+        "subject,age,mesh\nC,50,sphere.ply\nD,10,sphere.ply\nD,11,ellipsoid0.ply\n",
+    )
+    .unwrap();
+    let o = fshape(&["regress", "--visits", &path("dropout.csv"), "--config", &config, "--out", &path("dropout")]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("subject `C`") && err.contains("at least 2 visits") && err.contains("1 of 2 subjects failed"),
+        "{err}"
+    );
+    assert!(dir.join("dropout/D/summary.json").exists() && !dir.join("dropout/C/summary.json").exists());
+}
+
+#[test]
+fn the_regression_demo_recovers_its_truth_between_the_visits_and_its_rate() {
+    let out = tmp("regress_demo");
+    let o = fshape(&["demo", "regress-spheres", "--out", &out.display().to_string()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("regress-spheres/truth.json")).unwrap()).unwrap();
+    // The guide's bounds for a regression: 0.5 % of the diagonal and 2 %
+    // of the signal's range between the visits, 10 % for the rate.
+    for b in truth["between_visits"].as_array().unwrap() {
+        let (d, e) = (b["quality"]["mean_distance"].as_f64().unwrap(), b["quality"]["signal_rms"].as_f64().unwrap());
+        let d0 = b["baseline_quality"]["mean_distance"].as_f64().unwrap();
+        assert!(d <= 0.005 && e <= 0.02 && d < d0, "{b}");
+    }
+    let rate = truth["normal_rate_relative_l2_error"].as_f64().unwrap();
+    assert!(rate <= 0.1, "{rate}");
+    for file in ["truth_rate.png", "fit_rate.png", "regression/summary.json", "regression/report.html"] {
+        assert!(out.join("regress-spheres").join(file).exists(), "{file}");
+    }
 }

@@ -584,7 +584,7 @@ pub struct RegressionRecord {
     pub kind: Kind,
     /// [`FORMAT`].
     pub format: u32,
-    /// The subject, as the visits table names it (empty without a
+    /// The subject, as the visits table names it (`subject` without a
     /// `subject` column).
     pub subject: String,
     /// The visits table, as given.
@@ -614,6 +614,8 @@ pub struct RegressionRecord {
     /// The span of ages mapped onto [0, 1]: rates per unit age are the
     /// geodesic's velocities divided by it.
     pub span: f64,
+    /// The age at t = 1 (the latest visit's).
+    pub t1: f64,
     /// Every visit, in the table's order.
     pub visits: Vec<VisitRecord>,
     /// Every stage, with its iterations.

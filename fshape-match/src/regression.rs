@@ -54,6 +54,8 @@ pub struct RegressionResult {
     pub t0: f64,
     /// The ages' span mapped onto [0, 1].
     pub span: f64,
+    /// The age at t = 1 (the latest visit's, as given).
+    pub t1: f64,
     /// Each visit's normalised time, in the order given.
     pub times: Vec<f64>,
     /// Each visit's node on the trajectory (its time is the node's).
@@ -97,6 +99,7 @@ pub struct Visits {
     alignments: Vec<Option<crate::Alignment>>,
     t0: f64,
     span: f64,
+    t1: f64,
     regression: Regression,
     unknowns: Unknowns,
     /// The stage the regression is set up for.
@@ -171,7 +174,8 @@ impl Staged for Visits {
         let signal = if self.stages.plan.model.kind() == fshape_shoot::ModelKind::Lddmm {
             0
         } else {
-            t.n_vertices() * t.n_channels()
+            // A template without a signal is given a zero one: one channel.
+            t.n_vertices() * t.n_channels().max(1)
         };
         t.n_vertices() * t.dim() + signal
     }
@@ -232,6 +236,7 @@ impl Runner<Visits> {
         let first = (0..visits.len()).min_by(|&a, &b| visits[a].age.total_cmp(&visits[b].age)).expect("2 visits");
         let last = (0..visits.len()).max_by(|&a, &b| visits[a].age.total_cmp(&visits[b].age)).expect("2 visits");
         let (t0, span) = (visits[first].age, visits[last].age - visits[first].age);
+        let visits_last_age = visits[last].age;
         if span <= 0.0 {
             return bad(format!("every visit is at age {t0}: a regression needs visits at two ages at least"));
         }
@@ -292,6 +297,7 @@ impl Runner<Visits> {
             alignments,
             t0,
             span,
+            t1: visits_last_age,
             regression: Regression::new(problem)?,
             unknowns,
             staged: None,
@@ -344,7 +350,7 @@ impl Runner<Visits> {
             quality.push(crate::quality(&fitted, &visit.shape)?);
             initial_quality.push(crate::quality(template, &visit.shape)?);
         }
-        let (t0, span, times, alignments) = (v.t0, v.span, v.times.clone(), v.alignments.clone());
+        let (t0, span, t1, times, alignments) = (v.t0, v.span, v.t1, v.times.clone(), v.alignments.clone());
         let checkpoint = self.checkpoint();
         let (iterations, evaluations) = checkpoint.totals();
         Ok(RegressionResult {
@@ -354,6 +360,7 @@ impl Runner<Visits> {
             trajectory,
             t0,
             span,
+            t1,
             times,
             nodes,
             quality,

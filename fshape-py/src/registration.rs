@@ -257,15 +257,16 @@ pub(crate) fn regress<'py>(
     let rates = run.rates();
     let (Some(r), Some((normal, signal_rate))) = (run.result.as_ref(), rates) else {
         return Err(crate::errors::other(
-            "stopped by the progress callback: there is no result; call again with the same checkpoint to continue",
+            "stopped by the progress callback: there is no result (with a checkpoint, the same call continues the run)",
         ));
     };
     let baseline = &run.baseline;
     let (dim, channels) = (baseline.dim(), baseline.n_channels().max(1));
-    let (t0, span) = (r.t0, r.span);
-    let ages_out = ages_out.unwrap_or_else(|| (0..5).map(|k| t0 + span * k as f64 / 4.0).collect());
-    if let Some(a) = ages_out.iter().find(|a| !(t0..=t0 + span).contains(*a)) {
-        return Err(err(format!("ages_out: {a} is outside the visits' ages [{t0}, {}]", t0 + span)));
+    let (t0, span, t1) = (r.t0, r.span, r.t1);
+    let ages_out =
+        ages_out.unwrap_or_else(|| (0..5).map(|k| if k == 4 { t1 } else { t0 + span * k as f64 / 4.0 }).collect());
+    if let Some(a) = ages_out.iter().find(|a| !(t0..=t1).contains(*a)) {
+        return Err(err(format!("ages_out: {a} is outside the visits' ages [{t0}, {t1}]")));
     }
     let normalised: Vec<f64> = ages_out.iter().map(|a| (a - t0) / span).collect();
     let geo = geodesic(py, &r.trajectory, dim, &normalised)?;

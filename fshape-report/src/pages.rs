@@ -484,7 +484,7 @@ pub fn regression_page_of(
             "<h2>How close the fit is to each visit</h2><p>Ages {} to {} are mapped onto the geodesic's t ∈ [0, 1]; \
              the baseline is the earliest visit. Distances are fractions of each visit's diagonal, signal errors of its range.</p>{}",
             summary.t0,
-            summary.t0 + summary.span,
+            summary.t1,
             table("quality", &header, &rows)
         ),
         format!(
@@ -519,7 +519,7 @@ pub fn regression_page_of(
         subtitle: format!(
             "fshape regress: ages {} to {}; the fit's largest mean distance to a visit {} of its diagonal",
             summary.t0,
-            summary.t0 + summary.span,
+            summary.t1,
             percent(Some(worst))
         ),
         view,

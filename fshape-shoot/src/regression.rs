@@ -11,9 +11,8 @@
 //! the geodesic's energy plus the attachment of its state at every visit's
 //! time. The states are read where the integrator puts them: the time grid
 //! is the model's uniform one with a node added at every visit's time (a
-//! uniform node closer than a quarter step to a visit is dropped, so steps
-//! stay between a quarter and one and a quarter uniform steps; see
-//! `grid`). The gradient is the discrete adjoint of that integration:
+//! uniform node closer than a quarter step to a visit is dropped, so no
+//! step is longer than 1.5 uniform steps; see `grid`). The gradient is the discrete adjoint of that integration:
 //! the co-state integrates backward from 0 and jumps by
 //! γ_W w_v ∂A_v/∂(x, f) at each visit's node, so it is exact for the
 //! discrete J (tests/shoot/regression.rs against central differences).
@@ -74,12 +73,16 @@ pub struct RegressionGradient {
 /// The node times 0 = t_0 < … < t_N = 1 for `steps` uniform steps and
 /// visits at `visits` (each in [0, 1]), and the node of each visit: the
 /// uniform nodes, less those closer than a quarter step to a visit, and
-/// the visits' times. Steps are then at most 1.25/`steps` long.
+/// the visits' times. Steps are then shorter than 1.5/`steps` (two
+/// neighbouring uniform nodes may both give way to visits); visits close
+/// to each other or to 0 or 1 make short steps, which cost an evaluation
+/// each and lose no accuracy.
 pub(crate) fn grid(steps: usize, visits: &[f64]) -> (Vec<f64>, Vec<usize>) {
     let h = 1.0 / steps as f64;
     let mut times: Vec<f64> = visits.to_vec();
     for k in 0..=steps {
-        let u = k as f64 * h;
+        // k/N as the uniform grid's Trajectory::time has it (k·h can miss 1).
+        let u = k as f64 / steps as f64;
         let end = k == 0 || k == steps;
         if end || visits.iter().all(|v| (v - u).abs() >= 0.25 * h) {
             times.push(u);

@@ -21,7 +21,8 @@ impl Integrator {
     }
 }
 
-/// A shooting: the states at the time steps t_k = k/N, the stage states
+/// A shooting: the states at the time steps (t_k = k/N, or given node
+/// times, [`Trajectory::time`]), the stage states
 /// (kept for the adjoint), the Hamiltonian at every step and timings.
 #[derive(Clone, Debug)]
 pub struct Trajectory {

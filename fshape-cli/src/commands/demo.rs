@@ -18,6 +18,7 @@ pub enum Experiment {
     AtlasSpheres,
     StatsSpheres,
     StatsDigits,
+    RegressSpheres,
 }
 
 /// `fshape demo`'s arguments (its help is on the command).
@@ -27,8 +28,10 @@ pub struct Args {
     /// of 64 writers' 3s), atlas-spheres (an atlas with a known answer),
     /// stats-spheres (group statistics with a known answer: two groups
     /// of turned and moved ellipsoids, effects at known places) or
-    /// stats-digits (where writers' 3s and 5s differ); the atlases write
-    /// `fshape atlas` outputs, the statistics `fshape stats` outputs.
+    /// stats-digits (where writers' 3s and 5s differ) or regress-spheres
+    /// (a regression with a known answer: a thinning ellipsoid's visits);
+    /// the atlases write `fshape atlas` outputs, the statistics `fshape
+    /// stats` outputs, the regression `fshape regress` outputs.
     pub name: Experiment,
     /// Output directory.
     #[arg(long, default_value = "demo-output")]
@@ -73,6 +76,7 @@ pub fn run(a: Args) -> Result<()> {
         Experiment::Bunny => demo::bunny(&run),
         Experiment::Cortex => demo::cortex(&run),
         Experiment::AtlasSpheres => demo::atlas_spheres(out, max_iterations, gamma_w),
+        Experiment::RegressSpheres => demo::regress_spheres(out, max_iterations, gamma_w),
         Experiment::AtlasDigits => demo::atlas_digits(&digits, a.subjects),
         Experiment::Digits => demo::digits(&digits),
         Experiment::StatsDigits => demo::stats_digits(

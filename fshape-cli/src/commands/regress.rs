@@ -55,15 +55,37 @@ pub fn run(a: Args) -> Result<()> {
             names.join(", ")
         );
     }
+    // A subject that fails (a file missing, a single visit) is said and
+    // the others still run; the exit status is 1 if any failed.
+    let mut failed = 0;
+    let count = chosen.len();
     for s in chosen {
         // One subject: OUT itself; several: OUT/SUBJECT.
         let out = if table_has_subjects { a.run.out.join(&s.subject) } else { a.run.out.clone() };
-        one(&a, &config, s, &out).with_context(|| format!("subject `{}` of {}", s.subject, a.visits.display()))?;
+        let done =
+            one(&a, &config, s, &out).with_context(|| format!("subject `{}` of {}", s.subject, a.visits.display()));
+        match done {
+            Err(e) if count > 1 => {
+                eprintln!("error: {e:#}");
+                failed += 1;
+            }
+            other => drop(other?),
+        }
+    }
+    if failed > 0 {
+        bail!("{failed} of {count} subjects failed (each said above); the others are in {}", a.run.out.display());
     }
     Ok(())
 }
 
-fn one(a: &Args, config: &fshape_match::Config, s: &SubjectVisits, out: &std::path::Path) -> Result<()> {
+/// Regresses subject `s` into `out` and prints its lines; the run, once
+/// finished (`None` when stopped by `--stop-after`).
+pub(crate) fn one(
+    a: &Args,
+    config: &fshape_match::Config,
+    s: &SubjectVisits,
+    out: &std::path::Path,
+) -> Result<Option<regress::RegressionRun>> {
     let mut visits = Vec::with_capacity(s.visits.len());
     for row in &s.visits {
         let masking = crate::inputs::Masking { mask: row.mask.as_deref(), allow_missing: a.allow_missing };
@@ -87,7 +109,7 @@ fn one(a: &Args, config: &fshape_match::Config, s: &SubjectVisits, out: &std::pa
     if run.outcome == Outcome::Interrupted {
         progress.abandon("stopped by --stop-after; continue with --resume");
         eprintln!("stopped after the requested iterations; checkpoint in {}", checkpoint.display());
-        return Ok(());
+        return Ok(None);
     }
     progress.outputs(out);
     let files: Vec<String> = s.visits.iter().map(|v| v.mesh.display().to_string()).collect();
@@ -102,7 +124,7 @@ fn one(a: &Args, config: &fshape_match::Config, s: &SubjectVisits, out: &std::pa
         s.subject,
         r.visits.len(),
         r.t0,
-        r.t0 + r.span,
+        r.t1,
         r.final_value,
         r.iterations,
         r.stages.len(),
@@ -122,5 +144,5 @@ fn one(a: &Args, config: &fshape_match::Config, s: &SubjectVisits, out: &std::pa
         println!("{line}");
     }
     println!("  outputs       {} ({} files; rates per unit age in rates.csv)", out.display(), written.files);
-    Ok(())
+    Ok(Some(run))
 }

@@ -250,6 +250,7 @@ impl RegressionRun {
             metrics: self.plan.metrics,
             t0: result.t0,
             span: result.span,
+            t1: result.t1,
             visits,
             stages: result.stages.clone(),
             final_value: e.value,

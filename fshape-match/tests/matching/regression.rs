@@ -242,3 +242,34 @@ fn with_prealign_each_visit_scanned_elsewhere_is_moved_onto_the_baseline() {
         assert!(q.mean_distance <= 1.5 * q0.mean_distance + 0.001, "visit {i}");
     }
 }
+
+#[test]
+fn visits_without_a_signal_regress_from_a_coarse_stage_to_the_baseline() {
+    // Meshes without a signal (the template gets a zero one), the first
+    // stage on a simplified baseline whose momenta are carried to the next.
+    let sphere = fshape_mesh::generate::icosphere(2, 1.0);
+    assert!(sphere.signal().is_none());
+    let stretched = |a: f64| {
+        let pts: Vec<f64> = sphere.points().chunks_exact(3).flat_map(|p| [a * p[0], p[1], p[2] / a]).collect();
+        sphere.clone().with_points(pts).unwrap()
+    };
+    let visits = vec![
+        Visit { age: 0.0, shape: sphere.clone(), weight: 1.0 },
+        Visit { age: 1.0, shape: stretched(1.1), weight: 1.0 },
+        Visit { age: 2.0, shape: stretched(1.2), weight: 1.0 },
+    ];
+    let mut config = Config::parse(
+        "[deformation]\nwidths = [0.6]\n[attachment]\nkernel_geom = \"gaussian:0.15\"\n\
+         [[stage]]\nkernel_geom = \"gaussian:0.3\"\nvertices = 60\n[[stage]]\nkernel_geom = \"gaussian:0.15\"\n",
+    )
+    .unwrap();
+    config.optimizer.max_iterations = 15;
+    let mut run = Regress::new(visits, &config).unwrap();
+    run.run(&mut ()).unwrap();
+    let r = run.result().unwrap();
+    assert_eq!(r.stages.len(), 2);
+    assert_eq!(r.p0.len(), 3 * sphere.n_vertices());
+    for (q, q0) in r.quality.iter().zip(&r.initial_quality).skip(1) {
+        assert!(q.mean_distance < 0.5 * q0.mean_distance, "{} from {}", q.describe(), q0.describe());
+    }
+}

@@ -76,10 +76,12 @@ fn the_gradient_of_a_regression_matches_central_differences() {
         // gradient in p_0.
         if kind == "metamorphosis" && norm == "h1" {
             let m = model("norm = \"h1\"\nlength = 0.5\ngamma_f = 0.5\ngamma_w = 2.0", "", "rk4", 5);
+            // The first visit at weight 0: the same time grid, no jump there.
             let mut fewer = Regression::new(Problem::new(&template, m).unwrap()).unwrap();
-            for (t, shape, w) in visits().into_iter().skip(1) {
-                fewer = fewer.with_visit(t, &shape, attachment(), w).unwrap();
+            for (k, (t, shape, w)) in visits().into_iter().enumerate() {
+                fewer = fewer.with_visit(t, &shape, attachment(), if k == 0 { 0.0 } else { w }).unwrap();
             }
+            assert_eq!(fewer.times(), r.times());
             let h = fewer.objective_grad(&p0, &pf).unwrap();
             let diff = g.p0.iter().zip(&h.p0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
             assert!(diff > 1e-6, "the first visit's jump is missing: {diff}");
@@ -104,6 +106,16 @@ fn the_time_grid_has_a_node_at_every_visit_and_bounded_steps() {
     // 0.6 is dropped (closer than a quarter step), 0.2 kept.
     assert!(times.contains(&0.2) && !times.contains(&0.6), "{times:?}");
     assert_eq!(times.len(), 12);
+    // N/N is 1 however N rounds: a visit at 1 adds no step (k·(1/N) for
+    // N = 49 is 1 − 2⁻⁵³).
+    let m = model("", "", "rk4", 49);
+    let ends = Regression::new(Problem::new(&template, m).unwrap())
+        .unwrap()
+        .with_visit(0.0, &template, attachment(), 1.0)
+        .unwrap()
+        .with_visit(1.0, &template, attachment(), 1.0)
+        .unwrap();
+    assert_eq!(ends.times().0.len(), 50);
     // The trajectory's nodes are the grid's.
     let (p0, pf) = momenta(&template, 0.1, 2);
     let traj = r.shoot(&p0, &pf).unwrap();

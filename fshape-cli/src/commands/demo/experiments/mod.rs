@@ -9,6 +9,7 @@ mod atlas_spheres;
 mod bunny;
 mod cortex;
 mod digits;
+mod regress_spheres;
 mod stats_digits;
 mod stats_spheres;
 
@@ -17,6 +18,7 @@ pub use atlas_spheres::atlas_spheres;
 pub use bunny::bunny;
 pub use cortex::cortex;
 pub use digits::digits;
+pub use regress_spheres::regress_spheres;
 pub use stats_digits::{STATS_DIGITS_PER_CLASS, stats_digits};
 pub use stats_spheres::{StatsSpheresArgs, stats_spheres};
 
