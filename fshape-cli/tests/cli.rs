@@ -2632,7 +2632,11 @@ fn regress_fits_each_subjects_visits_in_its_folder_and_resumes_to_the_same_bytes
     // The page: the fitted geodesic, then each visit beside its fit;
     // `fshape report` writes the same page again from the folder.
     let page = std::fs::read_to_string(dir.join("run/A/report.html")).unwrap();
-    assert!(page.contains("the fitted geodesic at the visits") && page.contains("visit 3 (age 52)"), "{page:.300}");
+    assert!(page.contains("age 52 (visit 3)") && page.contains("visit 3 (age 52): its fit"), "{page:.300}");
+    // The collection lists every state by age: 3 visits and 7 ages between.
+    let pvd = std::fs::read_to_string(dir.join("run/A/trajectory.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 10, "{pvd}");
+    assert!(dir.join("run/A/state_006.ply").exists() && !dir.join("run/A/state_007.ply").exists());
     std::fs::remove_file(dir.join("run/A/report.html")).unwrap();
     let again = fshape(&["report", &path("run/A")]);
     assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));

@@ -499,7 +499,8 @@ pub struct RegressionWritten {
 
 /// Writes the folder of a finished regression (`None` without a result):
 /// the fitted state at each visit's age (`fitted_000.ply`, `.vtk`, …, in
-/// the visits' order) with a ParaView collection over the ages
+/// the visits' order) and at 9 evenly spaced ages (`state_000.ply`, …,
+/// those not a visit's) with a ParaView collection of them all by age
 /// (`trajectory.pvd`), a render of each fitted state and of each visit
 /// with one camera and colour range, p0.csv, pf.csv (not for LDDMM),
 /// momenta.vtk, the rates of change per unit age (rates.csv and
@@ -523,6 +524,7 @@ pub fn write_regression(
     let mut files: Vec<String> = Vec::new();
     let mut fitted = Vec::with_capacity(nodes.len());
     let mut steps: Vec<(f64, String)> = Vec::new();
+    let mut between = Vec::new();
     for (i, &k) in nodes.iter().enumerate() {
         let state = template
             .clone()
@@ -537,6 +539,26 @@ pub fn write_regression(
         }
         steps.push((run.visits[i].age, format!("fitted_{i:03}.vtk")));
         fitted.push(state);
+    }
+    // Between the visits: the fit at 9 evenly spaced ages (those not a
+    // visit's), state_000.ply, …, in the collection with the visits' fits.
+    for k in 0..=8 {
+        let age = if k == 8 { result.t1 } else { result.t0 + result.span * f64::from(k) / 8.0 };
+        if run.visits.iter().any(|v| v.age == age) {
+            continue;
+        }
+        let (x, f) = result.at_age(age);
+        let state = template.clone().with_points(x)?.with_signals(Some(f), channels)?;
+        let n = steps.len() - nodes.len();
+        for (ext, format) in [("vtk", io::Format::Vtk), ("ply", io::Format::Ply)] {
+            let name = format!("state_{n:03}.{ext}");
+            let mut bytes = Vec::new();
+            io::write_to(&mut bytes, &state, format, Encoding::Binary)?;
+            outputs.push((out.join(&name), bytes));
+            files.push(name);
+        }
+        steps.push((age, format!("state_{n:03}.vtk")));
+        between.push(state);
     }
     steps.sort_by(|a, b| a.0.total_cmp(&b.0));
     let entries: Vec<(f64, &str)> = steps.iter().map(|(t, f)| (*t, f.as_str())).collect();
@@ -619,7 +641,11 @@ pub fn write_regression(
     let Some(record) = run.record(labels, seconds, files) else { return Ok(None) };
     outputs.push((out.join("summary.json"), record.to_json()));
     let visit_shapes: Vec<FShape> = visits.iter().map(|v| (*v).clone()).collect();
-    let page = crate::regression_page_of(&fitted, &visit_shapes, &record, Some(&shoot), Some(&svg), view)?;
+    // The slider's states in age order, as the collection lists them.
+    let mut states: Vec<(f64, FShape)> = run.visits.iter().map(|v| v.age).zip(fitted.iter().cloned()).collect();
+    states.extend(steps.iter().filter(|(_, f)| f.starts_with("state_")).map(|(a, _)| *a).zip(between));
+    states.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let page = crate::regression_page_of(&states, &fitted, &visit_shapes, &record, Some(&shoot), Some(&svg), view)?;
     outputs.push((out.join("report.html"), crate::html(&page).into_bytes()));
     for (path, bytes) in &outputs {
         io::write_atomic(path, bytes, false)?;

@@ -428,17 +428,23 @@ pub fn regression_page(dir: &Path, view: (f64, f64)) -> Result<Page> {
         fitted.push(read(&dir.join(format!("fitted_{i:03}.ply")))?);
         visits.push(read(&dir.join(format!("visit_{i:03}.ply")))?);
     }
+    let states: Vec<(f64, FShape)> = collection(dir)?
+        .into_iter()
+        .map(|(age, file)| read(&dir.join(file.replace(".vtk", ".ply"))).map(|s| (age, s)))
+        .collect::<Result<_>>()?;
     let config = std::fs::read_to_string(dir.join("shoot.toml")).ok();
     let energy = std::fs::read_to_string(dir.join("energy.svg")).ok();
-    regression_page_of(&fitted, &visits, &summary, config.as_deref(), energy.as_deref(), view)
+    regression_page_of(&states, &fitted, &visits, &summary, config.as_deref(), energy.as_deref(), view)
 }
 
-/// The report of a regression from what it produced: the fitted state at
-/// each visit's age and each visit (in the record's order), its record,
+/// The report of a regression from what it produced: the fitted geodesic
+/// at some ages (`states`, in age order: the visits' and others), the fit
+/// at each visit's age and each visit (in the record's order), its record,
 /// the configuration's text and the energy plot. The first scene is the
-/// fitted geodesic with a slider over the visits' ages and the last visit
-/// beside; then a scene per visit, its fit beside it.
+/// fitted geodesic under a slider over those ages (a visit's marked) with
+/// the last visit beside; then a scene per visit, its fit beside it.
 pub fn regression_page_of(
+    states: &[(f64, FShape)],
     fitted: &[FShape],
     visits: &[FShape],
     summary: &RegressionRecord,
@@ -448,11 +454,16 @@ pub fn regression_page_of(
 ) -> Result<Page> {
     let mut order: Vec<usize> = (0..summary.visits.len().min(fitted.len()).min(visits.len())).collect();
     order.sort_by(|&a, &b| summary.visits[a].age.total_cmp(&summary.visits[b].age));
-    let frames: Vec<&FShape> = order.iter().map(|&i| &fitted[i]).collect();
-    let labels: Vec<String> = order.iter().map(|&i| format!("age {}", summary.visits[i].age)).collect();
+    let frames: Vec<&FShape> = states.iter().map(|(_, s)| s).collect();
+    let labels: Vec<String> = states
+        .iter()
+        .map(|(age, _)| match summary.visits.iter().position(|v| v.age == *age) {
+            Some(i) => format!("age {age} (visit {})", i + 1),
+            None => format!("age {age:.2}"),
+        })
+        .collect();
     let last = order.last().map(|&i| &visits[i]);
-    let mut scenes =
-        vec![scene("the fitted geodesic at the visits' ages", &frames, labels, last.map(|v| ("last visit", v)))?];
+    let mut scenes = vec![scene("the fitted geodesic", &frames, labels, last.map(|v| ("last visit", v)))?];
     for &i in &order {
         let v = &summary.visits[i];
         let name = format!("visit {} (age {}): its fit and the visit", i + 1, v.age);
