@@ -408,11 +408,7 @@ impl crate::optimize::Objective for RegressionObjective<'_> {
         let g = match self.regression.objective_grad(&p0, &pf) {
             Ok(g) => g,
             // As for a pair: past the first point, a step that went too far.
-            Err(e) if self.evaluations > 1 && crate::session::step_too_far(&e) => {
-                let nan = Energies { value: f64::NAN, energy: f64::NAN, signal_energy: f64::NAN, attachment: f64::NAN };
-                return Ok(Evaluation { value: f64::NAN, grad: vec![f64::NAN; x.len()], parts: nan });
-            }
-            Err(e) => return Err(e.into()),
+            Err(e) => return crate::session::too_far(e, self.evaluations, x.len()),
         };
         let o = &g.objective;
         let parts = Energies { value: o.value, energy: o.energy, signal_energy: o.signal_energy, attachment: o.data };

@@ -433,20 +433,24 @@ impl crate::optimize::Objective for MatchObjective<'_> {
         self.evaluations += 1;
         let g = match self.problem.objective_grad(&p0, &pf) {
             Ok(g) => g,
-            // After the first point, a shooting that diverges, or folds the
-            // mesh until a cell has no area, is a step that went too far:
-            // the line search steps back (a non-finite value), the run goes
-            // on. At the first point, and for errors of the setup itself,
-            // the error is the answer.
-            Err(e) if self.evaluations > 1 && step_too_far(&e) => {
-                let nan = Energies { value: f64::NAN, energy: f64::NAN, signal_energy: f64::NAN, attachment: f64::NAN };
-                return Ok(Evaluation { value: f64::NAN, grad: vec![f64::NAN; x.len()], parts: nan });
-            }
-            Err(e) => return Err(e.into()),
+            Err(e) => return too_far(e, self.evaluations, x.len()),
         };
         let grad = self.unknowns.pack_grad(&g.p0, &g.pf);
         Ok(Evaluation { value: g.objective.value, grad, parts: g.objective })
     }
+}
+
+/// A shooting's error as an objective sees it: after the first point, a
+/// shooting that diverges, or folds the mesh until a cell has no area, is
+/// a step that went too far: the line search steps back (a non-finite
+/// value, `len` NaN gradient entries), the run goes on. At the first point,
+/// and for errors of the setup itself, the error is the answer.
+pub(crate) fn too_far(e: ShootError, evaluations: usize, len: usize) -> Result<Evaluation<Energies>, MatchError> {
+    if evaluations > 1 && step_too_far(&e) {
+        let nan = Energies { value: f64::NAN, energy: f64::NAN, signal_energy: f64::NAN, attachment: f64::NAN };
+        return Ok(Evaluation { value: f64::NAN, grad: vec![f64::NAN; len], parts: nan });
+    }
+    Err(e.into())
 }
 
 /// Whether a shooting's error, past an objective's first point, is a step

@@ -84,6 +84,23 @@ fn stages_table(stages: &[StageRecord]) -> String {
     table("stages", &["stage", "k_p", "iterations", "J at start", "J at end", "why it ended"], &rows)
 }
 
+/// "The run": the model and norm, J and its parts at the end, the counts
+/// and time, and the stages' table.
+fn run_section(names: (&str, &str), j: [f64; 3], counts: (usize, usize, f64), stages: &[StageRecord]) -> String {
+    format!(
+        "<h2>The run</h2><p>{} model, {} signal norm; J = {:.4e} (energy {:.4e}, data term {:.4e}) after {} iterations and {} evaluations in {:.1} s.</p>{}",
+        escape(names.0),
+        escape(names.1),
+        j[0],
+        j[1],
+        j[2],
+        counts.0,
+        counts.1,
+        counts.2,
+        stages_table(stages)
+    )
+}
+
 /// The (time, state file) pairs of a ParaView collection, in order.
 fn collection(dir: &Path) -> Result<Vec<(f64, String)>> {
     let path = dir.join("trajectory.pvd");
@@ -130,17 +147,11 @@ pub fn registration_page(
     let (before, after) = (summary.quality_before.as_ref(), summary.quality.as_ref());
     let mut sections = vec![
         format!("<h2>How close it came</h2>{}", quality_table(before, after)),
-        format!(
-            "<h2>The run</h2><p>{} model, {} signal norm; J = {:.4e} (energy {:.4e}, data term {:.4e}) after {} iterations and {} evaluations in {:.1} s.</p>{}",
-            escape(&summary.model),
-            escape(&summary.norm),
-            summary.final_value,
-            summary.final_energy,
-            summary.final_attachment,
-            summary.iterations,
-            summary.evaluations,
-            summary.seconds,
-            stages_table(&summary.stages)
+        run_section(
+            (&summary.model, &summary.norm),
+            [summary.final_value, summary.final_energy, summary.final_attachment],
+            (summary.iterations, summary.evaluations, summary.seconds),
+            &summary.stages,
         ),
     ];
     if let Some(a) = &summary.prealign {
@@ -498,17 +509,11 @@ pub fn regression_page_of(
             summary.t1,
             table("quality", &header, &rows)
         ),
-        format!(
-            "<h2>The run</h2><p>{} model, {} signal norm; J = {:.4e} (energy {:.4e}, data term {:.4e}) after {} iterations and {} evaluations in {:.1} s.</p>{}",
-            escape(&summary.model),
-            escape(&summary.norm),
-            summary.final_value,
-            summary.final_energy,
-            summary.final_attachment,
-            summary.iterations,
-            summary.evaluations,
-            summary.seconds,
-            stages_table(&summary.stages)
+        run_section(
+            (&summary.model, &summary.norm),
+            [summary.final_value, summary.final_energy, summary.final_attachment],
+            (summary.iterations, summary.evaluations, summary.seconds),
+            &summary.stages,
         ),
     ];
     if let Some(svg) = energy_svg {
