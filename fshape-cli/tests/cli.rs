@@ -2653,6 +2653,10 @@ fn regress_fits_each_subjects_visits_in_its_folder_and_resumes_to_the_same_bytes
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(std::fs::read(dir.join("again/B/p0.csv")).unwrap(), std::fs::read(dir.join("run/B/p0.csv")).unwrap());
     assert!(!dir.join("again/A").exists());
+    // A job array's task 1 of 2 takes every second subject from the second.
+    let o = run("shard", &["--shard", "1/2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(dir.join("shard/B/summary.json").exists() && !dir.join("shard/A").exists());
     // A table's mistakes are named with their line.
     std::fs::write(dir.join("bad.csv"), "subject,age,mesh\nA,50,sphere.ply\nA,fifty,ellipsoid0.ply\n").unwrap();
     let o = fshape(&["regress", "--visits", &path("bad.csv"), "--config", &config, "--out", &path("bad")]);

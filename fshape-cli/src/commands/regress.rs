@@ -34,6 +34,11 @@ pub struct Args {
     /// Regress only this subject (as the table names it).
     #[arg(long)]
     pub subject: Option<String>,
+    /// This job's share of the subjects, task I of N (the subjects in the
+    /// table's order, every N-th from the I-th); under a Slurm job array,
+    /// its array variables say it when this is not given.
+    #[arg(long, value_parser = crate::args::shard)]
+    pub shard: Option<crate::args::Shard>,
     #[command(flatten)]
     pub view: crate::args::View,
     #[command(flatten)]
@@ -44,8 +49,20 @@ pub fn run(a: Args) -> Result<()> {
     let config = crate::inputs::read_config(&a.run.config, true)?;
     let subjects = regress::read_visits(&a.visits)?;
     let table_has_subjects = subjects.len() > 1 || subjects[0].subject != "subject";
-    let chosen: Vec<&SubjectVisits> =
-        subjects.iter().filter(|s| a.subject.as_ref().is_none_or(|name| *name == s.subject)).collect();
+    let (shard, shards) = match a.shard {
+        Some(s) => (s.index, s.count),
+        None => crate::commands::batch::shard_from_env()?.unwrap_or((0, 1)),
+    };
+    let chosen: Vec<&SubjectVisits> = subjects
+        .iter()
+        .enumerate()
+        .filter(|(i, s)| i % shards == shard && a.subject.as_ref().is_none_or(|name| *name == s.subject))
+        .map(|(_, s)| s)
+        .collect();
+    if chosen.is_empty() && shards > 1 {
+        eprintln!("task {shard} of {shards}: no subject of {} (it has {})", a.visits.display(), subjects.len());
+        return Ok(());
+    }
     if chosen.is_empty() {
         let names: Vec<&str> = subjects.iter().map(|s| s.subject.as_str()).collect();
         bail!(

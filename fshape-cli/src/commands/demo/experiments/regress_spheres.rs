@@ -92,6 +92,7 @@ pub fn regress_spheres(out: &Path, max_iterations: usize, gamma_w: f64) -> Resul
         signal_name: None,
         allow_missing: false,
         subject: None,
+        shard: None,
         view: crate::args::View { camera: crate::args::DEFAULT_CAMERA },
         report: crate::args::Report { quiet: false, verbose: false },
     };
