@@ -140,11 +140,6 @@ impl Visits {
         Ok(r)
     }
 
-    fn unknowns_of(&self, k: usize) -> Result<Unknowns, MatchError> {
-        let plan = &self.stages.plan;
-        Ok(Unknowns::for_template(self.stages.template_of(k).1, plan.model.kind(), plan.metrics, plan.scales.as_ref())?)
-    }
-
     fn set_stage(&mut self, k: usize) -> Result<(), MatchError> {
         if self.staged != Some(k) {
             self.regression = self.regression_at(k)?;
@@ -170,26 +165,11 @@ impl Staged for Visits {
     }
 
     fn len_at(&self, k: usize) -> usize {
-        let t = self.stages.template_of(k).1;
-        let signal = if self.stages.plan.model.kind() == fshape_shoot::ModelKind::Lddmm {
-            0
-        } else {
-            // A template without a signal is given a zero one: one channel.
-            t.n_vertices() * t.n_channels().max(1)
-        };
-        t.n_vertices() * t.dim() + signal
+        self.stages.unknowns_len(k)
     }
 
     fn start(&mut self, k: usize, warm: Option<&[f64]>) -> Result<Vec<f64>, MatchError> {
-        let Some(w) = warm else { return Ok(vec![0.0; self.len_at(k)]) };
-        if k == 0 || self.stages.template_of(k - 1).0 == self.stages.template_of(k).0 {
-            return Ok(w.to_vec());
-        }
-        let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
-        let (coarse, fine) = (self.stages.template_of(k - 1).1, self.stages.template_of(k).1);
-        let model = &self.stages.plan.model;
-        let (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, model.kind(), model.kernel())?;
-        Ok(self.unknowns_of(k)?.pack(&p0, &pf))
+        self.stages.start_of(k, warm)
     }
 
     fn prepare(&mut self, k: usize) -> Result<StageSetup, MatchError> {
@@ -334,12 +314,12 @@ impl Runner<Visits> {
         }
         let x = self.checkpoint().warm.clone().ok_or(MatchError::NotFinished)?;
         let last = self.plan().stages.len() - 1;
-        let (p0, pf) = self.staged.unknowns_of(last)?.unpack(&x);
+        let (p0, pf) = self.staged.stages.unknowns_of(last)?.unpack(&x);
         let v = &mut self.staged;
         v.set_stage(last)?;
         let (energies, trajectory) = v.regression.objective(&p0, &pf)?;
         let template = v.regression.problem().template();
-        let (_, nodes) = v.regression.times();
+        let nodes = v.regression.times().1.to_vec();
         let mut quality = Vec::with_capacity(v.visits.len());
         let mut initial_quality = Vec::with_capacity(v.visits.len());
         for (visit, &k) in v.visits.iter().zip(&nodes) {

@@ -91,28 +91,6 @@ pub struct Pair {
 pub type Session = Runner<Pair>;
 
 impl Pair {
-    /// The number of unknowns of stage k.
-    fn unknowns_len(&self, k: usize) -> usize {
-        let t = self.stages.template_of(k).1;
-        let signal = if self.stages.plan.model.kind() == fshape_shoot::ModelKind::Lddmm {
-            0
-        } else {
-            t.n_vertices() * t.n_channels().max(1)
-        };
-        t.n_vertices() * t.dim() + signal
-    }
-
-    /// The packing of stage k's unknowns.
-    fn unknowns_of(&self, k: usize) -> Result<Unknowns, MatchError> {
-        let t = self.stages.template_of(k).1;
-        Ok(Unknowns::for_template(
-            t,
-            self.stages.plan.model.kind(),
-            self.stages.plan.metrics,
-            self.stages.plan.scales.as_ref(),
-        )?)
-    }
-
     fn stage_target(&mut self, k: usize) -> Result<(), MatchError> {
         let (key, template) = self.stages.template_of(k);
         if key != self.on_template {
@@ -134,23 +112,6 @@ impl Pair {
             self.staged = Some(k);
         }
         Ok(())
-    }
-
-    /// The unknowns stage `k` starts from where it runs on another
-    /// template than stage k − 1: the last stage's end carried over
-    /// ([`crate::resolution::prolongate_fitted`]). `None` where stage k
-    /// starts from zero (the first) or from the last stage's end as it is.
-    fn carried(&self, k: usize, warm: Option<&[f64]>) -> Result<Option<Vec<f64>>, MatchError> {
-        let Some(w) = warm else { return Ok(None) };
-        if k == 0 || self.stages.template_of(k - 1).0 == self.stages.template_of(k).0 {
-            return Ok(None);
-        }
-        let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
-        let (coarse, fine) = (self.stages.template_of(k - 1).1, self.stages.template_of(k).1);
-        let kind = self.stages.plan.model.kind();
-        let (p0, pf) =
-            crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, kind, self.stages.plan.model.kernel())?;
-        Ok(Some(self.unknowns_of(k)?.pack(&p0, &pf)))
     }
 }
 
@@ -176,16 +137,13 @@ impl Staged for Pair {
     }
 
     fn len_at(&self, k: usize) -> usize {
-        self.unknowns_len(k)
+        self.stages.unknowns_len(k)
     }
 
     fn start(&mut self, k: usize, warm: Option<&[f64]>) -> Result<Vec<f64>, MatchError> {
         // Carried over before stage k's metric is built, so that the
         // transfer's dense factor and the metric's are not held at once.
-        Ok(match self.carried(k, warm)? {
-            Some(x) => x,
-            None => warm.map_or_else(|| vec![0.0; self.unknowns_len(k)], <[f64]>::to_vec),
-        })
+        self.stages.start_of(k, warm)
     }
 
     fn prepare(&mut self, k: usize) -> Result<StageSetup, MatchError> {
@@ -326,7 +284,7 @@ impl Runner<Pair> {
             return Err(MatchError::NotFinished);
         }
         let x = self.checkpoint().warm.clone().ok_or(MatchError::NotFinished)?;
-        let (p0, pf) = self.staged.unknowns_of(self.plan().stages.len() - 1)?.unpack(&x);
+        let (p0, pf) = self.staged.stages.unknowns_of(self.plan().stages.len() - 1)?.unpack(&x);
         self.shot(p0, pf, true)
     }
 
@@ -351,7 +309,7 @@ impl Runner<Pair> {
         };
         let pair = &self.staged;
         let last = pair.stages.plan.stages.len() - 1;
-        let (mut p0, mut pf) = pair.unknowns_of(k)?.unpack(&x);
+        let (mut p0, mut pf) = pair.stages.unknowns_of(k)?.unpack(&x);
         if pair.stages.template_of(k).0 != pair.stages.template_of(last).0 {
             let (coarse, fine) = (pair.stages.template_of(k).1, pair.stages.template_of(last).1);
             let model = &pair.stages.plan.model;

@@ -269,17 +269,8 @@ pub(crate) fn regress<'py>(
         return Err(err(format!("ages_out: {a} is outside the visits' ages [{t0}, {t1}]")));
     }
     let normalised: Vec<f64> = ages_out.iter().map(|a| (a - t0) / span).collect();
-    let geo = geodesic(py, &r.trajectory, dim, &normalised)?;
     // The geodesic's times as ages.
-    let geo = Bound::new(
-        py,
-        crate::results::Geodesic {
-            times: PyArray1::from_slice(py, &ages_out).into_any().unbind(),
-            points: geo.get().points.clone_ref(py),
-            signals: geo.get().signals.clone_ref(py),
-            hamiltonian: geo.get().hamiltonian.clone_ref(py),
-        },
-    )?;
+    let geo = crate::shoot::geodesic_labelled(py, &r.trajectory, dim, &normalised, &ages_out)?;
     let fitted = PyList::empty(py);
     for &k in &r.nodes {
         let s = baseline

@@ -17,6 +17,17 @@ pub(crate) fn geodesic<'py>(
     dim: usize,
     times: &[f64],
 ) -> PyResult<Bound<'py, Geodesic>> {
+    geodesic_labelled(py, traj, dim, times, times)
+}
+
+/// [`geodesic`] with `labels` (one per time, e.g. ages) as its `times`.
+pub(crate) fn geodesic_labelled<'py>(
+    py: Python<'py>,
+    traj: &fshape_shoot::Trajectory,
+    dim: usize,
+    times: &[f64],
+    labels: &[f64],
+) -> PyResult<Bound<'py, Geodesic>> {
     let mut points = Vec::new();
     let mut signals = Vec::new();
     let (mut n, mut k) = (0, 1);
@@ -36,7 +47,7 @@ pub(crate) fn geodesic<'py>(
     Bound::new(
         py,
         Geodesic {
-            times: PyArray1::from_slice(py, times).into_any().unbind(),
+            times: PyArray1::from_slice(py, labels).into_any().unbind(),
             points: Array3::from_shape_vec((times.len(), n, dim), points)
                 .map_err(err)?
                 .into_pyarray(py)

@@ -37,6 +37,10 @@ struct Visit {
 pub struct Regression {
     problem: Problem,
     visits: Vec<Visit>,
+    /// The integration's node times (`grid` of the visits' times), and
+    /// each visit's node: set as visits are added.
+    times: Vec<f64>,
+    nodes: Vec<usize>,
 }
 
 /// The regression objective's value and its parts.
@@ -107,7 +111,7 @@ impl Regression {
                     .into(),
             });
         }
-        Ok(Regression { problem, visits: Vec::new() })
+        Ok(Regression { problem, visits: Vec::new(), times: Vec::new(), nodes: Vec::new() })
     }
 
     /// Adds a visit: `shape` observed at normalised time `time` ∈ [0, 1]
@@ -144,6 +148,8 @@ impl Regression {
         }
         let attachment = Attachment::new(shape, kernel)?.with_parallel(self.problem.parallel());
         self.visits.push(Visit { time, weight, attachment });
+        let t: Vec<f64> = self.visits.iter().map(|v| v.time).collect();
+        (self.times, self.nodes) = grid(self.problem.model().steps(), &t);
         Ok(self)
     }
 
@@ -159,15 +165,14 @@ impl Regression {
 
     /// The node times of the integration (the uniform steps with a node at
     /// every visit, see the module docs) and each visit's node.
-    pub fn times(&self) -> (Vec<f64>, Vec<usize>) {
-        let t: Vec<f64> = self.visits.iter().map(|v| v.time).collect();
-        grid(self.problem.model().steps(), &t)
+    pub fn times(&self) -> (&[f64], &[usize]) {
+        (&self.times, &self.nodes)
     }
 
     /// Shoots (p_0, p^f) on the regression's time grid.
     pub fn shoot(&self, p0: &[f64], pf: &[f64]) -> Result<Trajectory, ShootError> {
         self.problem.check(p0, pf)?;
-        self.problem.shoot_from(self.problem.initial(p0, pf), self.times().0)
+        self.problem.shoot_from(self.problem.initial(p0, pf), self.times.clone())
     }
 
     /// The state at node k as an fshape on the baseline's cells.
@@ -202,9 +207,8 @@ impl Regression {
     pub fn objective(&self, p0: &[f64], pf: &[f64]) -> Result<(RegressionEnergies, Trajectory), ShootError> {
         self.no_visits()?;
         let traj = self.shoot(p0, pf)?;
-        let (_, nodes) = self.times();
         let mut a = Vec::with_capacity(self.visits.len());
-        for (v, &k) in self.visits.iter().zip(&nodes) {
+        for (v, &k) in self.visits.iter().zip(&self.nodes) {
             a.push(v.attachment.eval(&self.state(&traj, k)?)?.value);
         }
         Ok((self.energies(&traj, a), traj))
@@ -217,11 +221,10 @@ impl Regression {
         let traj = self.shoot(p0, pf)?;
         let mut t = traj.timings;
         let l = self.problem.layout;
-        let (_, nodes) = self.times();
         let gw = self.problem.model().gamma_w();
         let mut a = Vec::with_capacity(self.visits.len());
         let mut jumps = Vec::with_capacity(self.visits.len());
-        for (v, &k) in self.visits.iter().zip(&nodes) {
+        for (v, &k) in self.visits.iter().zip(&self.nodes) {
             let state = self.state(&traj, k)?;
             let (d, g) = timed(&mut t.attachment, || v.attachment.eval_grad(&state))?;
             a.push(d.value);

@@ -208,6 +208,44 @@ impl Stages {
     pub(crate) fn template_of(&self, k: usize) -> (Option<usize>, &FShape) {
         self.templates.of(k, &self.start)
     }
+
+    /// The number of unknowns of stage k: p_0, and p^f unless LDDMM (one
+    /// channel for a template without a signal, which is given a zero one).
+    pub(crate) fn unknowns_len(&self, k: usize) -> usize {
+        let t = self.template_of(k).1;
+        let signal = if self.plan.model.kind() == fshape_shoot::ModelKind::Lddmm {
+            0
+        } else {
+            t.n_vertices() * t.n_channels().max(1)
+        };
+        t.n_vertices() * t.dim() + signal
+    }
+
+    /// The packing of stage k's unknowns (without the metric's matrices).
+    pub(crate) fn unknowns_of(&self, k: usize) -> Result<crate::unknowns::Unknowns, MatchError> {
+        let plan = &self.plan;
+        Ok(crate::unknowns::Unknowns::for_template(
+            self.template_of(k).1,
+            plan.model.kind(),
+            plan.metrics,
+            plan.scales.as_ref(),
+        )?)
+    }
+
+    /// Where stage `k` starts: zeros for the first (or without `warm`),
+    /// else `warm`, the last stage's end, carried to stage k's template
+    /// where that differs ([`crate::resolution::prolongate_fitted`]).
+    pub(crate) fn start_of(&self, k: usize, warm: Option<&[f64]>) -> Result<Vec<f64>, MatchError> {
+        let Some(w) = warm else { return Ok(vec![0.0; self.unknowns_len(k)]) };
+        if k == 0 || self.template_of(k - 1).0 == self.template_of(k).0 {
+            return Ok(w.to_vec());
+        }
+        let (p0, pf) = self.unknowns_of(k - 1)?.unpack(w);
+        let (coarse, fine) = (self.template_of(k - 1).1, self.template_of(k).1);
+        let model = &self.plan.model;
+        let (p0, pf) = crate::resolution::prolongate_fitted(coarse, fine, &p0, &pf, model.kind(), model.kernel())?;
+        Ok(self.unknowns_of(k)?.pack(&p0, &pf))
+    }
 }
 
 /// The stage templates of a schedule: per stage a coarser version of the

@@ -95,7 +95,7 @@ fn the_time_grid_has_a_node_at_every_visit_and_bounded_steps() {
     let r = regression(&template, "metamorphosis", "l2-lumped", 10);
     let (times, nodes) = r.times();
     assert_eq!((times[0], *times.last().unwrap()), (0.0, 1.0));
-    for ((t, _, _), k) in visits().iter().zip(&nodes) {
+    for ((t, _, _), k) in visits().iter().zip(nodes) {
         assert_eq!(times[*k], *t);
     }
     for w in times.windows(2) {
