@@ -100,7 +100,8 @@ pub struct Visits {
     t0: f64,
     span: f64,
     t1: f64,
-    regression: Regression,
+    /// The regression of the stage set up (`None` before the first).
+    regression: Option<Regression>,
     unknowns: Unknowns,
     /// The stage the regression is set up for.
     staged: Option<usize>,
@@ -126,28 +127,38 @@ pub fn fingerprint(visits: &[Visit], config: &Config) -> String {
 }
 
 impl Visits {
-    /// The regression for stage k: the stage's template, integrator and
-    /// attachment kernel.
-    fn regression_at(&self, k: usize) -> Result<Regression, MatchError> {
+    /// Sets stage k up: its integrator and attachment kernel on every
+    /// visit, on its template. The problem (the signal norm's analysis) and
+    /// the metric's matrices (a dense factor) are built again only when
+    /// the template changes, as for a pair.
+    fn set_stage(&mut self, k: usize) -> Result<(), MatchError> {
+        if self.staged == Some(k) {
+            return Ok(());
+        }
         let plan = &self.stages.plan;
         let stage = &plan.stages[k];
-        let model = plan.model.clone().with_integrator(stage.integrator.0, stage.integrator.1)?;
-        let problem = Problem::new(self.stages.template_of(k).1, model)?.with_parallel(self.parallel);
+        let (key, template) = self.stages.template_of(k);
+        let same = self.staged.is_some_and(|j| self.stages.template_of(j).0 == key);
+        let mut problem = match self.regression.take() {
+            Some(r) if same => r.into_problem(),
+            _ => Problem::new(template, plan.model.clone())?.with_parallel(self.parallel),
+        };
+        problem.set_integrator(stage.integrator.0, stage.integrator.1)?;
+        if !same {
+            self.unknowns = Unknowns::scaled(&problem, plan.metrics, plan.scales.as_ref())?;
+        }
         let mut r = Regression::new(problem)?;
         for (v, t) in self.visits.iter().zip(&self.times) {
             r = r.with_visit(*t, &v.shape, stage.kernel.clone(), v.weight)?;
         }
-        Ok(r)
+        self.regression = Some(r);
+        self.staged = Some(k);
+        Ok(())
     }
 
-    fn set_stage(&mut self, k: usize) -> Result<(), MatchError> {
-        if self.staged != Some(k) {
-            self.regression = self.regression_at(k)?;
-            let plan = &self.stages.plan;
-            self.unknowns = Unknowns::scaled(self.regression.problem(), plan.metrics, plan.scales.as_ref())?;
-            self.staged = Some(k);
-        }
-        Ok(())
+    /// The regression of the stage set up.
+    fn current(&self) -> &Regression {
+        self.regression.as_ref().expect("set_stage runs before any evaluation")
     }
 }
 
@@ -174,7 +185,7 @@ impl Staged for Visits {
 
     fn prepare(&mut self, k: usize) -> Result<StageSetup, MatchError> {
         self.set_stage(k)?;
-        let problem = self.regression.problem();
+        let problem = self.current().problem();
         Ok(StageSetup {
             template_vertices: problem.template().n_vertices(),
             target_vertices: self.visits.iter().map(|v| v.shape.n_vertices()).sum(),
@@ -184,7 +195,7 @@ impl Staged for Visits {
     }
 
     fn objective(&mut self, _k: usize) -> RegressionObjective<'_> {
-        RegressionObjective::new(&self.regression, self.unknowns.clone())
+        RegressionObjective::new(self.current(), self.unknowns.clone())
     }
 }
 
@@ -268,7 +279,6 @@ impl Runner<Visits> {
         let fingerprint = fingerprint(&visits, config);
         let stages = Stages::new(plan, baseline.clone());
         // A placeholder until the first stage sets its own up.
-        let problem = Problem::new(baseline, stages.plan.model.clone())?;
         let unknowns = Unknowns::for_template(baseline, stages.plan.model.kind(), stages.plan.metrics, None)?;
         let staged = Visits {
             stages,
@@ -278,7 +288,7 @@ impl Runner<Visits> {
             t0,
             span,
             t1: visits_last_age,
-            regression: Regression::new(problem)?,
+            regression: None,
             unknowns,
             staged: None,
             parallel: true,
@@ -317,9 +327,10 @@ impl Runner<Visits> {
         let (p0, pf) = self.staged.stages.unknowns_of(last)?.unpack(&x);
         let v = &mut self.staged;
         v.set_stage(last)?;
-        let (energies, trajectory) = v.regression.objective(&p0, &pf)?;
-        let template = v.regression.problem().template();
-        let nodes = v.regression.times().1.to_vec();
+        let regression = v.current();
+        let (energies, trajectory) = regression.objective(&p0, &pf)?;
+        let template = regression.problem().template();
+        let nodes = regression.times().1.to_vec();
         let mut quality = Vec::with_capacity(v.visits.len());
         let mut initial_quality = Vec::with_capacity(v.visits.len());
         for (visit, &k) in v.visits.iter().zip(&nodes) {

@@ -158,6 +158,12 @@ impl Regression {
         &self.problem
     }
 
+    /// The problem back, without the visits (a coarse-to-fine stage on
+    /// the same template keeps its signal norm's analysis).
+    pub fn into_problem(self) -> Problem {
+        self.problem
+    }
+
     /// The number of visits.
     pub fn visits(&self) -> usize {
         self.visits.len()
