@@ -27,6 +27,10 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
+//! [`Problem::transport`] carries momenta along a shooting by parallel
+//! transport (the fanning scheme, with the integrator's exact
+//! tangent-linear step).
+//!
 //! [`Regression`] fits one geodesic to several observations at their
 //! times (geodesic regression), with the same exact adjoint.
 //!
@@ -37,11 +41,13 @@ mod dynamics;
 mod model;
 mod regression;
 mod shoot;
+mod transport;
 
 pub use dynamics::Timings;
 pub use model::{DEFAULT_MAX_DRIFT, Integrator, Model, ModelKind};
 pub use regression::{Regression, RegressionEnergies, RegressionGradient};
 pub use shoot::{Energies, Gradient, Problem, Trajectory};
+pub use transport::{MAX_TRANSPORT_VERTICES, Transported};
 
 /// Why shooting or matching failed.
 #[derive(Debug, thiserror::Error)]
@@ -117,6 +123,15 @@ pub enum ShootError {
         step: usize,
         /// The model's tolerance ([`Model::max_drift`]).
         tolerance: f64,
+    },
+    /// Parallel transport failed at a node of the trajectory
+    /// ([`Problem::transport`]).
+    #[error("transport failed at node {node}: {why}")]
+    Transport {
+        /// The node.
+        node: usize,
+        /// What went wrong.
+        why: String,
     },
     /// Matching needs a target ([`Problem::with_target`]).
     #[error("no target: matching needs Problem::with_target")]

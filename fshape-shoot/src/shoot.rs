@@ -10,7 +10,7 @@ use crate::{Integrator, Model, ModelKind, ShootError};
 
 impl Integrator {
     /// The Butcher tableau (a strictly lower triangular, row by row; b).
-    fn tableau(self) -> (&'static [&'static [f64]], &'static [f64]) {
+    pub(crate) fn tableau(self) -> (&'static [&'static [f64]], &'static [f64]) {
         match self {
             Integrator::Euler => (&[&[]], &[1.0]),
             Integrator::Midpoint => (&[&[], &[0.5]], &[0.0, 1.0]),
@@ -89,6 +89,16 @@ impl Trajectory {
         if self.times.is_empty() { 1.0 / self.steps() as f64 } else { self.times[k + 1] - self.times[k] }
     }
 
+    /// The state's layout.
+    pub(crate) fn layout(&self) -> Layout {
+        self.layout
+    }
+
+    /// The integrator's stages per step.
+    pub(crate) fn stages_per_step(&self) -> usize {
+        self.n_stages
+    }
+
     /// z at step k.
     pub(crate) fn node(&self, k: usize) -> &[f64] {
         let len = self.layout.len();
@@ -102,7 +112,7 @@ impl Trajectory {
     }
 
     /// Stage i of step k.
-    fn stage(&self, k: usize, i: usize) -> &[f64] {
+    pub(crate) fn stage(&self, k: usize, i: usize) -> &[f64] {
         let len = self.layout.len();
         let at = (k * self.n_stages + i) * len;
         &self.stages[at..at + len]

@@ -10,6 +10,8 @@ mod gradient;
 mod model;
 #[path = "shoot/regression.rs"]
 mod regression;
+#[path = "shoot/transport.rs"]
+mod transport;
 
 use fshape_fem::Norm;
 use fshape_kernels::Kernel;
