@@ -57,6 +57,7 @@ fn fshape(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(measures::attachment_grad, m)?)?;
     m.add_function(wrap_pyfunction!(measures::quality, m)?)?;
     m.add_function(wrap_pyfunction!(shoot::shoot, m)?)?;
+    m.add_function(wrap_pyfunction!(shoot::transport, m)?)?;
     m.add_function(wrap_pyfunction!(registration::match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(registration::atlas, m)?)?;
     m.add_function(wrap_pyfunction!(registration::regress, m)?)?;

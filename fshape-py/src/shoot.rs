@@ -63,6 +63,38 @@ pub(crate) fn node_times(steps: usize) -> Vec<f64> {
     (0..=steps).map(|k| k as f64 / steps as f64).collect()
 }
 
+/// The n × d array `a` named `what` as a flat vector, for `shape`.
+fn vector_field(what: &str, s: &fshape_mesh::FShape, a: PyArrayLike2<'_, f64, AllowTypeChange>) -> PyResult<Vec<f64>> {
+    let (n, dim) = (s.n_vertices(), s.dim());
+    let a = a.as_array();
+    if a.shape() != [n, dim] {
+        return Err(err(format!("{what}: shape {:?}, but the shape has {n} vertices in {dim}-D", a.shape())));
+    }
+    Ok(a.iter().copied().collect())
+}
+
+/// The array `a` named `what` of n values, or n × k for a shape of k
+/// signal channels (row by row), as a flat vector; zeros if None.
+fn signal_field(
+    what: &str,
+    s: &fshape_mesh::FShape,
+    a: Option<numpy::PyArrayLikeDyn<'_, f64, AllowTypeChange>>,
+) -> PyResult<Vec<f64>> {
+    let (n, k) = (s.n_vertices(), s.n_channels().max(1));
+    let Some(a) = a else { return Ok(vec![0.0; n * k]) };
+    let a = a.as_array();
+    let fits = match a.shape() {
+        [m] => k == 1 && *m == n,
+        [m, c] => *m == n && *c == k,
+        _ => false,
+    };
+    if !fits {
+        let want = if k == 1 { format!("({n},)") } else { format!("({n}, {k})") };
+        return Err(err(format!("{what}: shape {:?}, but the shape wants {want}", a.shape())));
+    }
+    Ok(a.iter().copied().collect())
+}
+
 /// Shoots the geodesic from `shape` with momenta `p0` (n × d) and `pf` (n,
 /// or n × k for a shape of k maps; zeros if None) under the model of `config` (a dict, a TOML path or
 /// text; `normalize` must be false, as for `fshape shoot`). Returns the
@@ -84,31 +116,59 @@ pub(crate) fn shoot<'py>(
              none: set normalize = false, or shoot with the weights a registration used (its result's config)",
         ));
     }
-    let (n, dim, k) = (s.n_vertices(), s.dim(), s.n_channels().max(1));
-    let p0a = p0.as_array();
-    if p0a.shape() != [n, dim] {
-        return Err(err(format!("p0: shape {:?}, but the shape has {n} vertices in {dim}-D", p0a.shape())));
-    }
-    let p0: Vec<f64> = p0a.iter().copied().collect();
-    // n values, or n × k for a shape of k signal channels (row by row).
-    let pf: Vec<f64> = match pf {
-        Some(a) => {
-            let a = a.as_array();
-            let fits = match a.shape() {
-                [m] => k == 1 && *m == n,
-                [m, c] => *m == n && *c == k,
-                _ => false,
-            };
-            if !fits {
-                let want = if k == 1 { format!("({n},)") } else { format!("({n}, {k})") };
-                return Err(err(format!("pf: shape {:?}, but the shape wants {want}", a.shape())));
-            }
-            a.iter().copied().collect()
-        }
-        None => vec![0.0; n * k],
-    };
+    let dim = s.dim();
+    let p0 = vector_field("p0", &s, p0)?;
+    let pf = signal_field("pf", &s, pf)?;
     let model = config.model().map_err(err)?;
     let steps = model.steps();
     let traj = py.detach(|| fshape_shoot::Problem::new(&s, model).and_then(|p| p.shoot(&p0, &pf))).map_err(err)?;
     geodesic(py, &traj, dim, &node_times(steps))
+}
+
+/// Carries the momenta `beta` (n × d) and `beta_f` (n, or n × k; zeros if
+/// None) along the geodesic from `shape` with momenta `p0` and `pf`, by
+/// parallel transport (fshape-shoot's fanning scheme, first order in the
+/// step): from its start to its end, or with `back` from its end to its
+/// start. Returns the carried (beta, beta_f), beta_f shaped as `pf`.
+#[pyfunction]
+#[pyo3(signature = (shape, p0, config, beta, pf = None, beta_f = None, back = false))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn transport<'py>(
+    py: Python<'py>,
+    shape: &Bound<'py, PyAny>,
+    p0: PyArrayLike2<'py, f64, AllowTypeChange>,
+    config: &Bound<'py, PyAny>,
+    beta: PyArrayLike2<'py, f64, AllowTypeChange>,
+    pf: Option<numpy::PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
+    beta_f: Option<numpy::PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
+    back: bool,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let s = shape_of(shape)?;
+    let config = config_of(config)?;
+    if config.model.normalize {
+        return Err(err(
+            "config: [model] normalize = true makes the weights relative to a registration's target, and transport \
+             has none: set normalize = false, or use the weights a registration used (its result's config)",
+        ));
+    }
+    let p0 = vector_field("p0", &s, p0)?;
+    let pf = signal_field("pf", &s, pf)?;
+    let beta = vector_field("beta", &s, beta)?;
+    let beta_f = signal_field("beta_f", &s, beta_f)?;
+    let model = config.model().map_err(err)?;
+    let carried = py
+        .detach(|| {
+            let problem = fshape_shoot::Problem::new(&s, model)?;
+            let traj = problem.shoot(&p0, &pf)?;
+            if back { problem.transport_back(&traj, &beta, &beta_f) } else { problem.transport(&traj, &beta, &beta_f) }
+        })
+        .map_err(err)?;
+    let (n, dim, k) = (s.n_vertices(), s.dim(), s.n_channels().max(1));
+    let momentum = Array2::from_shape_vec((n, dim), carried.momentum).map_err(err)?.into_pyarray(py).into_any();
+    let signal = if k == 1 {
+        PyArray1::from_vec(py, carried.signal_momentum).into_any()
+    } else {
+        Array2::from_shape_vec((n, k), carried.signal_momentum).map_err(err)?.into_pyarray(py).into_any()
+    };
+    Ok((momentum, signal))
 }

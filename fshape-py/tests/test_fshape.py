@@ -429,6 +429,31 @@ def test_shooting_with_zero_momenta_stays_put_and_bad_lengths_are_refused():
         fshape.shoot(src, 1e4 * np.random.default_rng(0).normal(size=(12, 3)), config)
 
 
+def test_transport_carries_momenta_there_and_back():
+    src, _ = sphere_pair()
+    rng = np.random.default_rng(3)
+    p0, pf = 0.1 * rng.normal(size=(12, 3)), 0.1 * rng.normal(size=12)
+    beta, beta_f = rng.normal(size=(12, 3)), rng.normal(size=12)
+    scale = np.linalg.norm(np.concatenate([beta.ravel(), beta_f]))
+    errors = []
+    for steps in [20, 40]:
+        config = {"model": {"normalize": False, "gamma_f": 0.5}, "deformation": {"widths": [0.6]},
+                  "integrator": {"steps": steps}}
+        there, there_f = fshape.transport(src, p0, config, beta, pf=pf, beta_f=beta_f)
+        assert there.shape == (12, 3) and there_f.shape == (12,)
+        home, home_f = fshape.transport(src, p0, config, there, pf=pf, beta_f=there_f, back=True)
+        moved = np.linalg.norm(np.concatenate([(there - beta).ravel(), there_f - beta_f])) / scale
+        errors.append(np.linalg.norm(np.concatenate([(home - beta).ravel(), home_f - beta_f])) / scale)
+        # The momenta move on the way (63 % measured) and come back.
+        assert moved > 0.3, moved
+    # First order in the step (1.1 % at 20 steps, 0.56 % at 40 measured).
+    assert errors[1] < 0.015 and errors[1] < 0.6 * errors[0], errors
+    with pytest.raises(fshape.FShapeError, match="beta: shape"):
+        fshape.transport(src, p0, config, beta[:5], pf=pf)
+    with pytest.raises(fshape.FShapeError, match="second-order integrator"):
+        fshape.transport(src, p0, {**config, "integrator": {"scheme": "euler", "steps": 20}}, beta)
+
+
 def test_an_atlas_of_three_subjects_brings_its_template_closer():
     src, tgt = sphere_pair()
     mid = fshape.FShape(0.5 * (src.points + tgt.points), src.cells, 0.5 * (src.signal + tgt.signal))

@@ -193,6 +193,42 @@ impl Problem {
         })
     }
 
+    /// Carries the momenta (`momentum`, `signal_momentum`) from the last
+    /// node of `traj`, a shooting of this problem, back to its first: the
+    /// transport along the shooting from the end (its points and signal)
+    /// with the momenta −(p_N, p^f_N), on the model's uniform steps. This
+    /// is how a rate at a subject's shape (the end of a registration from
+    /// the atlas template) is carried to the template.
+    ///
+    /// # Errors
+    ///
+    /// As [`Problem::transport`], and any error of the shooting back.
+    pub fn transport_back(
+        &self,
+        traj: &Trajectory,
+        momentum: &[f64],
+        signal_momentum: &[f64],
+    ) -> Result<Transported, ShootError> {
+        let l = self.layout;
+        if traj.layout().len() != l.len() {
+            return Err(ShootError::Invalid {
+                what: "transport",
+                why: "along a trajectory that this problem did not shoot".into(),
+            });
+        }
+        let n = traj.steps();
+        let end = self.template().clone().with_points(traj.points(n).to_vec())?;
+        let end = end.with_signals_and_mask(
+            Some(traj.signal(n).to_vec()),
+            l.nf,
+            self.template().mask().map(<[f64]>::to_vec),
+        )?;
+        let back = Problem::new(&end, self.model().clone())?.with_parallel(self.parallel());
+        let neg = |v: &[f64]| v.iter().map(|a| -a).collect::<Vec<f64>>();
+        let reversed = back.shoot(&neg(traj.momenta(n)), &neg(traj.signal_momentum(n)))?;
+        back.transport(&reversed, momentum, signal_momentum)
+    }
+
     /// K(x)⁻¹ w for the P × n vector field `w` (each coordinate alike), by
     /// a dense Cholesky factor of the kernel matrix at `x` (serial, so the
     /// bits do not depend on the thread count).

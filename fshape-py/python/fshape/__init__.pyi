@@ -51,6 +51,7 @@ __all__ = [
     "attachment_grad",
     "quality",
     "shoot",
+    "transport",
     "match",
     "atlas",
     "regress",
@@ -532,6 +533,22 @@ def shoot(
 ) -> Geodesic:
     """The geodesic from shape with momenta p0 (n x d) and pf (n, or n x k for k maps) under the
     config's model (normalize must be false), at every time step."""
+
+def transport(
+    shape: FShape,
+    p0: npt.ArrayLike,
+    config: ConfigLike,
+    beta: npt.ArrayLike,
+    pf: Optional[npt.ArrayLike] = None,
+    beta_f: Optional[npt.ArrayLike] = None,
+    back: bool = False,
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Carries the momenta beta (n x d) and beta_f (n, or n x k) along the
+    geodesic from shape with momenta p0 and pf (config's model; normalize
+    must be false) by parallel transport, from its start to its end, or
+    with back=True from its end to its start (a rate at a subject's shape,
+    the end of a registration from a template, carried to the template).
+    First order in the time step. Returns the carried (beta, beta_f)."""
 
 def match(
     source: FShape,
