@@ -129,7 +129,8 @@ pub(crate) fn shoot<'py>(
 /// None) along the geodesic from `shape` with momenta `p0` and `pf`, by
 /// parallel transport (fshape-shoot's fanning scheme, first order in the
 /// step): from its start to its end, or with `back` from its end to its
-/// start. Returns the carried (beta, beta_f), beta_f shaped as `pf`.
+/// start. Returns the carried (beta, beta_f), beta_f of n values for one
+/// map, n × k for k.
 #[pyfunction]
 #[pyo3(signature = (shape, p0, config, beta, pf = None, beta_f = None, back = false))]
 #[allow(clippy::too_many_arguments)]

@@ -124,6 +124,13 @@ pub enum ShootError {
         /// The model's tolerance ([`Model::max_drift`]).
         tolerance: f64,
     },
+    /// Parallel transport cannot be done for this problem or input
+    /// ([`Problem::transport`]).
+    #[error("cannot transport: {why}")]
+    CannotTransport {
+        /// Why.
+        why: String,
+    },
     /// Parallel transport failed at a node of the trajectory
     /// ([`Problem::transport`]).
     #[error("transport failed at node {node}: {why}")]

@@ -39,17 +39,25 @@
 //! exact transport keeps, are reported at both ends ([`Transported`]), so
 //! their drift measures the scheme's error.
 //!
-//! Masks: a masked vertex's signal momentum is kept at 0, as every
-//! control is. Under the lumped L² norm (diagonal D_s) that is exact;
-//! under H¹ the velocity D_s⁻¹p^f is not 0 at masked vertices, and the
-//! projection adds a first-order error (tests/shoot/transport.rs measures
-//! both).
+//! Masks: a masked vertex's signal momentum is kept at 0 at every node,
+//! as every control is. Under the lumped L² norm (diagonal D_s) the
+//! masked model is a Riemannian one on the unmasked signal values and
+//! this is its transport. Under a norm whose D_s is not diagonal (L², H¹)
+//! the velocity D_s⁻¹p^f reaches masked vertices while their momenta stay
+//! 0: the model is then constrained, and zeroing at every node defines the
+//! transport used, which is not Levi-Civita's of the unmasked metric and
+//! has no reference to converge to. A geodesic still carries its own
+//! momentum to its end (tests/shoot/transport.rs).
 //!
 //! Step 3 solves with the dense kernel matrix (a Cholesky factor per
-//! node, [`MAX_TRANSPORT_VERTICES`] at most): the kernel matrix of a
+//! node, [`MAX_TRANSPORT_VERTICES`] at most, with exact or truncated
+//! kernel sums: grid sums approximate a kernel whose matrix this does not
+//! have, so they are refused): the kernel matrix of a
 //! finely sampled surface is badly conditioned, and a factor that meets a
 //! non-positive pivot is an error naming the node. Transport on a
 //! decimated template is the way around both.
+
+use fshape_kernels::SumPath;
 
 use crate::dynamics::{Dynamics, Scratch, Timings};
 use crate::shoot::{axpy, dot};
@@ -97,30 +105,9 @@ impl Problem {
         momentum: &[f64],
         signal_momentum: &[f64],
     ) -> Result<Transported, ShootError> {
-        self.check(momentum, signal_momentum)?;
+        self.refuse_transport(traj, momentum, signal_momentum)?;
         let l = self.layout;
-        let invalid = |why: String| ShootError::Invalid { what: "transport", why };
-        if self.model().kind() == ModelKind::Tangential {
-            return Err(invalid("is defined for metamorphosis and LDDMM, not the tangential model".into()));
-        }
-        let integrator = self.model().integrator();
-        if integrator == Integrator::Euler {
-            return Err(invalid(
-                "needs a second-order integrator (midpoint or rk4): Euler's step misses the connection's h² term"
-                    .into(),
-            ));
-        }
-        let (a, b) = integrator.tableau();
-        if traj.layout().len() != l.len() || traj.stages_per_step() != b.len() {
-            return Err(invalid("along a trajectory that this problem did not shoot".into()));
-        }
-        if l.p > MAX_TRANSPORT_VERTICES {
-            return Err(invalid(format!(
-                "solves with the dense kernel matrix: {} vertices is more than {MAX_TRANSPORT_VERTICES}; \
-                 transport on a decimated template",
-                l.p
-            )));
-        }
+        let (a, b) = self.model().integrator().tableau();
         let dynamics = self.dynamics();
         let mut scratch = Scratch::new(l, dynamics.fem)?;
         let mut t = Timings::default();
@@ -209,13 +196,8 @@ impl Problem {
         momentum: &[f64],
         signal_momentum: &[f64],
     ) -> Result<Transported, ShootError> {
+        self.refuse_transport(traj, momentum, signal_momentum)?;
         let l = self.layout;
-        if traj.layout().len() != l.len() {
-            return Err(ShootError::Invalid {
-                what: "transport",
-                why: "along a trajectory that this problem did not shoot".into(),
-            });
-        }
         let n = traj.steps();
         let end = self.template().clone().with_points(traj.points(n).to_vec())?;
         let end = end.with_signals_and_mask(
@@ -227,6 +209,62 @@ impl Problem {
         let neg = |v: &[f64]| v.iter().map(|a| -a).collect::<Vec<f64>>();
         let reversed = back.shoot(&neg(traj.momenta(n)), &neg(traj.signal_momentum(n)))?;
         back.transport(&reversed, momentum, signal_momentum)
+    }
+
+    /// What [`Problem::transport`] refuses, checked before any work.
+    fn refuse_transport(&self, traj: &Trajectory, momentum: &[f64], signal_momentum: &[f64]) -> Result<(), ShootError> {
+        let l = self.layout;
+        let refuse = |why: String| Err(ShootError::CannotTransport { why });
+        for (what, v, n) in
+            [("the momentum to carry", momentum, l.pn), ("the signal momentum to carry", signal_momentum, l.pk())]
+        {
+            if v.len() != n {
+                return Err(ShootError::Dimension { what, expected: n, found: v.len() });
+            }
+            if let Some(i) = v.iter().position(|a| !a.is_finite()) {
+                return Err(ShootError::NonFinite { what, index: i / (n / l.p).max(1) });
+            }
+        }
+        if self.model().kind() == ModelKind::Tangential {
+            return refuse("it is defined for metamorphosis and LDDMM, not the tangential model".into());
+        }
+        let integrator = self.model().integrator();
+        if integrator == Integrator::Euler {
+            return refuse(
+                "it needs a second-order integrator (midpoint or rk4): Euler's step misses the connection's h² term"
+                    .into(),
+            );
+        }
+        let t = traj.layout();
+        if (t.p, t.dim, t.nf) != (l.p, l.dim, l.nf) || traj.stages_per_step() != integrator.tableau().1.len() {
+            return refuse(format!(
+                "the trajectory has {} points in {}-D with {} signal channels and {} stages a step, the problem {} in \
+                 {}-D with {} and {}: it is not this problem's shooting",
+                t.p,
+                t.dim,
+                t.nf,
+                traj.stages_per_step(),
+                l.p,
+                l.dim,
+                l.nf,
+                integrator.tableau().1.len()
+            ));
+        }
+        if l.p > MAX_TRANSPORT_VERTICES {
+            return refuse(format!(
+                "it solves with the dense kernel matrix: {} vertices is more than {MAX_TRANSPORT_VERTICES}; \
+                 transport on a decimated template",
+                l.p
+            ));
+        }
+        if let SumPath::Grid { .. } = self.model().kernel().path() {
+            return refuse(
+                "it solves with the kernel's matrix, which grid sums only approximate: set no deformation tolerance \
+                 (exact sums) or a template small enough for truncated ones"
+                    .into(),
+            );
+        }
+        Ok(())
     }
 
     /// K(x)⁻¹ w for the P × n vector field `w` (each coordinate alike), by

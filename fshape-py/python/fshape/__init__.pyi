@@ -548,7 +548,11 @@ def transport(
     must be false) by parallel transport, from its start to its end, or
     with back=True from its end to its start (a rate at a subject's shape,
     the end of a registration from a template, carried to the template).
-    First order in the time step. Returns the carried (beta, beta_f)."""
+    With back=True, beta is given at the geodesic's end. First order in the
+    time step; masked vertices' signal momenta are 0, and LDDMM carries no
+    signal momentum (zeros). It solves with the dense kernel matrix: at most
+    4096 vertices, exact or truncated kernel sums. Returns the carried
+    (beta, beta_f): beta_f is (n,) for one map, (n, k) for k."""
 
 def match(
     source: FShape,
