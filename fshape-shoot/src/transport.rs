@@ -97,8 +97,8 @@ impl Problem {
     ///
     /// Mismatched lengths or non-finite momenta; the tangential model or
     /// the Euler integrator; a trajectory of another problem; more than
-    /// [`MAX_TRANSPORT_VERTICES`] vertices; a kernel matrix that is not
-    /// numerically positive definite at some node.
+    /// [`MAX_TRANSPORT_VERTICES`] vertices; grid kernel sums; a kernel
+    /// matrix that is not numerically positive definite at some node.
     pub fn transport(
         &self,
         traj: &Trajectory,
