@@ -29,7 +29,7 @@
 use fshape_fem::{Norm, SignalNorm};
 use fshape_kernels::Kernel;
 use fshape_mesh::FShape;
-use fshape_shoot::ShootError;
+use fshape_shoot::{DenseKernelFactor, ShootError};
 
 /// The ridge's size, relative to k(0)·r_0^d ([`KernelFactor`]).
 pub const RIDGE: f64 = 1.5e-4;
@@ -56,20 +56,10 @@ pub const MAX_VERTICES: usize = 16384;
 /// (r_0: the radius where k falls to e^{−1/2}k(0), σ for a Gaussian; d:
 /// the cells' dimension), so it is scale-free too.
 ///
-/// The factorisation and the solves are faer's blocked dense Cholesky,
-/// run serially (`Par::Seq`): faer's parallel reductions would make the
-/// bits depend on the number of threads.
-pub struct KernelFactor {
-    dim: usize,
-    /// L (lower triangle; LLᵀ = K + λD_0⁻¹).
-    l: faer::Mat<f64>,
-}
-
-impl std::fmt::Debug for KernelFactor {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("KernelFactor").field("n", &self.l.nrows()).field("dim", &self.dim).finish_non_exhaustive()
-    }
-}
+/// The factor is fshape-shoot's [`DenseKernelFactor`] (serial, so the bits
+/// do not depend on the number of threads).
+#[derive(Debug)]
+pub struct KernelFactor(DenseKernelFactor);
 
 /// The radius where k falls to e^{−1/2}·k(0) (σ for a Gaussian of width σ).
 fn half_width(kernel: &Kernel) -> f64 {
@@ -108,27 +98,7 @@ impl KernelFactor {
     /// The Cholesky factor of K + diag(`ridge`) on the points `points`
     /// (`dim` coordinates each); `None` where a pivot is not positive.
     pub(crate) fn factor(points: &[f64], dim: usize, kernel: &Kernel, ridge: &[f64]) -> Option<KernelFactor> {
-        use faer::dyn_stack::{MemBuffer, MemStack};
-        use faer::linalg::cholesky::llt::factor;
-        let n = ridge.len();
-        debug_assert_eq!(points.len(), n * dim);
-        // The lower triangle, column by column (faer is column-major).
-        let mut l = faer::Mat::<f64>::zeros(n, n);
-        for j in 0..n {
-            let xj = &points[j * dim..(j + 1) * dim];
-            let col = l.col_mut(j).try_as_col_major_mut().expect("a fresh matrix is contiguous").as_slice_mut();
-            for (i, v) in col.iter_mut().enumerate().skip(j) {
-                let xi = &points[i * dim..(i + 1) * dim];
-                let u: f64 = xi.iter().zip(xj).map(|(a, b)| (a - b) * (a - b)).sum();
-                *v = kernel.value(u);
-            }
-            col[j] += ridge[j];
-        }
-        let par = faer::Par::Seq;
-        let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f64>(n, par, Default::default()));
-        let done =
-            factor::cholesky_in_place(l.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default());
-        done.ok().map(|_| KernelFactor { dim, l })
+        DenseKernelFactor::new(points, dim, kernel, ridge).map(KernelFactor)
     }
 
     /// The ridge λ of a kernel on cells of dimension `cell_dim`, without
@@ -140,22 +110,7 @@ impl KernelFactor {
     /// v ← (K + λD_0⁻¹)⁻¹v on the first n·dim values of `v` (the p_0
     /// block, each dimension alike); the rest is left as it is.
     pub fn apply(&self, v: &mut [f64]) {
-        use faer::dyn_stack::MemStack;
-        let (n, d) = (self.l.nrows(), self.dim);
-        // The block is n × d row-major: as a matrix, d × n column-major; its
-        // transpose is the n × d right-hand side.
-        let mut rhs = faer::Mat::<f64>::from_fn(n, d, |i, c| v[i * d + c]);
-        faer::linalg::cholesky::llt::solve::solve_in_place(
-            self.l.as_ref(),
-            rhs.as_mut(),
-            faer::Par::Seq,
-            MemStack::new(&mut []),
-        );
-        for i in 0..n {
-            for c in 0..d {
-                v[i * d + c] = rhs[(i, c)];
-            }
-        }
+        self.0.solve_in_place(v);
     }
 }
 

@@ -37,12 +37,14 @@
 //! The configuration file, the optimiser and the registration workflow
 //! (stages, checkpoints) are fshape-match's; this crate is the model.
 
+mod dense;
 mod dynamics;
 mod model;
 mod regression;
 mod shoot;
 mod transport;
 
+pub use dense::DenseKernelFactor;
 pub use dynamics::Timings;
 pub use model::{DEFAULT_MAX_DRIFT, Integrator, Model, ModelKind};
 pub use regression::{Regression, RegressionEnergies, RegressionGradient};

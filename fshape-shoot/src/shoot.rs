@@ -349,8 +349,13 @@ impl Problem {
     }
 
     pub(crate) fn check(&self, p0: &[f64], pf: &[f64]) -> Result<(), ShootError> {
+        self.check_as(["momentum p0", "signal momentum"], p0, pf)
+    }
+
+    /// [`Problem::check`] with the two arrays called `names` in errors.
+    pub(crate) fn check_as(&self, names: [&'static str; 2], p0: &[f64], pf: &[f64]) -> Result<(), ShootError> {
         let l = self.layout;
-        for (what, v, n) in [("momentum p0", p0, l.pn), ("signal momentum", pf, l.pk())] {
+        for (what, v, n) in [(names[0], p0, l.pn), (names[1], pf, l.pk())] {
             if v.len() != n {
                 return Err(ShootError::Dimension { what, expected: n, found: v.len() });
             }

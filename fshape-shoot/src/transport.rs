@@ -61,7 +61,7 @@ use fshape_kernels::SumPath;
 
 use crate::dynamics::{Dynamics, Scratch, Timings};
 use crate::shoot::{axpy, dot};
-use crate::{Integrator, ModelKind, Problem, ShootError, Trajectory};
+use crate::{DenseKernelFactor, Integrator, ModelKind, Problem, ShootError, Trajectory};
 
 /// The most vertices [`Problem::transport`] takes: its dense kernel
 /// factor holds n² values (128 MiB at this size) and costs n³/3 flops
@@ -124,7 +124,6 @@ impl Problem {
         let mut dks = vec![0.0; s * len];
         let mut dzi = vec![0.0; len];
         let mut next = vec![0.0; len];
-        let mut hs = vec![0.0; l.pk()];
         for k in 0..traj.steps() {
             let dt = traj.dt(k);
             // The step's exact tangent-linear map applied to dz.
@@ -136,7 +135,7 @@ impl Problem {
                     }
                 }
                 let out = &mut dks[i * len..(i + 1) * len];
-                dynamics.jvp(traj.stage(k, i), &mut hs, &dzi, out, &mut scratch, &mut t)?;
+                dynamics.jvp(traj.stage(k, i), &mut h, &dzi, out, &mut scratch, &mut t)?;
             }
             next.copy_from_slice(&dz);
             for (i, bi) in b.iter().enumerate() {
@@ -148,7 +147,7 @@ impl Problem {
             let node = traj.node(k + 1);
             let x = &node[l.x()];
             let wx: Vec<f64> = next[l.x()].iter().map(|v| v / dt).collect();
-            let beta = self.kernel_solve(x, &wx, k + 1)?;
+            let beta = self.kernel_solve(x, wx, k + 1)?;
             dz.fill(0.0);
             for (o, v) in dz[l.mom()].iter_mut().zip(&beta) {
                 *o = self.model().gamma_v() * v;
@@ -215,16 +214,7 @@ impl Problem {
     fn refuse_transport(&self, traj: &Trajectory, momentum: &[f64], signal_momentum: &[f64]) -> Result<(), ShootError> {
         let l = self.layout;
         let refuse = |why: String| Err(ShootError::CannotTransport { why });
-        for (what, v, n) in
-            [("the momentum to carry", momentum, l.pn), ("the signal momentum to carry", signal_momentum, l.pk())]
-        {
-            if v.len() != n {
-                return Err(ShootError::Dimension { what, expected: n, found: v.len() });
-            }
-            if let Some(i) = v.iter().position(|a| !a.is_finite()) {
-                return Err(ShootError::NonFinite { what, index: i / (n / l.p).max(1) });
-            }
-        }
+        self.check_as(["the momentum to carry", "the signal momentum to carry"], momentum, signal_momentum)?;
         if self.model().kind() == ModelKind::Tangential {
             return refuse("it is defined for metamorphosis and LDDMM, not the tangential model".into());
         }
@@ -268,35 +258,17 @@ impl Problem {
     }
 
     /// K(x)⁻¹ w for the P × n vector field `w` (each coordinate alike), by
-    /// a dense Cholesky factor of the kernel matrix at `x` (serial, so the
-    /// bits do not depend on the thread count).
-    fn kernel_solve(&self, x: &[f64], w: &[f64], node: usize) -> Result<Vec<f64>, ShootError> {
-        use faer::dyn_stack::{MemBuffer, MemStack};
-        use faer::linalg::cholesky::llt::{factor, solve};
-        let (n, d) = (self.layout.p, self.layout.dim);
-        let kernel = self.model().kernel();
-        // The lower triangle, column by column (faer is column-major).
-        let mut m = faer::Mat::<f64>::zeros(n, n);
-        for j in 0..n {
-            let xj = &x[j * d..(j + 1) * d];
-            let col = m.col_mut(j).try_as_col_major_mut().expect("a fresh matrix is contiguous").as_slice_mut();
-            for (i, v) in col.iter_mut().enumerate().skip(j) {
-                let xi = &x[i * d..(i + 1) * d];
-                *v = kernel.value(xi.iter().zip(xj).map(|(a, b)| (a - b) * (a - b)).sum());
-            }
-        }
-        let par = faer::Par::Seq;
-        let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f64>(n, par, Default::default()));
-        factor::cholesky_in_place(m.as_mut(), Default::default(), par, MemStack::new(&mut mem), Default::default())
-            .map_err(|_| ShootError::Transport {
+    /// a dense Cholesky factor of the kernel matrix at `x`.
+    fn kernel_solve(&self, x: &[f64], mut w: Vec<f64>, node: usize) -> Result<Vec<f64>, ShootError> {
+        let factor = DenseKernelFactor::new(x, self.layout.dim, self.model().kernel(), &vec![0.0; self.layout.p])
+            .ok_or_else(|| ShootError::Transport {
                 node,
                 why: "the kernel matrix is not numerically positive definite (points closer than the kernel \
                       resolves; transport on a decimated template)"
                     .into(),
             })?;
-        let mut rhs = faer::Mat::<f64>::from_fn(n, d, |i, c| w[i * d + c]);
-        solve::solve_in_place(m.as_ref(), rhs.as_mut(), par, MemStack::new(&mut []));
-        Ok((0..n * d).map(|i| rhs[(i / d, i % d)]).collect())
+        factor.solve_in_place(&mut w);
+        Ok(w)
     }
 }
 
